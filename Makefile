@@ -1,0 +1,63 @@
+# ssi_bridge: `make run` starts the node on its simulated default, `make test` runs every test.
+# Both set up first (idempotent): a CPython 3.12 venv with the pinned wheels, then a colcon
+# build of msg_defs/ (ssi_bridge_msgs) and this package into install/.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DEFAULT_GOAL := help
+
+VENV        := .venv
+STAMP_VENV  := $(VENV)/.requirements.stamp
+STAMP_BUILD := install/.build.stamp
+ENV         := source scripts/env.sh
+ARGS        ?=
+PYTEST_ARGS ?=
+ONLY        ?=
+
+SOURCES := $(shell find msg_defs config launch resource -type f 2>/dev/null) setup.py setup.cfg package.xml
+
+.PHONY: help setup run test bench lock clean
+
+help:
+	@echo "make run    set up if needed, then run ssi_bridge_node (ARGS='--ros-args ...' passes through)"
+	@echo "make test   set up if needed, then run the whole test suite (PYTEST_ARGS=... passes through)"
+	@echo "make bench  run the benchmarks in bench/ (ONLY=<name> runs bench/bench_<name>.py)"
+	@echo "make setup  create .venv from requirements.lock and colcon-build into install/"
+
+setup: $(STAMP_BUILD)
+
+$(STAMP_VENV): requirements.lock scripts/find_python.sh
+	@py=$$(scripts/find_python.sh); \
+	if [ ! -x $(VENV)/bin/python ]; then echo "setup: creating $(VENV) with $$py"; "$$py" -m venv $(VENV); fi
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip==26.3
+	$(VENV)/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.lock
+	@touch $@
+
+$(STAMP_BUILD): $(STAMP_VENV) $(SOURCES)
+	@echo "setup: colcon build (ssi_bridge_msgs, ssi_bridge) -> install/"
+	@$(ENV) && colcon --log-base log build --symlink-install --paths . msg_defs \
+	    --event-handlers console_cohesion- status- --cmake-args -DBUILD_TESTING=OFF > log/colcon-build.txt 2>&1 \
+	    || { tail -n 60 log/colcon-build.txt; echo "setup: colcon build failed (full log: log/colcon-build.txt)"; exit 1; }
+	@touch $@
+
+log:
+	@mkdir -p log
+$(STAMP_BUILD): | log
+
+run: setup
+	@$(ENV) && exec install/ssi_bridge/lib/ssi_bridge/ssi_bridge_node $(ARGS)
+
+test: setup
+	@$(ENV) && python -m pytest $(PYTEST_ARGS)
+
+bench: setup
+	@$(ENV) && mkdir -p bench/results && : > bench/results/latest.jsonl && \
+	for f in bench/bench_$(if $(ONLY),$(ONLY),*).py; do echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
+
+lock:
+	@py=$$(scripts/find_python.sh); rm -rf /tmp/ssi_bridge_lock_venv; "$$py" -m venv /tmp/ssi_bridge_lock_venv
+	/tmp/ssi_bridge_lock_venv/bin/python -m pip install --quiet --upgrade pip==26.3
+	/tmp/ssi_bridge_lock_venv/bin/python scripts/lock.py
+
+clean:
+	rm -rf build install log $(VENV)
