@@ -1,0 +1,136 @@
+"""Per-cycle evaluation steps of the XN-1SSI as pure functions (000 chapter 1).
+
+* :func:`extract` - ZERO test, invalid LSB/MSB bits, Gray -> binary ("Transmission
+  procedure", Table 19).
+* :func:`ssi_status` - REG_SSI_MASK -> SSI_STS0..3 and SSI_DIAG (Table 3).
+* :func:`compare` - one comparator, the truth table of "Comparison value 1, Comparison value 2".
+* :func:`limits` - STS_OFLW / STS_UFLW (Tables 1 and 2).
+* :func:`direction` - STS_UP / STS_DN (process input byte 6).
+
+32-bit register values are compared as Integer32 (two's complement): object 0x6820, which
+*is* REG_SSI_POS, and the CAM limits 0x6B10/0x6B20 (= REG_CMP2/REG_CMP1) are Integer32, and
+REG_SSI_POS = encoder - REG_OFFSET goes negative below the offset.  The limit defaults
+0xFFFFFFFF / 0 are sentinels that switch monitoring off (Tables 1, 2), not compared values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ssi_bridge.line.readout import LineReadout
+from ssi_bridge.module.diagnostics import to_int32
+from ssi_bridge.module.para1 import Para1
+from ssi_bridge.module.registers import VALUE_MAX
+
+try:  # the encoder stage owns the code conversions; fall back until it has landed
+    from ssi_bridge.encoder.codes import gray_to_bin as _gray_to_bin
+except ImportError:  # pragma: no cover - depends on the other stage's progress
+    def _gray_to_bin(value: int) -> int:
+        """Gray -> binary: each binary bit is the XOR of all Gray bits at or above it."""
+        shift = value >> 1
+        while shift:
+            value ^= shift
+            shift >>= 1
+        return value
+
+
+def gray_to_bin(value: int) -> int:
+    """Decode a Gray-coded non-negative integer."""
+    return int(_gray_to_bin(value))
+
+
+def bin_to_gray(value: int) -> int:
+    """Encode a non-negative integer in reflected binary Gray code."""
+    return value ^ (value >> 1)
+
+
+@dataclass(frozen=True)
+class Acquired:
+    """What one clock burst yields after the module's processing."""
+
+    #: REG_SSI_FRAME: the complete frame as read (SSI_FRAME_LEN bits, first bit = MSB)
+    frame: int
+    #: the encoder value: invalid bits removed, Gray decoded (before REG_OFFSET)
+    value: int
+    #: REG_GRAY_POS: the same value in Gray code
+    gray: int
+    #: False when the ZERO test failed (ERR_SSI = 1)
+    ok: bool
+
+
+def extract(readout: LineReadout, para: Para1) -> Acquired:
+    """Turn one readout into frame, encoder value and ZERO-test result.
+
+    The LSB-side invalid bits are shifted out and the MSB-side ones masked to 0 *before* the
+    Gray decode, so status bits around a Gray-coded position cannot corrupt it (the Gray
+    decode of a bit depends on every bit above it).  The ZERO test (skipped when DIS_ERR_SSI
+    = 1) expects the data line low one clock after the last valid bit (``trailer_bit``).
+    """
+    n = para.ssi_frame_len
+    frame = readout.data & ((1 << n) - 1)
+    field = (frame >> para.invalid_bits_lsb) & ((1 << para.value_bits) - 1)
+    if para.ssi_code_gray:
+        gray, value = field, gray_to_bin(field)
+    else:
+        gray, value = bin_to_gray(field), field
+    ok = para.dis_err_ssi or readout.trailer_bit == 0
+    return Acquired(frame=frame, value=value, gray=gray, ok=ok)
+
+
+def ssi_status(frame: int, mask: int) -> tuple[int, bool]:
+    """SSI_STS3..0 (as a 4-bit number) and SSI_DIAG from REG_SSI_MASK (000 Table 3).
+
+    Byte x of REG_SSI_MASK (byte 0 = least significant) serves SSI_STSx: bit 7 EN_Dx_RMSx
+    copies frame bit SSI_FRAME_BIT_SELx (bits 4..0; bit 0 = last bit clocked) into SSI_STSx;
+    SSI_DIAG = OR over x of (SSI_STSx & EN_Dx_DS), as the manual's formula is written, so a
+    status bit reaches SSI_DIAG only when it is also copied (EN_Dx_RMSx = 1).
+    """
+    sts = 0
+    diag = False
+    for x in range(4):
+        byte = (mask >> (8 * x)) & 0xFF
+        if byte & 0x80 and (frame >> (byte & 0x1F)) & 1:
+            sts |= 1 << x
+            diag = diag or bool(byte & 0x40)
+    return sts, diag
+
+
+def compare(pos: int, cmp_value: int, *, enabled: bool, clear: bool,
+            flag: bool) -> tuple[bool, bool, bool]:
+    """One comparator step; returns (STS_CMPx, FLAG_CMPx, REL_CMPx).
+
+    EN_CMPx = 0: all three 0 and the latched flag forgotten.  STS = (pos == cmp),
+    REL = (pos >= cmp) (signed), FLAG latches a match and is cleared by CLR_CMPx = 1 only
+    while the values do not match ("Reset of FLAG_CMPx not possible when values match").
+    """
+    if not enabled:
+        return False, False, False
+    p, c = to_int32(pos), to_int32(cmp_value)
+    sts = p == c
+    flag = flag or sts
+    if clear and not sts:
+        flag = False
+    return sts, flag, p >= c
+
+
+def limits(pos: int, lower: int, upper: int) -> tuple[bool, bool]:
+    """(STS_OFLW, STS_UFLW) per 000 Tables 1 and 2: active only off the default values."""
+    p = to_int32(pos)
+    oflw = upper != VALUE_MAX and p > to_int32(upper)
+    uflw = lower != 0 and p < to_int32(lower)
+    return oflw, uflw
+
+
+def direction(previous: int | None, current: int, width: int) -> tuple[bool, bool]:
+    """(STS_UP, STS_DN) from two successive encoder values of ``width`` bits.
+
+    The difference is taken modulo 2**width, so a multiturn wrap (max -> 0) counts as one
+    step up, not a jump down.  Both bits are 0 when the value is constant.
+    """
+    if previous is None or width <= 0:
+        return False, False
+    diff = (current - previous) % (1 << width)
+    if diff == 0:
+        return False, False
+    up = diff < (1 << (width - 1)) or width == 1
+    return up, not up
