@@ -1,0 +1,124 @@
+"""CAN bus configuration and the fault-injecting bus wrapper shared by gateway and client.
+
+The station and the master each open their own python-can ``Bus`` on the same channel (on the
+default in-process ``virtual`` interface every bus sees the frames the others send, as on a
+real wire). :class:`LossyBus` wraps any bus to drop a seeded fraction of frames ("CAN frame
+loss" fault) or to go quiet entirely ("gateway silent").
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+import can
+
+from ssi_bridge.exceptions import BusError, ConfigError
+
+logger = logging.getLogger(__name__)
+
+#: bit rates a CANopen device must support or may support (CiA 301 / CiA 102), bit/s
+CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """Where the gateway and the client meet: python-can interface, channel, bit rate, node."""
+
+    #: python-can interface name ("virtual", "socketcan", "pcan", ...)
+    interface: str = "virtual"
+    #: python-can channel (virtual: any string; every bus on the same string is one wire)
+    channel: str = "ssi_bridge"
+    #: bit rate in bit/s, one of :data:`CIA_BITRATES` (ignored by the virtual interface)
+    bitrate: int = 500_000
+    #: CANopen node id of the XN-GW-CANOPEN (1-127)
+    node_id: int = 1
+
+    def __post_init__(self) -> None:
+        if not self.interface:
+            raise ConfigError("BusConfig.interface must name a python-can interface")
+        if self.channel in ("", None):
+            raise ConfigError("BusConfig.channel must not be empty")
+        if self.bitrate not in CIA_BITRATES:
+            raise ConfigError(
+                f"BusConfig.bitrate {self.bitrate} bit/s is not a CiA bit rate {CIA_BITRATES}")
+        if not 1 <= self.node_id <= 127:
+            raise ConfigError(f"BusConfig.node_id {self.node_id} outside 1-127")
+
+
+def open_bus(config: BusConfig) -> can.BusABC:
+    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it."""
+    kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
+    if config.interface != "virtual":
+        kwargs["bitrate"] = config.bitrate
+    try:
+        bus = can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as err:
+        raise BusError(
+            f"cannot open CAN bus {config.interface}:{config.channel} "
+            f"at {config.bitrate} bit/s: {err}") from err
+    logger.debug("opened %s:%s", config.interface, config.channel)
+    return bus
+
+
+class LossyBus(can.BusABC):
+    """A bus wrapper that drops frames at ``loss_rate`` (seeded) and can be muted.
+
+    Drops apply to sent and, if ``drop_received`` is set, to received frames. ``muted``
+    swallows every frame this side sends (the "gateway silent" fault). Both can be changed
+    at run time from any thread. Shutting the wrapper down shuts the wrapped bus down.
+    """
+
+    def __init__(self, inner: can.BusABC, loss_rate: float = 0.0, *, seed: int | None = 0,
+                 drop_received: bool = False) -> None:
+        self._inner = inner
+        self._rng = random.Random(seed)
+        self._rng_lock = threading.Lock()
+        self.loss_rate = loss_rate
+        self.drop_received = drop_received
+        #: when True nothing this side sends reaches the wire
+        self.muted = False
+        #: frames dropped so far (sent + received)
+        self.dropped = 0
+        super().__init__(channel=getattr(inner, "channel_info", "lossy"))
+        self.channel_info = f"lossy({inner.channel_info})"
+
+    @property
+    def loss_rate(self) -> float:
+        """Fraction of frames dropped, 0.0-1.0."""
+        return self._loss_rate
+
+    @loss_rate.setter
+    def loss_rate(self, value: float) -> None:
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f"loss_rate {value} outside 0.0-1.0")
+        self._loss_rate = float(value)
+
+    def _drop(self) -> bool:
+        if self._loss_rate <= 0.0:
+            return False
+        with self._rng_lock:
+            hit = self._rng.random() < self._loss_rate
+        if hit:
+            self.dropped += 1
+        return hit
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` unless muted or chosen for dropping."""
+        if self.muted or self._drop():
+            return
+        self._inner.send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        msg = self._inner.recv(timeout)
+        if msg is not None and self.drop_received and self._drop():
+            return None, False
+        return msg, False
+
+    def shutdown(self) -> None:
+        """Shut the wrapped bus down too."""
+        super().shutdown()
+        self._inner.shutdown()

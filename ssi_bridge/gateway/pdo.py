@@ -1,0 +1,195 @@
+"""The station's PDO engine: CiA 301 PDO communication/mapping objects made to work.
+
+canopen's ``LocalNode`` stores PDO parameters but does not act on them, so this module reads
+the live 0x1400-0x140B / 0x1600-0x160B (RPDO) and 0x1800-0x180B / 0x1A00-0x1A0B (TPDO)
+objects, checks writes to them as CiA 301 requires (mapping only while the PDO is invalid,
+mapped objects must exist and be mappable, at most 64 bits) and moves data:
+
+* TPDOs: transmission type 1-240 = every n-th SYNC, 254/255 = event driven: sent after a
+  SYNC cycle when the mapped data changed (000 Table 15, "normally 255");
+* RPDOs: 0-240 = applied at the next SYNC, 254/255 = applied on reception.
+PDOs move only in NMT OPERATIONAL (the gateway checks the state before calling in).
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from dataclasses import dataclass
+from typing import Callable
+
+import canopen
+from canopen.sdo import SdoAbortedError
+
+from ssi_bridge.gateway.aborts import SdoAbort
+from ssi_bridge.gateway.dictionary import (
+    N_PDOS, PDO_INVALID, RPDO_COM, RPDO_MAP, TPDO_COM, TPDO_MAP,
+)
+
+logger = logging.getLogger(__name__)
+
+U32 = struct.Struct("<I")
+#: COB-ID bits that are not the 11-bit identifier (valid, RTR, frame)
+_COB_FLAGS = 0xE000_0000
+#: synchronous transmission types (every n-th SYNC); 0 = acyclic synchronous
+SYNC_TYPES = range(0, 241)
+
+
+@dataclass
+class _Pdo:
+    """The current state of one PDO as the station acts on it."""
+
+    number: int
+    cob_id: int
+    valid: bool
+    trans_type: int
+    entries: list[tuple[int, int, int]]  # (index, subindex, bits)
+    last: bytes | None = None
+    pending: bytes | None = None
+
+
+class PdoEngine:
+    """Read PDO parameters from ``node`` and transmit / apply PDO data."""
+
+    def __init__(self, node: canopen.LocalNode, send: Callable[[int, bytes], None]) -> None:
+        self._node = node
+        self._send = send
+        self.tpdos: list[_Pdo] = []
+        self.rpdos: list[_Pdo] = []
+        self._subscribed: dict[int, Callable] = {}
+        self._sync_count = 0
+
+    # -- configuration -----------------------------------------------------------------------
+    def _u(self, index: int, subindex: int) -> int:
+        obj = self._node.object_dictionary[index][subindex]
+        return obj.decode_raw(self._node.get_data(index, subindex))
+
+    def _load(self, com: int, mapping: int, number: int) -> _Pdo:
+        cob = self._u(com, 1)
+        entries = []
+        for sub in range(1, self._u(mapping, 0) + 1):
+            value = self._u(mapping, sub)
+            entries.append((value >> 16, (value >> 8) & 0xFF, value & 0xFF))
+        return _Pdo(number, cob & 0x7FF, not cob & PDO_INVALID, self._u(com, 2), entries)
+
+    def reload(self) -> None:
+        """Re-read all PDO objects and (re)subscribe the valid RPDOs."""
+        self.tpdos = [self._load(TPDO_COM + n, TPDO_MAP + n, n + 1) for n in range(N_PDOS)]
+        self.rpdos = [self._load(RPDO_COM + n, RPDO_MAP + n, n + 1) for n in range(N_PDOS)]
+        network = self._node.network
+        for cob, callback in self._subscribed.items():
+            network.unsubscribe(cob, callback)
+        self._subscribed = {}
+        for pdo in self.rpdos:
+            if pdo.valid and pdo.entries:
+                callback = self._make_receiver(pdo)
+                network.subscribe(pdo.cob_id, callback)
+                self._subscribed[pdo.cob_id] = callback
+
+    def detach(self) -> None:
+        """Unsubscribe every RPDO (gateway stop)."""
+        for cob, callback in self._subscribed.items():
+            self._node.network.unsubscribe(cob, callback)
+        self._subscribed = {}
+
+    def check_write(self, index: int, subindex: int, data: bytes) -> None:
+        """Refuse a PDO parameter write CiA 301 forbids (raises ``SdoAbortedError``)."""
+        is_tx = index >= TPDO_COM
+        base = index & 0xFE00
+        is_map = base in (RPDO_MAP, TPDO_MAP)
+        n = index - base
+        if n >= N_PDOS:
+            return
+        com = (TPDO_COM if is_tx else RPDO_COM) + n
+        valid = not self._u(com, 1) & PDO_INVALID
+        if not is_map:
+            if subindex == 1:
+                new = U32.unpack(data)[0]
+                if valid and not new & PDO_INVALID and (new ^ self._u(com, 1)) & 0x7FF:
+                    raise SdoAbortedError(SdoAbort.INVALID_VALUE)
+                if new & 0x2000_0000 or new & 0x1FFF_F800:
+                    raise SdoAbortedError(SdoAbort.INVALID_VALUE)  # 29-bit ids not supported
+            elif subindex == 2 and 240 < data[0] < 252:
+                raise SdoAbortedError(SdoAbort.INVALID_VALUE)
+            return
+        if valid:
+            raise SdoAbortedError(SdoAbort.CANNOT_STORE_STATE)
+        if subindex == 0:
+            self._check_mapping(index, data[0], is_tx)
+        elif self._u(index, 0) != 0:
+            raise SdoAbortedError(SdoAbort.CANNOT_STORE_STATE)
+        else:
+            self._check_entry(U32.unpack(data)[0], is_tx)
+
+    def _check_entry(self, value: int, is_tx: bool) -> int:
+        index, subindex, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+        od = self._node.object_dictionary
+        if index not in od:
+            raise SdoAbortedError(SdoAbort.NO_SUCH_OBJECT)
+        obj = od[index]
+        if not isinstance(obj, canopen.objectdictionary.ODVariable):
+            if subindex not in obj:
+                raise SdoAbortedError(SdoAbort.NO_SUCH_SUBINDEX)
+            obj = obj[subindex]
+        allowed = obj.readable if is_tx else obj.writable
+        if not obj.pdo_mappable or not allowed or bits != len(obj):
+            raise SdoAbortedError(SdoAbort.NOT_MAPPABLE)
+        return bits
+
+    def _check_mapping(self, index: int, count: int, is_tx: bool) -> None:
+        if count > 8:
+            raise SdoAbortedError(SdoAbort.VALUE_TOO_HIGH)
+        total = sum(self._check_entry(self._u(index, sub), is_tx) for sub in range(1, count + 1))
+        if total > 64:
+            raise SdoAbortedError(SdoAbort.PDO_TOO_LONG)
+
+    # -- data ---------------------------------------------------------------------------------
+    def _payload(self, pdo: _Pdo) -> bytes:
+        return b"".join(self._node.get_data(i, s) for i, s, _ in pdo.entries)
+
+    def on_sync(self) -> None:
+        """Apply synchronous RPDOs and send the TPDOs due after this SYNC's module cycle."""
+        self._sync_count = self._sync_count % 240 + 1
+        for pdo in self.tpdos:
+            if not pdo.valid or not pdo.entries:
+                continue
+            if pdo.trans_type in SYNC_TYPES:
+                if pdo.trans_type == 0 or self._sync_count % pdo.trans_type == 0:
+                    self._send(pdo.cob_id, self._payload(pdo))
+            elif pdo.trans_type >= 254:
+                data = self._payload(pdo)
+                if data != pdo.last:
+                    pdo.last = data
+                    self._send(pdo.cob_id, data)
+
+    def apply_pending(self) -> None:
+        """Write the data of synchronous RPDOs received since the last SYNC."""
+        for pdo in self.rpdos:
+            if pdo.pending is not None:
+                data, pdo.pending = pdo.pending, None
+                self._apply(pdo, data)
+
+    def _apply(self, pdo: _Pdo, data: bytes) -> None:
+        offset = 0
+        for index, subindex, bits in pdo.entries:
+            size = bits // 8
+            chunk = bytes(data[offset:offset + size])
+            offset += size
+            if len(chunk) != size:
+                logger.warning("RPDO%d: %d bytes too short for its mapping", pdo.number, len(data))
+                return
+            try:
+                self._node.set_data(index, subindex, chunk)
+            except SdoAbortedError as err:
+                logger.warning("RPDO%d: 0x%04X:%02X refused (0x%08X)", pdo.number, index,
+                               subindex, err.code)
+
+    def _make_receiver(self, pdo: _Pdo) -> Callable:
+        def receive(can_id: int, data: bytearray, timestamp: float) -> None:
+            if self._node.nmt.state != "OPERATIONAL":
+                return
+            if pdo.trans_type in SYNC_TYPES:
+                pdo.pending = bytes(data)
+            else:
+                self._apply(pdo, bytes(data))
+        return receive
