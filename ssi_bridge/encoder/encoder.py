@@ -1,0 +1,215 @@
+"""The simulated SSI encoder: motion -> quantised, scaled value -> coded frame bits.
+
+``SsiEncoder.frame_at(t)`` is what the encoder loads into its shift register at the first
+falling clock edge ``t`` (004 §2.2 time 1, 001 §4.6 item 1). Which position that frame
+carries depends on the SSI mode (004 §2.8):
+
+* asynchronous: the position is formed every ``formation_period_s`` (125 µs AHS/AHM36,
+  150 µs ATM60, 004 §3.1/§3.4) independent of the clock, so the frame carries the value
+  formed at the last formation instant before ``t`` and two reads may return the same value;
+  ``formation_period_s = 0`` idealises this to "formed at the latch edge";
+* synchronous: the position is recorded at the first falling edge (``SyncReference.LATCH``,
+  ATM60) or ``sync_delay_s`` after the end of the burst (``BURST_END``, AHS/AHM36), and
+  "the position recorded at the last clock pulse chain is sent" (004 §3.4): each frame
+  carries the position recorded for the previous burst (the very first one: the position at
+  its own latch).
+
+Scaling (001 §5.1.2): value = origin + ((⌊±pos · steps_per_unit⌋ + preset offset − origin)
+mod total steps); the sign follows the count direction, inverted by the F/B input (§4.5).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Direction, EncoderConfig,
+                                       ErrorOutput, SpecialBit, SsiMode, SyncReference)
+from ssi_bridge.encoder.layout import encode_area
+from ssi_bridge.encoder.motion import MotionProfile
+from ssi_bridge.encoder.special import SpecialState
+from ssi_bridge.exceptions import ConfigError
+
+__all__ = ["EncoderConfig", "EncoderFrame", "SsiEncoder"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class EncoderFrame:
+    """The frame an encoder latched, with the ground truth it was made from."""
+
+    #: frame bits, first transmitted bit = most significant bit of ``bits``
+    bits: int
+    #: number of frame bits
+    length: int
+    #: output value encoded in the position bits (steps, may be negative, 001 §5.2.5)
+    count: int
+    #: ground truth position at the formation time (rev or m)
+    position: float
+    #: ground truth velocity at the formation time (rev/s or m/s)
+    velocity: float = 0.0
+    #: latch time (first falling clock edge) (s)
+    latch_time: float = 0.0
+    #: time the position was formed (s), earlier than the latch in async/sync modes
+    sample_time: float = 0.0
+    #: logically active special / error bits (before active-low inversion)
+    flags: frozenset[SpecialBit] = frozenset()
+    #: an encoder error was active
+    error: bool = False
+    #: the power-failure condition was active
+    power_failure: bool = False
+
+
+class SsiEncoder:
+    """An absolute encoder with an SSI output, driven by a motion profile."""
+
+    def __init__(self, config: EncoderConfig, motion: MotionProfile) -> None:
+        self.config = config
+        self.motion = motion
+        self._offset = 0
+        self._fb_input = False
+        self._sign = 1 if config.direction is Direction.INCREASING else -1
+        self._errors: frozenset[SpecialBit] = frozenset()
+        self.power_failure = False
+        #: asynchronous mode: time of one formation instant (s); formation every period
+        self.phase_s = 0.0
+        self._sync_next: float | None = None
+        self._special = SpecialState(config) if config.special_bits else None
+        self._mask = (1 << config.frame_bits) - 1
+        self._layout_bits = frozenset(config.special_bits)
+
+    # -- description --------------------------------------------------------------------
+    @property
+    def frame_bits(self) -> int:
+        """Bits per frame (the master clocks ``frame_bits + 1``, 001 §4.6)."""
+        return self.config.frame_bits
+
+    @property
+    def steps_per_rev(self) -> float:
+        """Output steps per revolution (per metre for a linear encoder)."""
+        return self.config.steps_per_unit
+
+    @property
+    def revolutions(self) -> float:
+        """Revolutions before the count restarts (numerator / divisor, 001 §5.1.2.2)."""
+        return self.config.revolutions_numerator / self.config.revolutions_divisor
+
+    @property
+    def linear(self) -> bool:
+        return self.config.linear
+
+    @property
+    def measuring_step_m(self) -> float:
+        return self.config.measuring_step_m
+
+    # -- inputs and faults --------------------------------------------------------------
+    @property
+    def fb_input(self) -> bool:
+        """F/B input (001 §4.5): when active, the set count direction is inverted."""
+        return self._fb_input
+
+    @fb_input.setter
+    def fb_input(self, active: bool) -> None:
+        self._fb_input = bool(active)
+        base = 1 if self.config.direction is Direction.INCREASING else -1
+        self._sign = -base if self._fb_input else base
+
+    @property
+    def errors(self) -> frozenset[SpecialBit]:
+        """Encoder error bits currently active."""
+        return self._errors
+
+    def set_error(self, active: bool = True, bits: set[SpecialBit] | None = None) -> None:
+        """Raise or clear encoder errors; ``bits=None`` means every error bit of the layout.
+
+        A layout without error bits still records the error (it shows as ERROR_VALUE or
+        ALL_ONES where the family does that, 004 §3.3/§3.7).
+        """
+        if bits is None:
+            bits = {b for b in self.config.special_bits if b in ERROR_BITS} or {SpecialBit.ERROR}
+        self._errors = (self._errors | frozenset(bits)) if active else (self._errors - frozenset(bits))
+        logger.debug("encoder %s errors now %s", self.config.name, sorted(b.value for b in self._errors))
+
+    def apply_preset(self, t: float, value: int | None = None) -> int:
+        """Preset adjustment (001 §5.1.3/§5.1.4): the value at ``t`` becomes ``value``.
+
+        Only the zero point moves (an integer offset), so the speed does not jump.
+        Returns the new offset in steps.
+        """
+        cfg = self.config
+        value = cfg.preset_value if value is None else value
+        if not cfg.origin <= value < cfg.origin + cfg.range_steps:
+            raise ConfigError(f"encoder {cfg.name}: preset {value} outside "
+                              f"{cfg.origin}..{cfg.origin + cfg.range_steps - 1} (001 §5.1.3)")
+        raw = math.floor(self._sign * self.motion.position(t) * cfg.steps_per_unit)
+        self._offset = value - raw
+        return self._offset
+
+    # -- the data path ------------------------------------------------------------------
+    def value_at(self, position: float) -> int:
+        """Output value for a ground-truth position (rev or m), 001 §5.1.2."""
+        cfg = self.config
+        raw = math.floor(self._sign * position * cfg.steps_per_unit) + self._offset
+        return cfg.origin + (raw - cfg.origin) % cfg.range_steps
+
+    def sample_time(self, t: float) -> float:
+        """Formation time of the value a latch at ``t`` loads (004 §2.8, §3.1, §3.4)."""
+        cfg = self.config
+        if cfg.ssi_mode is SsiMode.SYNC:
+            ts = t if self._sync_next is None else self._sync_next
+            if cfg.sync_reference is SyncReference.LATCH:
+                self._sync_next = t + cfg.sync_delay_s
+            return ts
+        period = cfg.formation_period_s
+        if period > 0.0:
+            return math.floor((t - self.phase_s) / period) * period + self.phase_s
+        return t
+
+    def end_burst(self, t_end: float) -> None:
+        """The master's last clock ended at ``t_end`` (sync mode, 004 §3.1: +20 µs)."""
+        cfg = self.config
+        if cfg.ssi_mode is SsiMode.SYNC and cfg.sync_reference is SyncReference.BURST_END:
+            self._sync_next = t_end + cfg.sync_delay_s
+
+    def frame_at(self, t: float) -> EncoderFrame:
+        """Latch at ``t``: form (or reuse) the position and assemble the frame bits."""
+        cfg = self.config
+        ts = self.sample_time(t)
+        pos = self.motion.position(ts)
+        value = self.value_at(pos)
+        errors = self._errors
+        if errors and cfg.error_output is ErrorOutput.ALL_ONES:
+            area = (1 << cfg.position_bits) - 1
+        elif errors and cfg.error_output is ErrorOutput.ERROR_VALUE:
+            area = cfg.error_value << cfg.trailing_zero_bits
+        else:
+            area = encode_area(cfg, value)
+        special = self._special
+        if special is None:
+            return EncoderFrame(area << (cfg.frame_bits - cfg.position_bits), cfg.frame_bits, value, pos, 0.0, t, ts, frozenset(),
+                                bool(errors), self.power_failure)
+        vel = self.motion.velocity(ts)
+        speed_rps = vel if not cfg.linear else 0.0
+        active = special.active(ts, value, speed_rps, errors, self.power_failure)
+        frame = area
+        inverted = cfg.inverted_bits
+        for bit in cfg.special_bits:
+            if bit in PARITY_BITS:
+                level = bin(frame).count("1") & 1
+                if bit is SpecialBit.EVEN_ERROR_PARITY and errors:
+                    level ^= 1
+                if level:
+                    active.add(bit)
+            else:
+                level = 1 if bit in active else 0
+            if bit in inverted:
+                level ^= 1
+            frame = (frame << 1) | level
+        frame <<= cfg.frame_bits - cfg.position_bits - len(cfg.special_bits)
+        if errors and cfg.error_output is ErrorOutput.ALL_ONES:
+            frame = self._mask
+        flags = frozenset(b for b in active if b in self._layout_bits)
+        return EncoderFrame(frame, cfg.frame_bits, value, pos, vel, t, ts, flags,
+                            bool(errors), self.power_failure)
