@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
 
-from ssi_bridge.encoder.codes import Code
+from ssi_bridge.encoder.codes import Code, bcd_encode
 from ssi_bridge.exceptions import ConfigError
 
 
@@ -265,13 +265,18 @@ class EncoderConfig:
 
     @cached_property
     def value_bits(self) -> int:
-        """Bits the largest value needs in the chosen code (+1 sign bit for negatives)."""
-        top = max(self.origin + self.range_steps - 1, -self.origin, 1)
+        """Bits the value range needs in the chosen code, sign included (001 §5.2.5)."""
+        top = max(self.origin + self.range_steps - 1, 1)
+        low = -self.origin
+        if self.origin >= 0:
+            return 4 * len(str(top)) if self.code is Code.BCD else top.bit_length()
         if self.code is Code.BCD:
-            bits = 4 * len(str(top))
-        else:
-            bits = top.bit_length()
-        return bits + (1 if self.origin < 0 else 0)
+            if self.negative is Negative.COMPLEMENT:     # -10**d/2 .. 10**d/2 - 1
+                return 4 * len(str(2 * max(low, top + 1) - 1))
+            return bcd_encode(max(low, top)).bit_length() + 1
+        if self.negative is Negative.COMPLEMENT:         # -2**(n-1) .. 2**(n-1) - 1
+            return max(low - 1, top).bit_length() + 1
+        return max(low, top).bit_length() + 1
 
     @property
     def position_bits(self) -> int:
