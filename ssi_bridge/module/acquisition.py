@@ -1,7 +1,7 @@
 """Per-cycle evaluation steps of the XN-1SSI as pure functions (000 chapter 1).
 
-* :func:`extract` - ZERO test, invalid LSB/MSB bits, Gray -> binary ("Transmission
-  procedure", Table 19).
+* :func:`extract` - SSI error check (ZERO test), invalid LSB/MSB bits, Gray -> binary
+  ("Transmission procedure", Table 19), via the line stage's master decode.
 * :func:`ssi_status` - REG_SSI_MASK -> SSI_STS0..3 and SSI_DIAG (Table 3).
 * :func:`compare` - one comparator, the truth table of "Comparison value 1, Comparison value 2".
 * :func:`limits` - STS_OFLW / STS_UFLW (Tables 1 and 2).
@@ -17,31 +17,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ssi_bridge.encoder.codes import bin_to_gray, gray_to_bin
+from ssi_bridge.line.decode import XN_MAX_FRAME_BITS, MasterStatus, check_readout, decode_frame
 from ssi_bridge.line.readout import LineReadout
 from ssi_bridge.module.diagnostics import to_int32
 from ssi_bridge.module.para1 import Para1
 from ssi_bridge.module.registers import VALUE_MAX
 
-try:  # the encoder stage owns the code conversions; fall back until it has landed
-    from ssi_bridge.encoder.codes import gray_to_bin as _gray_to_bin
-except ImportError:  # pragma: no cover - depends on the other stage's progress
-    def _gray_to_bin(value: int) -> int:
-        """Gray -> binary: each binary bit is the XOR of all Gray bits at or above it."""
-        shift = value >> 1
-        while shift:
-            value ^= shift
-            shift >>= 1
-        return value
 
-
-def gray_to_bin(value: int) -> int:
-    """Decode a Gray-coded non-negative integer."""
-    return int(_gray_to_bin(value))
-
-
-def bin_to_gray(value: int) -> int:
-    """Encode a non-negative integer in reflected binary Gray code."""
-    return value ^ (value >> 1)
+__all__ = ["Acquired", "bin_to_gray", "compare", "direction", "extract", "gray_to_bin",
+           "limits", "ssi_status"]
 
 
 @dataclass(frozen=True)
@@ -54,27 +39,27 @@ class Acquired:
     value: int
     #: REG_GRAY_POS: the same value in Gray code
     gray: int
-    #: False when the ZERO test failed (ERR_SSI = 1)
+    #: False when the SSI error check failed (ERR_SSI = 1)
     ok: bool
 
 
 def extract(readout: LineReadout, para: Para1) -> Acquired:
-    """Turn one readout into frame, encoder value and ZERO-test result.
+    """Turn one readout into frame, encoder value and SSI error check (000 Table 19).
 
-    The LSB-side invalid bits are shifted out and the MSB-side ones masked to 0 *before* the
-    Gray decode, so status bits around a Gray-coded position cannot corrupt it (the Gray
-    decode of a bit depends on every bit above it).  The ZERO test (skipped when DIS_ERR_SSI
-    = 1) expects the data line low one clock after the last valid bit (``trailer_bit``).
+    The frame decode is the line stage's master decode (:func:`decode_frame`): LSB-side
+    invalid bits shifted out, MSB-side ones masked to 0, then Gray -> binary on the remaining
+    field only, so status bits around a Gray-coded position cannot corrupt it.  The error
+    check (skipped entirely when DIS_ERR_SSI = 1, "disable SSI error detection", DeviceNet
+    attribute 124) is the ZERO test after the last bit (``trailer_bit`` must be 0) plus the
+    start level (a data wire break reads LOW where the idle "pause 1" is expected).
     """
     n = para.ssi_frame_len
     frame = readout.data & ((1 << n) - 1)
-    field = (frame >> para.invalid_bits_lsb) & ((1 << para.value_bits) - 1)
-    if para.ssi_code_gray:
-        gray, value = field, gray_to_bin(field)
-    else:
-        gray, value = bin_to_gray(field), field
-    ok = para.dis_err_ssi or readout.trailer_bit == 0
-    return Acquired(frame=frame, value=value, gray=gray, ok=ok)
+    value = decode_frame(frame, n, invalid_lsb=para.invalid_bits_lsb,
+                         invalid_msb=para.invalid_bits_msb, gray=para.ssi_code_gray,
+                         max_bits=XN_MAX_FRAME_BITS)
+    ok = para.dis_err_ssi or check_readout(readout, zero_test=True) is MasterStatus.OK
+    return Acquired(frame=frame, value=value, gray=bin_to_gray(value), ok=ok)
 
 
 def ssi_status(frame: int, mask: int) -> tuple[int, bool]:

@@ -85,6 +85,16 @@ def test_zero_test_of_the_data_line(reader, module, dis_err_ssi, trailer, err_ss
     assert (Diag.ERR_SSI in module.diag) == err_ssi, "diagnostics bit 1 wire-break"
 
 
+@pytest.mark.parametrize("dis_err_ssi, err_ssi", [(False, True), (True, False)])
+def test_missing_start_level_is_an_ssi_error(reader, module, dis_err_ssi, err_ssi) -> None:
+    # data wire break: the line reads LOW where the idle "pause 1" is expected -> ERR_SSI
+    # (docs/module.md "SSI error check"); DIS_ERR_SSI switches the whole check off
+    module.write_para1(para(dis_err_ssi=dis_err_ssi))
+    reader.push(0, start_bit=0)
+    module.cycle(0.0)
+    assert (Diag.ERR_SSI in module.diag) == err_ssi
+
+
 def test_wire_break_keeps_the_last_good_position(reader, module) -> None:
     # 000 ERR_SSI: the faulty frame is not taken as a position (docs/module.md)
     reader.push(100).push(0x1FFFFFF, trailer_bit=1).push(101)
