@@ -1,4 +1,4 @@
-"""The 8-byte process input and output images of the XN-1SSI (000 chapter 2, PROFIBUS-DP data image).
+"""The 8-byte process input and output images of the XN-1SSI (000 ch. 2, PROFIBUS-DP data image).
 
 Byte order: bytes 0-3 carry REG_RD_DATA / REG_WR_DATA with byte 0 = data byte 3 (the most
 significant byte) and byte 3 = data byte 0, i.e. big-endian, exactly as the PROFIBUS-DP
@@ -116,12 +116,14 @@ class ProcessInput:
 
     def encode(self) -> bytes:
         """The 8 bytes as the gateway transports them."""
-        byte4 = (self.reg_rd_adr & ADDRESS_MASK) | (ReadStatus.REG_RD_ABORT if self.reg_rd_abort else 0)
+        byte4 = self.reg_rd_adr & ADDRESS_MASK
+        byte4 |= ReadStatus.REG_RD_ABORT if self.reg_rd_abort else 0
         byte5 = (self.ssi_sts & _SSI_STS_MASK)
         byte5 |= WriteStatus.REG_WR_AKN if self.reg_wr_akn else 0
         byte5 |= WriteStatus.REG_WR_ACCEPT if self.reg_wr_accept else 0
         return IMAGE_STRUCT.pack(self.reg_rd_data & 0xFFFFFFFF, int(byte4), int(byte5),
-                                 int(self.cmp & _CMP_STATUS_ALL), int(self.sts & _MODULE_STATUS_ALL))
+                                 int(self.cmp & _CMP_STATUS_ALL),
+                                 int(self.sts & _MODULE_STATUS_ALL))
 
     @classmethod
     def decode(cls, image: bytes) -> ProcessInput:

@@ -16,7 +16,9 @@ from ssi_bridge.line.readout import LineReadout, SsiReader
 from ssi_bridge.module import acquisition
 from ssi_bridge.module.bank import Endurance, RegisterBank
 from ssi_bridge.module.diagnostics import Diag
-from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput
+from ssi_bridge.module.images import (
+    CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput,
+)
 from ssi_bridge.module.para1 import Para1
 from ssi_bridge.module.registers import (
     HW_VERSION, MAGIC_NO, REGISTER_COUNT, SW_VERSION, VALUE_MAX, Reg, describe_refusal,
@@ -70,10 +72,12 @@ class Xn1Ssi:
     def status(self) -> ProcessInput:
         """The decoded process input image."""
         sts = ModuleStatus(0)
-        for flag, on in ((ModuleStatus.SSI_DIAG, self._ssi_diag), (ModuleStatus.ERR_SSI, self._err_ssi),
+        err_para = self.bank.err_para
+        for flag, on in ((ModuleStatus.SSI_DIAG, self._ssi_diag),
+                         (ModuleStatus.ERR_SSI, self._err_ssi),
                          (ModuleStatus.STS_OFLW, self._oflw), (ModuleStatus.STS_UFLW, self._uflw),
-                         (ModuleStatus.ERR_PARA, self.bank.err_para),
-                         (ModuleStatus.STS_STOP, self._stop_latched or self.bank.err_para)):
+                         (ModuleStatus.ERR_PARA, err_para),
+                         (ModuleStatus.STS_STOP, self._stop_latched or err_para)):
             if on:
                 sts |= flag
         adr, abort, data = self._rd
@@ -135,13 +139,15 @@ class Xn1Ssi:
     def _evaluate(self, out: ProcessOutput, moved: tuple[bool, bool]) -> None:
         """SSI status bits, comparators, limits, direction (000 chapter 1, Tables 1-3)."""
         bank = self.bank
-        self._ssi_sts, self._ssi_diag = acquisition.ssi_status(self._frame, bank.value(Reg.REG_SSI_MASK))
+        mask = bank.value(Reg.REG_SSI_MASK)
+        self._ssi_sts, self._ssi_diag = acquisition.ssi_status(self._frame, mask)
         cmp = CmpStatus(0)
         units = ((Reg.REG_CMP1, CmpControl.EN_CMP1, CmpControl.CLR_CMP1, 0),
                  (Reg.REG_CMP2, CmpControl.EN_CMP2, CmpControl.CLR_CMP2, 3))
         for i, (reg, en, clr, shift) in enumerate(units):
-            sts, flag, rel = acquisition.compare(self._pos, bank.value(reg), enabled=en in out.cmp,
-                                                 clear=clr in out.cmp, flag=self._flags[i])
+            sts, flag, rel = acquisition.compare(self._pos, bank.value(reg),
+                                                 enabled=en in out.cmp, clear=clr in out.cmp,
+                                                 flag=self._flags[i])
             self._flags[i] = flag
             cmp |= CmpStatus((sts | flag << 1 | rel << 2) << shift)
         if moved[0]:

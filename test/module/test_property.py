@@ -17,11 +17,19 @@ CMP1_BITS = CmpStatus.STS_CMP1 | CmpStatus.FLAG_CMP1 | CmpStatus.REL_CMP1
 CMP2_BITS = CmpStatus.STS_CMP2 | CmpStatus.FLAG_CMP2 | CmpStatus.REL_CMP2
 
 # images biased towards interesting addresses: half of them pick a named register to write
+def _write_image(data: int, adr: int, rd: int, ctl: int, stop: bool) -> bytes:
+    cmp = CmpControl(ctl) & CmpControl(0x1B)
+    return ProcessOutput(data, rd, adr, True, cmp, stop).encode()
+
+
+SPECIAL_VALUES = [0x6C643230, 0x6C643438, 0x19010000, 0x99020000]
 named_write = st.builds(
-    lambda data, adr, rd, ctl, stop: ProcessOutput(data, rd, adr, True, CmpControl(ctl) & CmpControl(0x1B), stop).encode(),
-    st.one_of(st.integers(0, 0xFFFFFFFF), st.sampled_from([0x6C643230, 0x6C643438, 0x19010000, 0x99020000])),
-    st.sampled_from([int(r) for r in WRITABLE]), st.integers(0, 63), st.integers(0, 255), st.booleans())
-images = st.lists(st.one_of(st.binary(min_size=8, max_size=8), named_write), min_size=1, max_size=60)
+    _write_image,
+    st.one_of(st.integers(0, 0xFFFFFFFF), st.sampled_from(SPECIAL_VALUES)),
+    st.sampled_from([int(r) for r in WRITABLE]), st.integers(0, 63), st.integers(0, 255),
+    st.booleans())
+images = st.lists(st.one_of(st.binary(min_size=8, max_size=8), named_write),
+                  min_size=1, max_size=60)
 frames = st.lists(st.tuples(st.integers(0, 0xFFFFFFFF), st.integers(0, 1)), min_size=1, max_size=60)
 
 
