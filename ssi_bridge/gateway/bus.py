@@ -21,6 +21,8 @@ from ssi_bridge.exceptions import BusError, ConfigError
 logger = logging.getLogger(__name__)
 
 #: bit rates a CANopen device must support or may support (CiA 301 / CiA 102), bit/s
+#: receive-thread wake-up period (s): bounds how long stopping a canopen Network takes
+NOTIFIER_CYCLE = 0.05
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
 

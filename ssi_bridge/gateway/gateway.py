@@ -30,7 +30,7 @@ import canopen
 from canopen.sdo import SdoServer
 
 from ssi_bridge.exceptions import BusError
-from ssi_bridge.gateway.bus import BusConfig, LossyBus, open_bus
+from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BusConfig, LossyBus, open_bus
 from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
 from ssi_bridge.gateway.objects import EncoderObjects
@@ -125,6 +125,7 @@ class XnGateway:
             inner, self._source = self._source, None
         self.bus = LossyBus(inner)
         self.network = canopen.Network(self.bus)
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.network.add_node(self.node)
         self.network.subscribe(0, self._on_nmt)

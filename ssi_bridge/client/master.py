@@ -1,0 +1,383 @@
+"""BridgeClient: the CANopen master the ROS node uses to talk to the XN-GW-CANOPEN.
+
+``connect()`` brings the gateway up as a real master must (CiA 301): probe it over SDO, go
+PRE-OPERATIONAL, map and enable the PDOs it consumes (all invalid by default, 000 Table 15),
+set the heartbeat producer time, start the node (OPERATIONAL). ``sync()`` produces the SYNC
+(the module cycle), TPDO callbacks keep the newest sample per slot, and the register
+handshake of 000 runs over the process-image PDOs (or SDO, ``transport="sdo"``).
+
+A supervisor thread consumes the heartbeat: a silent gateway is reported
+(``gateway_alive`` False), a boot-up message or a non-OPERATIONAL heartbeat triggers an
+automatic re-configuration, and while no heartbeat comes the gateway is probed over SDO so a
+restarted station whose heartbeat is off again is found as well.
+
+Threads: ``sync``/``latest``/``wait_cycle`` (timer thread), ``read_register``/
+``write_register``/``set_control`` (service thread) and the network thread share
+:class:`~ssi_bridge.client.samples.SlotTable`; one handshake per slot at a time (slot lock).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import can
+import canopen
+
+from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
+from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
+from ssi_bridge.client.sdo import SdoAccess, position_pdos
+from ssi_bridge.exceptions import (
+    BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
+)
+from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BusConfig, LossyBus, open_bus
+from ssi_bridge.gateway.dictionary import (
+    MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
+)
+from ssi_bridge.module.images import CmpControl, Control, ProcessInput
+
+logger = logging.getLogger(__name__)
+
+SYNC_COB_ID = 0x80
+HEARTBEAT_OBJECT = 0x1017
+NMT_BOOTUP, NMT_OPERATIONAL = 0, 5
+
+
+class _FrameCounter(can.Listener):
+    def __init__(self, counters: ClientCounters) -> None:
+        self._counters = counters
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self._counters.frames += 1
+        if msg.is_error_frame:
+            self._counters.can_errors += 1
+
+
+class BridgeClient:
+    """Master side of the bridge for one station with ``slots`` XN-1SSI modules.
+
+    :param bus: a :class:`BusConfig` (the client opens its own bus) or an open bus it takes over
+    :param node_id: the gateway's node id
+    :param slots: number of modules (1-8)
+    :param sdo_timeout: bound of one SDO transfer (s)
+    :param handshake_timeout: bound of one handshake step (s); a whole write is bounded by
+        three steps
+    :param heartbeat_ms: heartbeat producer time configured on the gateway (ms); the gateway
+        counts as silent after 4 periods without one
+    :param transport: "pdo" (process images over PDOs) or "sdo" (SDO polling of 0x2000/0x2100)
+    :param assist_after: a handshake sends its own SYNC when none was sent for this long (s)
+    """
+
+    def __init__(self, bus: BusConfig | can.BusABC, node_id: int, slots: int, *,
+                 sdo_timeout: float = 0.5, handshake_timeout: float = 1.0,
+                 heartbeat_ms: int = 50, transport: str = "pdo",
+                 assist_after: float = 0.005) -> None:
+        if not 1 <= slots <= MAX_SLOTS:
+            raise ValueError(f"slots {slots} outside 1-{MAX_SLOTS}")
+        if transport not in ("pdo", "sdo"):
+            raise ValueError(f"transport {transport!r}: use 'pdo' or 'sdo'")
+        self._source: BusConfig | can.BusABC | None = bus
+        self.node_id = node_id
+        self.slots = slots
+        self.sdo_timeout = sdo_timeout
+        self.handshake_timeout = handshake_timeout
+        self.heartbeat_ms = heartbeat_ms
+        self.heartbeat_timeout = max(4 * heartbeat_ms / 1000.0, 0.1)
+        self.transport = transport
+        self.assist_after = assist_after
+        self.counters = ClientCounters()
+        self.table = SlotTable(slots)
+        self.bus: LossyBus | None = None
+        self.network: canopen.Network | None = None
+        self.node: canopen.RemoteNode | None = None
+        self.sdo: SdoAccess | None = None
+        self._handshake = Handshake(self, handshake_timeout, WRITE_STEPS * handshake_timeout)
+        self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
+        self._send_lock = threading.Lock()
+        self._last_heartbeat = 0.0
+        self._heartbeat_state: int | None = None
+        self._reconfigure = threading.Event()
+        self._stop = threading.Event()
+        self._supervisor: threading.Thread | None = None
+        self._was_alive = False
+        self._configuring = False
+
+    # -- life cycle -------------------------------------------------------------------------
+    def connect(self) -> None:
+        """Open the bus and configure the gateway (raises GatewayUnavailable / SdoAbortError)."""
+        if self.network is not None:
+            return
+        if isinstance(self._source, BusConfig):
+            inner = open_bus(self._source)
+        elif self._source is None:
+            raise BusError("this client's bus was handed over and already shut down")
+        else:
+            inner, self._source = self._source, None
+        self.bus = LossyBus(inner)
+        self.network = canopen.Network(self.bus)
+        self.network.listeners.append(_FrameCounter(self.counters))
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
+        self.network.connect()
+        self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
+        self.network.add_node(self.node)
+        self.sdo = SdoAccess(self.node, self.sdo_timeout)
+        self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
+        self.node.emcy.add_callback(self._on_emcy)
+        self._subscribe_tpdos()
+        try:
+            self.configure()
+        except SsiBridgeError:
+            self.close()
+            raise
+        self._stop.clear()
+        self._reconfigure.clear()
+        self._supervisor = threading.Thread(target=self._supervise, daemon=True,
+                                            name=f"bridge-supervisor-{self.node_id}")
+        self._supervisor.start()
+
+    def close(self) -> None:
+        """Stop the supervisor and shut the bus down (the gateway keeps running)."""
+        self._stop.set()
+        if self._supervisor is not None and self._supervisor is not threading.current_thread():
+            self._supervisor.join(timeout=2 * self.sdo_timeout + 1.0)
+        self._supervisor = None
+        if self.network is not None:
+            network, self.network = self.network, None
+            network.disconnect()
+        self.bus = None
+
+    def __enter__(self) -> BridgeClient:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def configure(self) -> None:
+        """(Re)configure the gateway: PRE-OP, PDOs, heartbeat, OPERATIONAL, resend outputs."""
+        assert self.sdo is not None and self.node is not None
+        with self.sdo.lock:
+            self._configuring = True
+            try:
+                self.sdo.read(0x1000)  # probe: a clear error when nobody answers
+                self.node.nmt.state = "PRE-OPERATIONAL"
+                self.sdo.configure_pdos(self.slots, images=self.transport == "pdo")
+                self.sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
+                self.node.nmt.state = "OPERATIONAL"
+            finally:
+                self._configuring = False
+            self._last_heartbeat = time.monotonic()
+            self.counters.configurations += 1
+        for slot in range(1, self.slots + 1):
+            self._send_output(slot, bytes(self.table.slot(slot).output))
+        logger.info("gateway node %d configured (%d slot(s), %s transport)", self.node_id,
+                    self.slots, self.transport)
+
+    # -- cyclic data ------------------------------------------------------------------------
+    def sync(self) -> float:
+        """Send one SYNC (one module cycle); return its ``time.monotonic()`` send time."""
+        if self.network is None:
+            raise BusError("client not connected")
+        t = self.table.on_sync()
+        try:
+            with self._send_lock:
+                self.network.send_message(SYNC_COB_ID, b"")
+        except can.CanError as err:
+            self.counters.can_errors += 1
+            raise BusError(f"could not send SYNC: {err}") from err
+        self.counters.syncs += 1
+        return t
+
+    def latest(self, slot: int) -> ChannelSample | None:
+        """The newest sample of ``slot`` (None before the first complete one)."""
+        return self.table.latest(slot)
+
+    def wait_cycle(self, timeout: float) -> bool:
+        """True once every slot's image and position arrived since the last :meth:`sync`."""
+        return self.table.wait_cycle(timeout)
+
+    @property
+    def gateway_alive(self) -> bool:
+        """True while the gateway's heartbeat is current."""
+        return (self.network is not None
+                and time.monotonic() - self._last_heartbeat <= self.heartbeat_timeout)
+
+    @property
+    def emergencies(self) -> canopen.emcy.EmcyConsumer:
+        """canopen's EMCY consumer of the gateway (``log``, ``active``, ``wait``)."""
+        assert self.node is not None
+        return self.node.emcy
+
+    # -- registers and control --------------------------------------------------------------
+    def read_register(self, slot: int, addr: int) -> int:
+        """Read register ``addr`` of ``slot`` through the 000 handshake."""
+        return self._locked(slot, lambda: self._handshake.read(slot, addr))
+
+    def write_register(self, slot: int, addr: int, value: int) -> None:
+        """Write ``value`` to register ``addr`` of ``slot`` through the 000 handshake."""
+        self._locked(slot, lambda: self._handshake.write(slot, addr, value))
+
+    def set_control(self, slot: int, *, stop: bool = False, enable_cmp1: bool = False,
+                    enable_cmp2: bool = False, clear_cmp1: bool = False,
+                    clear_cmp2: bool = False) -> None:
+        """Set output bytes 6/7; CLR_CMPx are sent for one module cycle, then dropped."""
+        bits = CmpControl(0)
+        for on, flag in ((enable_cmp1, CmpControl.EN_CMP1), (enable_cmp2, CmpControl.EN_CMP2),
+                         (clear_cmp1, CmpControl.CLR_CMP1), (clear_cmp2, CmpControl.CLR_CMP2)):
+            if on:
+                bits |= flag
+        with self.table.cond:
+            st = self.table.slot(slot)
+            st.output[6] = int(bits)
+            st.output[7] = int(Control.STOP) if stop else 0
+            st.pulse_seq = self.table.sync_seq if clear_cmp1 or clear_cmp2 else None
+            data = bytes(st.output)
+        self._send_output(slot, data)
+
+    def read_object(self, index: int, subindex: int = 0) -> int | bytes | str:
+        """SDO upload with typed errors (SdoAbortError with the CiA 301 meaning)."""
+        if self.sdo is None:
+            raise BusError("client not connected")
+        return self.sdo.read(index, subindex)
+
+    def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
+        """SDO download with typed errors."""
+        if self.sdo is None:
+            raise BusError("client not connected")
+        self.sdo.write(index, subindex, value)
+
+    def _locked(self, slot: int, job: Callable[[], int | None]) -> int:
+        self.table.slot(slot)  # KeyError for an unknown slot
+        lock = self._slot_locks[slot]
+        if not lock.acquire(timeout=self._handshake.total_timeout):
+            self.counters.handshake_failures += 1
+            raise HandshakeTimeout(f"slot {slot}: another register handshake is still running")
+        try:
+            return job()  # type: ignore[return-value]
+        except (HandshakeTimeout, GatewayUnavailable):
+            self.counters.timeouts += 1
+            self.counters.handshake_failures += 1
+            raise
+        except RegisterError:
+            self.counters.handshake_failures += 1
+            raise
+        finally:
+            lock.release()
+
+    # -- ImagePort for the handshake ---------------------------------------------------------
+    def edit_output(self, slot: int, edit: Callable[[bytearray], None]) -> None:
+        """Change bytes 0-5 of ``slot``'s output image and send it."""
+        with self.table.cond:
+            st = self.table.slot(slot)
+            scratch = bytearray(st.output)
+            edit(scratch)
+            st.output[0:6] = scratch[0:6]
+            st.edit_seq = self.table.sync_seq
+            data = bytes(st.output)
+        self._send_output(slot, data)
+
+    def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
+        """An input image produced after the last edit; sends SYNC itself when none comes."""
+        end = time.monotonic() + timeout
+        while (left := end - time.monotonic()) > 0:
+            if self.transport == "sdo":
+                return self._poll_input(slot)
+            image = self.table.next_input(slot, min(left, self.assist_after))
+            if image is not None:
+                return image
+            if time.monotonic() - self.table.last_sync_monotonic >= self.assist_after:
+                self.sync()
+        return None
+
+    def alive(self) -> bool:
+        """ImagePort: the heartbeat is current."""
+        return self.gateway_alive
+
+    def _poll_input(self, slot: int) -> ProcessInput | None:
+        assert self.sdo is not None
+        self.sync()
+        try:
+            raw = self.sdo.read(PROCESS_INPUT, slot)
+        except GatewayUnavailable:
+            return None
+        data = int(raw).to_bytes(8, "little") if isinstance(raw, int) else bytes(raw)
+        self.table.on_image(slot, data)
+        return ProcessInput.decode(data)
+
+    def _send_output(self, slot: int, data: bytes) -> None:
+        if self.network is None:
+            return
+        try:
+            if self.transport == "sdo":
+                assert self.sdo is not None
+                self.sdo.write(PROCESS_OUTPUT, slot, int.from_bytes(data, "little"))
+                return
+            with self._send_lock:
+                self.network.send_message(rpdo_cob_base(slot) + self.node_id, data)
+        except can.CanError as err:
+            self.counters.can_errors += 1
+            logger.warning("slot %d: process output not sent: %s", slot, err)
+        except GatewayUnavailable as err:
+            logger.warning("slot %d: process output not written: %s", slot, err)
+
+    # -- network thread callbacks ------------------------------------------------------------
+    def _subscribe_tpdos(self) -> None:
+        assert self.node is not None
+        for slot in range(1, self.slots + 1):
+            self.node.tpdo[slot].add_callback(
+                lambda pdo, s=slot: self._on_image(s, bytes(pdo.data)))
+        for pdo_no, carried in position_pdos(self.slots):
+            self.node.tpdo[pdo_no].add_callback(
+                lambda pdo, c=carried: self.table.on_positions(c, bytes(pdo.data)))
+
+    def _on_image(self, slot: int, data: bytes) -> None:
+        self.table.on_image(slot, data)
+        with self.table.cond:
+            st = self.table.slot(slot)
+            if st.pulse_seq is None or self.table.sync_seq <= st.pulse_seq:
+                return
+            st.pulse_seq = None
+            st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
+            out = bytes(st.output)
+        self._send_output(slot, out)
+
+    def _on_heartbeat(self, state: int) -> None:
+        self._last_heartbeat = time.monotonic()
+        self._heartbeat_state = state
+        if state == NMT_BOOTUP:
+            self.counters.restarts += 1
+            logger.warning("gateway node %d booted (restart?); re-configuring", self.node_id)
+            self._reconfigure.set()
+        elif state != NMT_OPERATIONAL and not self._configuring:
+            self._reconfigure.set()
+
+    def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
+        self.counters.emergencies += 1
+        logger.info("gateway node %d EMCY %s data %s", self.node_id, error, error.data.hex())
+
+    def _supervise(self) -> None:
+        period = max(self.heartbeat_ms / 1000.0, 0.02)
+        next_probe = 0.0
+        while not self._stop.wait(period):
+            alive = self.gateway_alive
+            if self._was_alive and not alive:
+                logger.warning("gateway node %d silent: no heartbeat for %.3f s", self.node_id,
+                               self.heartbeat_timeout)
+            self._was_alive = alive
+            if not alive and time.monotonic() >= next_probe and not self._reconfigure.is_set():
+                next_probe = time.monotonic() + 5 * period
+                try:
+                    assert self.sdo is not None
+                    self.sdo.read(HEARTBEAT_OBJECT)
+                    self._reconfigure.set()  # it answers but sends no heartbeat: restarted
+                except SsiBridgeError:
+                    self.counters.timeouts += 1
+            if self._reconfigure.is_set() and not self._stop.is_set():
+                self._reconfigure.clear()
+                try:
+                    self.configure()
+                except SsiBridgeError as err:
+                    self._reconfigure.set()
+                    logger.warning("gateway node %d re-configuration failed: %s", self.node_id, err)

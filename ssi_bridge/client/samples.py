@@ -1,0 +1,144 @@
+"""What the master keeps per slot: latest sample, process images, counters, freshness.
+
+:class:`SlotTable` is filled by TPDO callbacks on the network thread and read by the timer
+thread (``latest``/``wait_cycle``) and the service thread (handshake); one condition
+variable guards it. A sample is attributed to the last SYNC sent before it arrived.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+
+from ssi_bridge.module.images import ProcessInput
+
+#: two Integer32 positions in one encoder default PDO (000 Table 15, object 0x6820)
+POSITION_PAIR = struct.Struct("<ii")
+#: SYNC times remembered to stamp late samples
+_KEEP_SYNC_TIMES = 64
+
+
+@dataclass(frozen=True)
+class ChannelSample:
+    """The newest data of one slot, as the ROS node publishes it."""
+
+    #: slot number 1..8 (object subindex)
+    slot: int
+    #: REG_SSI_POS as Integer32 (object 0x6820)
+    position: int
+    #: the 8-byte process input image (000 "Process input")
+    process_input: bytes
+    #: time.monotonic() of the SYNC that produced this sample (s)
+    sync_time: float
+    #: number of process input images received for this slot
+    counter: int
+
+
+@dataclass
+class ClientCounters:
+    """Health counters of the master (for /diagnostics)."""
+
+    #: CAN frames received
+    frames: int = 0
+    #: CAN error frames received or send failures
+    can_errors: int = 0
+    #: register handshakes that failed (refusal, timeout, silent gateway)
+    handshake_failures: int = 0
+    #: handshake steps or SDO transfers that timed out
+    timeouts: int = 0
+    #: SYNC frames sent
+    syncs: int = 0
+    #: times the gateway was (re)configured
+    configurations: int = 0
+    #: boot-up messages seen (gateway restarts)
+    restarts: int = 0
+    #: EMCY frames received
+    emergencies: int = 0
+
+
+@dataclass
+class _Slot:
+    image: bytes | None = None
+    image_seq: int = -1
+    image_count: int = 0
+    position: int | None = None
+    position_seq: int = -1
+    output: bytearray = field(default_factory=lambda: bytearray(8))
+    edit_seq: int = 0  # sync sequence at the last output edit
+    pulse_seq: int | None = None  # clear pulse armed at this sync sequence
+
+
+class SlotTable:
+    """Per-slot state shared by the network, timer and service threads."""
+
+    def __init__(self, slots: int) -> None:
+        self.slots = slots
+        self.cond = threading.Condition()
+        self.sync_seq = 0
+        self.sync_time = 0.0
+        self.last_sync_monotonic = 0.0
+        self._slots = {s: _Slot() for s in range(1, slots + 1)}
+        self._times: dict[int, float] = {}
+
+    def slot(self, slot: int) -> _Slot:
+        """The state of ``slot`` (raises KeyError with the valid range)."""
+        try:
+            return self._slots[slot]
+        except KeyError:
+            raise KeyError(f"slot {slot} not configured (1..{self.slots})") from None
+
+    def on_sync(self) -> float:
+        """Record a SYNC about to be sent; return its time."""
+        with self.cond:
+            self.sync_seq += 1
+            self.sync_time = self.last_sync_monotonic = time.monotonic()
+            self._times[self.sync_seq] = self.sync_time
+            self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
+            return self.sync_time
+
+    def on_image(self, slot: int, data: bytes) -> None:
+        """Store a received process input image."""
+        with self.cond:
+            st = self._slots[slot]
+            st.image, st.image_seq = bytes(data), self.sync_seq
+            st.image_count += 1
+            self.cond.notify_all()
+
+    def on_positions(self, slots: list[int], data: bytes) -> None:
+        """Store the positions of an encoder default PDO."""
+        values = POSITION_PAIR.unpack(bytes(data).ljust(8, b"\0"))
+        with self.cond:
+            for slot, value in zip(slots, values):
+                st = self._slots[slot]
+                st.position, st.position_seq = value, self.sync_seq
+            self.cond.notify_all()
+
+    def latest(self, slot: int) -> ChannelSample | None:
+        """The newest complete sample of ``slot`` or None before the first one."""
+        with self.cond:
+            st = self.slot(slot)
+            if st.image is None or st.position is None:
+                return None
+            return ChannelSample(slot, st.position, st.image,
+                                 self._times.get(st.image_seq, 0.0), st.image_count)
+
+    def cycle_complete(self) -> bool:
+        """True when every slot's image and position arrived since the last SYNC."""
+        return all(st.image_seq == self.sync_seq and st.position_seq == self.sync_seq
+                   for st in self._slots.values())
+
+    def wait_cycle(self, timeout: float) -> bool:
+        """Wait until :meth:`cycle_complete` or ``timeout`` (s) elapses."""
+        with self.cond:
+            return self.cond.wait_for(self.cycle_complete, timeout)
+
+    def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
+        """Wait for an image newer than the slot's last output edit."""
+        with self.cond:
+            st = self._slots[slot]
+            if self.cond.wait_for(lambda: st.image_seq > st.edit_seq, timeout):
+                assert st.image is not None
+                return ProcessInput.decode(st.image)
+            return None

@@ -1,0 +1,59 @@
+"""Fixtures for the bridge-client tests: a real gateway and client on a private virtual bus.
+
+Every fixture shuts its buses down, and ``no_leaked_bus`` fails a test that leaves a python-can
+virtual bus open on its channel.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+
+import can.interfaces.virtual as virtual
+import pytest
+
+from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.gateway.bus import BusConfig
+from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.line.readout import LineReadout
+from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+_channels = itertools.count()
+
+
+class ScriptedReader:
+    """An SsiReader whose encoder value the test sets; a healthy line otherwise."""
+
+    def __init__(self, value: int = 1234) -> None:
+        self.value = value
+
+    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
+        data = self.value & ((1 << n_bits) - 1)
+        return LineReadout(latch_time=t, n_bits=n_bits, data=data,
+                           end_time=t + (n_bits + 1) / bit_rate_hz)
+
+
+@pytest.fixture
+def channel(request: pytest.FixtureRequest) -> Iterator[str]:
+    """A virtual channel private to this test; fails the test if a bus is left open on it."""
+    name = f"client-{next(_channels)}-{request.node.name}"
+    yield name
+    with virtual.channels_lock:
+        leaked = len(virtual.channels.get(name, []))
+    assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
+
+
+@pytest.fixture
+def station(channel: str) -> Iterator[tuple[XnGateway, BridgeClient, list[ScriptedReader]]]:
+    """Gateway (node 5, one XN-1SSI on a scripted reader) and a connected client."""
+    readers = [ScriptedReader(1234)]
+    config = BusConfig(channel=channel, node_id=5)
+    gateway = XnGateway(config, 5, [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
+    client = BridgeClient(config, 5, len(readers), sdo_timeout=0.3, handshake_timeout=0.5)
+    gateway.start()
+    try:
+        client.connect()
+        yield gateway, client, readers
+    finally:
+        client.close()
+        gateway.stop()
