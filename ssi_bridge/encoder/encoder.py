@@ -188,7 +188,8 @@ class SsiEncoder:
             area = encode_area(cfg, value)
         special = self._special
         if special is None:
-            return EncoderFrame(area << (cfg.frame_bits - cfg.position_bits), cfg.frame_bits, value, pos, 0.0, t, ts, frozenset(),
+            return EncoderFrame(area << (cfg.frame_bits - cfg.position_bits), cfg.frame_bits,
+                                value, pos, self.motion.velocity(ts), t, ts, frozenset(),
                                 bool(errors), self.power_failure)
         vel = self.motion.velocity(ts)
         speed_rps = vel if not cfg.linear else 0.0
