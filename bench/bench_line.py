@@ -1,0 +1,94 @@
+"""Benchmark: frames per second through encoder -> SSI line -> master decode.
+
+Reported beside the physical limit of a real line: 1 MHz clock, 25-bit frame + pause-1
+clock + tm 20 µs ≈ 46 µs per frame ≈ 21.7 k frames/s (004 §2.2, 001 §4.6). Goals: scalar
+path >= 10x that limit, batch path >= 1 M frames/s. Prints one JSON object per line and
+appends them to bench/results/latest.jsonl; never fails.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+RESULTS = Path(__file__).resolve().parent / "results" / "latest.jsonl"
+BIT_RATE = 1e6
+FRAME_BITS = 25
+TM = 20e-6
+PHYSICAL_FPS = 1.0 / ((FRAME_BITS + 1) / BIT_RATE + TM)
+
+
+def _emit(records: list[dict], metric: str, value: float, unit: str,
+          baseline: float | None = None) -> None:
+    rec: dict = {"metric": metric, "value": round(value, 3), "unit": unit}
+    if baseline:
+        rec["baseline"] = round(baseline, 3)
+        rec["ratio"] = round(value / baseline, 3)
+    records.append(rec)
+    print(json.dumps(rec), flush=True)
+
+
+def bench_scalar(records: list[dict], n: int = 30000) -> None:
+    from ssi_bridge.encoder.families import make_encoder
+    from ssi_bridge.encoder.motion import Sine
+    from ssi_bridge.line.line import LineConfig, SsiLine, decode_frame
+
+    line = SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0)),
+                   LineConfig(check_cable_table=False))
+    read, period = line.read, 1e-3
+    t0 = time.perf_counter()
+    for i in range(n):
+        r = read(i * period, FRAME_BITS, BIT_RATE)
+        decode_frame(r.data, FRAME_BITS)
+    dt = time.perf_counter() - t0
+    _emit(records, "line_scalar_frames_per_s", n / dt, "frames/s", PHYSICAL_FPS)
+    _emit(records, "line_scalar_us_per_frame", dt / n * 1e6, "us",
+          1e6 / PHYSICAL_FPS)
+
+
+def bench_batch(records: list[dict], n: int = 1_000_000) -> None:
+    import numpy as np
+
+    from ssi_bridge.encoder.families import make_encoder
+    from ssi_bridge.encoder.motion import Sine
+    from ssi_bridge.line.batch import read_batch
+    from ssi_bridge.line.line import LineConfig, SsiLine
+
+    line = SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0)),
+                   LineConfig(check_cable_table=False))
+    times = np.arange(n, dtype=np.float64) * 1e-4
+    read_batch(line, times[:1000], FRAME_BITS, BIT_RATE)          # warm the schedule
+    t0 = time.perf_counter()
+    read_batch(line, times, FRAME_BITS, BIT_RATE)
+    dt = time.perf_counter() - t0
+    _emit(records, "line_batch_frames_per_s", n / dt, "frames/s", PHYSICAL_FPS)
+
+
+def main() -> int:
+    logging.basicConfig(level=logging.ERROR)
+    records: list[dict] = []
+    for bench in (bench_scalar, bench_batch):
+        try:
+            bench(records)
+        except Exception as err:  # a benchmark reports, it never fails
+            rec = {"metric": bench.__name__, "value": None, "unit": "", "error": repr(err)}
+            records.append(rec)
+            print(json.dumps(rec), flush=True)
+    try:
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        with RESULTS.open("a", encoding="utf-8") as fh:
+            for rec in records:
+                fh.write(json.dumps(rec) + "\n")
+    except OSError as err:
+        print(json.dumps({"metric": "write_results", "value": None, "unit": "",
+                          "error": repr(err)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
