@@ -24,6 +24,8 @@ from canopen import objectdictionary as od
 from canopen.objectdictionary import datatypes as dt
 from canopen.objectdictionary import eds
 
+from ssi_bridge.gateway.bus import CIA_BITRATES
+
 #: number of XN-1SSI modules a station may hold (issue 5)
 MAX_SLOTS = 8
 #: 0x1000 device type: CiA 401 generic I/O (the gateway's first device profile)
@@ -34,6 +36,7 @@ DEVICE_NAME = "XN-GW-CANOPEN"
 #: 0x1018 identity. Simulation values, not Eaton's CiA vendor assignment.
 VENDOR_ID = 0x0000_0000
 PRODUCT_CODE = 0x0000_6811
+SERIAL = 0x0000_0001
 REVISION = 0x0003_0000  # gateway firmware V3.00: first with XN-1SSI support (000 ch. 4)
 #: CiA 301 PDO COB-ID bit 31: PDO does not exist / is not valid
 PDO_INVALID = 0x8000_0000
@@ -189,6 +192,7 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
     d.device_information.vendor_number = VENDOR_ID
     d.device_information.product_number = PRODUCT_CODE
     d.device_information.revision_number = REVISION
+    d.device_information.allowed_baudrates = set(CIA_BITRATES)
     d.device_information.nr_of_RXPDO = N_PDOS
     d.device_information.nr_of_TXPDO = N_PDOS
     d.add_object(_var("Device type", 0x1000, 0, dt.UNSIGNED32, "ro", DEVICE_TYPE))
@@ -209,7 +213,7 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
         _var("Vendor-ID", 0x1018, 1, dt.UNSIGNED32, "ro", VENDOR_ID),
         _var("Product code", 0x1018, 2, dt.UNSIGNED32, "ro", PRODUCT_CODE),
         _var("Revision number", 0x1018, 3, dt.UNSIGNED32, "ro", REVISION),
-        _var("Serial number", 0x1018, 4, dt.UNSIGNED32, "ro", node_id)]))
+        _var("Serial number", 0x1018, 4, dt.UNSIGNED32, "ro", SERIAL)]))
     _pdo_objects(d, node_id)
     d.add_object(_array(PROCESS_INPUT, "Process input image", slots, dt.UNSIGNED64, "ro",
                         True))

@@ -27,9 +27,11 @@ from typing import TYPE_CHECKING
 
 import can
 import canopen
-from canopen.sdo import SdoServer
+from canopen.objectdictionary import ODArray
+from canopen.sdo import SdoAbortedError, SdoServer
 
 from ssi_bridge.exceptions import BusError
+from ssi_bridge.gateway.aborts import SdoAbort
 from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BusConfig, LossyBus, open_bus
 from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
@@ -100,8 +102,10 @@ class XnGateway:
         self.emergencies = Emergencies(len(self.modules), self._send_emcy)
         self._lock = threading.RLock()
         self.node = _StationNode(node_id, self.od, self._after_write, self._lock)
+        self.node.add_read_callback(self._check_subindex)
         self.node.add_read_callback(self.emergencies.on_read)
         self.node.add_read_callback(self.objects.on_read)
+        self.node.add_write_callback(self._check_subindex)
         self.node.add_write_callback(self._check_write)
         self.node.add_write_callback(self.emergencies.on_write)
         self.node.add_write_callback(self.objects.on_write)
@@ -199,6 +203,11 @@ class XnGateway:
                 self.network.unsubscribe(self._sync_cob, self._on_sync)
             self.network.subscribe(cob, self._on_sync)
             self._sync_cob = cob
+
+    def _check_subindex(self, index: int, subindex: int, od: object, **_: object) -> None:
+        # canopen's ODArray invents any subindex 1-255 on lookup; the station has one per slot
+        if isinstance(self.od[index], ODArray) and subindex not in self.od[index].subindices:
+            raise SdoAbortedError(SdoAbort.NO_SUCH_SUBINDEX)
 
     def _check_write(self, index: int, subindex: int, od: object, data: bytes) -> None:
         if 0x1400 <= index < 0x1C00:

@@ -1,0 +1,104 @@
+"""Fixtures for the gateway tests: a station and a bare canopen master on a private bus.
+
+The master side here is canopen's own RemoteNode (not our client), so the gateway is checked
+against the library's reading of CiA 301. Every fixture shuts its bus down; ``channel``
+fails a test that leaves a virtual bus open.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import can.interfaces.virtual as virtual
+import canopen
+import pytest
+
+from ssi_bridge.gateway.bus import BusConfig
+from ssi_bridge.gateway.dictionary import build_dictionary
+from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.line.readout import LineReadout
+from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+_channels = itertools.count()
+NODE_ID = 7
+
+
+class ScriptedReader:
+    """An SsiReader returning the value the test sets, on a healthy line."""
+
+    def __init__(self, value: int = 0) -> None:
+        self.value = value
+
+    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
+        return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
+                           end_time=t + (n_bits + 1) / bit_rate_hz)
+
+
+@dataclass
+class Station:
+    gateway: XnGateway
+    network: canopen.Network
+    node: canopen.RemoteNode
+    readers: list[ScriptedReader]
+
+    def wait_for(self, condition, message: str, timeout: float = 2.0) -> None:
+        """Poll ``condition`` until true; fail with ``message`` after ``timeout`` s."""
+        wait_for(condition, message, timeout)
+
+    def sync(self) -> None:
+        """One SYNC, waited for until the gateway ran the cycle (no fixed sleep)."""
+        before = self.gateway.cycles
+        self.network.sync.transmit()
+        wait_for(lambda: self.gateway.cycles > before, "gateway ran no cycle after SYNC")
+
+
+def wait_for(condition, message: str, timeout: float = 2.0) -> None:
+    """Poll ``condition`` until true; fail with ``message`` after ``timeout`` s."""
+    import time
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            pytest.fail(message)
+        time.sleep(0.001)
+
+
+@pytest.fixture
+def channel(request: pytest.FixtureRequest) -> Iterator[str]:
+    """A virtual channel private to this test; fails the test if a bus is left open on it."""
+    name = f"gateway-{next(_channels)}-{request.node.name}"
+    yield name
+    with virtual.channels_lock:
+        leaked = len(virtual.channels.get(name, []))
+    assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
+
+
+def make_station(channel: str, slots: int) -> Iterator[Station]:
+    readers = [ScriptedReader(1000 * (s + 1)) for s in range(slots)]
+    gateway = XnGateway(BusConfig(channel=channel, node_id=NODE_ID), NODE_ID,
+                        [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
+    network = canopen.Network()
+    network.NOTIFIER_CYCLE = 0.05
+    gateway.start()
+    try:
+        network.connect(interface="virtual", channel=channel)
+        node = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, slots))
+        node.sdo.RESPONSE_TIMEOUT = 0.5
+        network.add_node(node)
+        yield Station(gateway, network, node, readers)
+    finally:
+        network.disconnect()
+        gateway.stop()
+
+
+@pytest.fixture
+def station(channel: str) -> Iterator[Station]:
+    """A two-slot station in PRE-OPERATIONAL with a canopen RemoteNode for it."""
+    yield from make_station(channel, 2)
+
+
+@pytest.fixture
+def station8(channel: str) -> Iterator[Station]:
+    """A full eight-slot station."""
+    yield from make_station(channel, 8)
