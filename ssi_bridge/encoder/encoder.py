@@ -79,6 +79,8 @@ class SsiEncoder:
         self._special = SpecialState(config) if config.special_bits else None
         self._mask = (1 << config.frame_bits) - 1
         self._layout_bits = frozenset(config.special_bits)
+        self._frame_bits = config.frame_bits
+        self._fill = config.frame_bits - config.position_bits
 
     # -- description --------------------------------------------------------------------
     @property
@@ -188,7 +190,7 @@ class SsiEncoder:
             area = encode_area(cfg, value)
         special = self._special
         if special is None:
-            return EncoderFrame(area << (cfg.frame_bits - cfg.position_bits), cfg.frame_bits,
+            return EncoderFrame(area << self._fill, self._frame_bits,
                                 value, pos, self.motion.velocity(ts), t, ts, frozenset(),
                                 bool(errors), self.power_failure)
         vel = self.motion.velocity(ts)

@@ -25,9 +25,11 @@ from __future__ import annotations
 import logging
 import math
 import random
+from collections.abc import Callable
+from operator import itemgetter
 from dataclasses import dataclass, field
 
-from ssi_bridge.encoder.config import FrameFormat
+from ssi_bridge.encoder.config import FrameFormat, SsiMode
 from ssi_bridge.encoder.encoder import EncoderFrame, SsiEncoder
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.line.decode import MasterStatus, check_readout, decode_frame
@@ -113,6 +115,10 @@ class SsiLine:
         self._last_pause: float | None = None
         self._static: dict[tuple[int, float], tuple[str, ...]] = {}
         self._schedules: dict[tuple[int, float, int], tuple[int, ...]] = {}
+        self._pickers: dict[tuple[int, float, int], Callable[[str], tuple[str, ...]]] = {}
+        ecfg = encoder.config
+        self._pause_rules = (ecfg.ssi_mode is SsiMode.SYNC or ecfg.async_max_pause_s is not None
+                             or ecfg.async_pause_tolerance is not None)
         #: the frame the encoder latched for the last burst (None after a clock break)
         self.last_frame: EncoderFrame | None = None
         #: bursts read and values latched (repeat bursts latch nothing)
@@ -148,7 +154,8 @@ class SsiLine:
         warnings = list(static)
         if self._last_end is not None and not expect_repeat:
             pause = t - self._last_end
-            warnings += pause_warnings(self.encoder.config, pause, self._last_pause, tm)
+            if self._pause_rules or pause < 2.0 * tm:
+                warnings += pause_warnings(self.encoder.config, pause, self._last_pause, tm)
             self._last_pause = pause
         self.bursts += 1
         clock_ok = not faults.clock_break
@@ -170,11 +177,11 @@ class SsiLine:
         initial = 0 if (line_low and clock_ok) else 1
         last_fall = t + (clocks - 1) * period
         if clock_ok:
-            # extended word: sources a sample can see, selected per edge by the schedule
+            # extended word: the sources a sample can see; the edge schedule picks one
+            # level per master sample (string indexing keeps the per-bit walk in C)
             word = (initial << (length + 2)) | (1 << (length + 1)) | (bits << 1)
-            samples = 0
-            for shift in self._schedule(n_bits, period, length):
-                samples = (samples << 1) | ((word >> shift) & 1)
+            pick = self._picker(n_bits, period, length)
+            samples = int("".join(pick(format(word, self._fmt(length)))), 2)
         else:
             samples = (1 << (clocks + 1)) - 1          # encoder never clocked: idle high
         if faults.active:
@@ -188,6 +195,20 @@ class SsiLine:
             latch_time=t, n_bits=n_bits, data=(samples >> 1) & ((1 << n_bits) - 1),
             start_bit=samples >> (clocks), trailer_bit=samples & 1, end_time=end_time,
             warnings=tuple(warnings))
+
+    @staticmethod
+    def _fmt(length: int) -> str:
+        return f"0{length + 3}b"
+
+    def _picker(self, n_bits: int, period: float, length: int) -> Callable[[str], tuple[str, ...]]:
+        """Per-sample selector over the extended word's binary string (from the schedule)."""
+        key = (n_bits, period, length)
+        pick = self._pickers.get(key)
+        if pick is None:
+            idx = [length + 2 - shift for shift in self._schedule(n_bits, period, length)]
+            pick = itemgetter(*idx)
+            self._pickers[key] = pick
+        return pick
 
     def _schedule(self, n_bits: int, period: float, length: int) -> tuple[int, ...]:
         """Which level the master samples at each clock, from the edge timing (cached).
