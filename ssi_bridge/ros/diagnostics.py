@@ -1,0 +1,111 @@
+"""Diagnostic statuses of the bridge: one per joint channel and one for the bus/gateway.
+
+Level mapping (docs/node.md has the table):
+
+=================================================  =========
+condition                                           level
+=================================================  =========
+no fresh sample for ``stale_cycles`` cycles          STALE
+ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
+STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
+otherwise                                           OK
+gateway silent (no heartbeat) / not connected       ERROR (bus)
+achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
+=================================================  =========
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+from ssi_bridge.module.images import ModuleStatus, ProcessInput
+
+OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
+                          DiagnosticStatus.STALE)
+
+
+@dataclass
+class ChannelCounters:
+    """Per-joint counters the node keeps between diagnostics messages."""
+
+    samples: int = 0
+    stale_cycles: int = 0
+    consecutive_stale: int = 0
+    error_cycles: int = 0
+    handshake_failures: int = 0
+    last_input: ProcessInput | None = None
+    last_position: int = 0
+    extra: dict[str, str] = field(default_factory=dict)
+
+
+def channel_level(inp: ProcessInput | None, consecutive_stale: int, stale_limit: int
+                  ) -> tuple[int, str]:
+    """Level and one-line message of a joint channel from its latest process input."""
+    if inp is None:
+        return STALE, "no sample received yet"
+    if consecutive_stale >= stale_limit:
+        return STALE, f"no fresh sample for {consecutive_stale} cycles"
+    sts = inp.sts
+    if ModuleStatus.ERR_PARA in sts:
+        return ERROR, "ERR_PARA: the module rejected REG_PARA1, encoder not read"
+    if ModuleStatus.ERR_SSI in sts:
+        return ERROR, "ERR_SSI: SSI encoder signal faulty (wire break or no data)"
+    warnings = []
+    if ModuleStatus.STS_OFLW in sts:
+        warnings.append("STS_OFLW: above REG_UPPER_LIMIT")
+    if ModuleStatus.STS_UFLW in sts:
+        warnings.append("STS_UFLW: below REG_LOWER_LIMIT")
+    if ModuleStatus.SSI_DIAG in sts:
+        warnings.append("SSI_DIAG: an enabled encoder status bit is set")
+    if ModuleStatus.STS_STOP in sts:
+        warnings.append("STS_STOP: acquisition stopped by STOP")
+    if warnings:
+        return WARN, "; ".join(warnings)
+    return OK, "reading"
+
+
+def channel_status(joint: str, hardware_id: str, counters: ChannelCounters, stale_limit: int,
+                   position: float) -> DiagnosticStatus:
+    """The DiagnosticStatus ``ssi_bridge: <joint>`` with every status bit as a key/value."""
+    inp = counters.last_input
+    level, message = channel_level(inp, counters.consecutive_stale, stale_limit)
+    values = {
+        "position": f"{position:.6f}",
+        "REG_SSI_POS": str(counters.last_position),
+        "samples": str(counters.samples),
+        "stale_cycles": str(counters.stale_cycles),
+        "error_cycles": str(counters.error_cycles),
+        "handshake_failures": str(counters.handshake_failures),
+    }
+    if inp is not None:
+        values.update({name: str(value) for name, value in inp.bits().items()})
+    values.update(counters.extra)
+    return DiagnosticStatus(
+        level=level, name=f"ssi_bridge: {joint}", message=message, hardware_id=hardware_id,
+        values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,
+               achieved_rate: float, publish_rate: float, counters: dict[str, int],
+               extra_error: str = "") -> DiagnosticStatus:
+    """The bus/gateway status: liveness, achieved vs configured rate and CAN counters."""
+    if not connected:
+        level, message = ERROR, "not connected to the gateway"
+    elif not alive:
+        level, message = ERROR, "gateway silent: no heartbeat / no TPDOs"
+    elif extra_error:
+        level, message = ERROR, extra_error
+    elif achieved_rate < 0.9 * publish_rate:
+        level, message = WARN, f"cycle rate {achieved_rate:.1f} Hz below {publish_rate:.1f} Hz"
+    else:
+        level, message = OK, f"cycling at {achieved_rate:.1f} Hz"
+    values = {"achieved_rate_hz": f"{achieved_rate:.2f}", "publish_rate_hz": f"{publish_rate:.2f}",
+              "gateway_alive": str(alive)}
+    values.update({k: str(v) for k, v in counters.items()})
+    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
+                            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+__all__ = ["ChannelCounters", "bus_status", "channel_level", "channel_status"]

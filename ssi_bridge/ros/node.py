@@ -1,0 +1,307 @@
+"""The ssi_bridge ROS 2 node: one SYNC cycle per period, published as joint_states and status.
+
+Each cycle the node (the CANopen master) sends SYNC; the gateway latches every module's SSI
+frame and answers with TPDOs; the node turns REG_SSI_POS into joint units, estimates velocity,
+and publishes. ``header.stamp`` is the SYNC time, which is the SSI latch time of the sample
+(the module latches on SYNC, well inside one bit time after it; docs/node.md). Services do the
+register handshake over the bus in their own callback group, so the cycle never waits on them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rcl_interfaces.msg import SetParametersResult
+from sensor_msgs.msg import JointState
+from ssi_bridge_msgs.msg import ChannelStatus, Status
+from ssi_bridge_msgs.srv import (
+    InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
+    StopRecording, WriteRegister,
+)
+
+from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.gateway.bus import BusConfig
+from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.module.images import ProcessInput
+from ssi_bridge.module.registers import Para1, Reg
+from ssi_bridge.ros import logbridge
+from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_status
+from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
+from ssi_bridge.ros.recording import SessionRecorder
+from ssi_bridge.ros.services import BridgeServices
+from ssi_bridge.ros.station import SimStation
+from ssi_bridge.ros.units import JointScale, VelocityEstimator
+
+#: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
+#: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
+IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
+
+
+class SsiBridgeNode(Node):
+    """Bridge of one XN-GW-CANOPEN station's XN-1SSI channels to ROS 2."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("ssi_bridge", **kwargs)
+        logbridge.install(self.get_logger())
+        self.settings: NodeSettings = declare_parameters(self)
+        s = self.settings
+        self._t0 = time.monotonic()
+        self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
+        self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
+                                    bitrate=s.bus_bitrate, node_id=s.node_id)
+        self.station: SimStation | None = None
+        self.gateway: XnGateway | None = None
+        self.faults: FaultInjector | None = None
+        if s.simulation:
+            self.station = SimStation(s)
+            self.gateway = XnGateway(self.bus_config, s.node_id, self.station.modules,
+                                     clock=self.sim_time)
+            self.gateway.start()
+            self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
+        n_slots = max(j.slot for j in s.joints)
+        self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
+        self.client.connect()
+        for joint in s.joints:
+            self.client.edit_output(joint.slot, _idle_read)
+        self.scales = {j.name: self._scale(j) for j in s.joints}
+        self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
+                         for j in s.joints}
+        self.counters = {j.name: ChannelCounters() for j in s.joints}
+        self.positions = {j.name: 0.0 for j in s.joints}
+        self._cycle_times: list[float] = []
+        self._last_levels: tuple[int, ...] = ()
+
+        self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
+        self.status_pub = self.create_publisher(Status, "~/status", 10)
+        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.recorder = SessionRecorder(self, s)
+
+        self._cycle_group = MutuallyExclusiveCallbackGroup()
+        self._service_group = MutuallyExclusiveCallbackGroup()
+        self._diag_group = MutuallyExclusiveCallbackGroup()
+        self.cycle_timer = self.create_timer(1.0 / s.publish_rate, self._on_cycle,
+                                             callback_group=self._cycle_group)
+        self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
+                                            callback_group=self._diag_group)
+        self.handlers = BridgeServices(self)
+        g = self._service_group
+        self.create_service(ReadRegister, "~/read_register", self.handlers.read_register,
+                            callback_group=g)
+        self.create_service(WriteRegister, "~/write_register", self.handlers.write_register,
+                            callback_group=g)
+        self.create_service(SetPreset, "~/set_preset", self.handlers.set_preset, callback_group=g)
+        self.create_service(ResetRegisters, "~/reset_registers", self.handlers.reset_registers,
+                            callback_group=g)
+        self.create_service(SetControl, "~/set_control", self.handlers.set_control,
+                            callback_group=g)
+        self.create_service(InjectFault, "~/inject_fault", self.handlers.inject_fault,
+                            callback_group=g)
+        self.create_service(StartRecording, "~/start_recording", self.recorder.on_start,
+                            callback_group=g)
+        self.create_service(StopRecording, "~/stop_recording", self.recorder.on_stop,
+                            callback_group=g)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        if s.record_enabled:
+            try:
+                self.recorder.start(s.record_path)
+            except (RecordingError, OSError) as err:
+                # the bridge still runs; the bus diagnostics show the error until fixed
+                self.recorder.error = f"record.enabled: {err}"
+                self.get_logger().error(self.recorder.error)
+        self.get_logger().info(
+            f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
+            f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
+            f"({'simulated station' if s.simulation else 'real station'}); publishing "
+            f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
+            f"/diagnostics every {s.diagnostics_period:g} s; services under "
+            f"{self.get_fully_qualified_name()}/")
+
+    # -- time ------------------------------------------------------------------------------
+    def sim_time(self) -> float:
+        """Seconds since the node started: the clock of the simulated station."""
+        return time.monotonic() - self._t0
+
+    def _stamp_ns(self, monotonic_t: float) -> int:
+        """ROS time (ns) of a past ``time.monotonic()`` instant."""
+        now_ns = self.get_clock().now().nanoseconds
+        return now_ns - int((time.monotonic() - monotonic_t) * 1e9)
+
+    def _scale(self, joint: JointSettings) -> JointScale:
+        """Counts -> units: parameters win; else the simulated encoder's own resolution."""
+        enc = self.station.channels[joint.name].encoder if self.station else None
+        linear = bool(enc.linear) if enc else joint.measuring_step > 0
+        shift = 1 << Para1.decode(joint.para1).invalid_bits_lsb
+        if linear:
+            step = joint.measuring_step or (enc.measuring_step_m if enc else 1e-6)
+            return JointScale(linear=True, measuring_step_m=step * shift,
+                              direction=joint.direction)
+        steps = joint.steps_per_rev or (enc.steps_per_rev if enc else 8192)
+        revs = joint.revolutions or (enc.revolutions if enc else 4096)
+        return JointScale(counts_per_rev=steps / shift, revolutions=revs,
+                          direction=joint.direction)
+
+    # -- the cycle -------------------------------------------------------------------------
+    def _on_cycle(self) -> None:
+        """SYNC, collect the TPDOs of this cycle, publish joint_states and ~/status."""
+        if self.faults is not None and self.faults.active:
+            for done in self.faults.expire():
+                self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
+                                        True, "fault duration over, cleared")
+        t_sync = self.client.sync()
+        self.client.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
+        self._cycle_times.append(t_sync)
+        stamp_ns = self._stamp_ns(t_sync)
+        stamp = _time_msg(stamp_ns)
+        js = JointState()
+        js.header.stamp = stamp
+        js.header.frame_id = self.settings.frame_id
+        status = Status()
+        status.header = js.header
+        for joint in self.settings.joints:
+            self._update_joint(joint, t_sync, js, status)
+        if not js.name:
+            return
+        self.joint_pub.publish(js)
+        self.status_pub.publish(status)
+        self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
+        self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
+        levels = tuple(st.level for st in self._statuses())
+        if self._last_levels and levels != self._last_levels:
+            self.publish_diagnostics()
+        self._last_levels = levels
+
+    def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
+                      status: Status) -> None:
+        name = joint.name
+        counters = self.counters[name]
+        sample = self.client.latest(joint.slot)
+        if sample is None:
+            counters.stale_cycles += 1
+            counters.consecutive_stale += 1
+            return
+        fresh = sample.sync_time >= t_sync
+        if fresh:
+            counters.samples += 1
+            counters.consecutive_stale = 0
+        else:
+            counters.stale_cycles += 1
+            counters.consecutive_stale += 1
+        inp = ProcessInput.decode(sample.process_input)
+        counters.last_input = inp
+        counters.last_position = sample.position
+        if inp.sts & (inp.sts.ERR_SSI | inp.sts.ERR_PARA):
+            counters.error_cycles += 1
+        scale = self.scales[name]
+        position = scale.position(sample.position)
+        if fresh:
+            velocity = self.velocity[name].update(sample.sync_time, sample.position)
+        else:
+            velocity = self.velocity[name].velocity
+        self.positions[name] = position
+        js.name.append(name)
+        js.position.append(position)
+        js.velocity.append(velocity)
+        status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
+
+    # -- diagnostics -----------------------------------------------------------------------
+    def achieved_rate(self) -> float:
+        """Cycles per second over the last diagnostics period."""
+        now = time.monotonic()
+        window = max(self.settings.diagnostics_period, 1.0)
+        self._cycle_times = [t for t in self._cycle_times if now - t <= window]
+        return len(self._cycle_times) / window
+
+    def _statuses(self) -> list:
+        s = self.settings
+        out = []
+        for joint in s.joints:
+            hw = (f"{s.bus_interface}:{s.bus_channel} node {s.node_id} slot {joint.slot} "
+                  f"XN-1SSI")
+            out.append(channel_status(joint.name, hw, self.counters[joint.name],
+                                      s.stale_cycles, self.positions[joint.name]))
+        counters = dataclasses.asdict(self.client.counters)
+        counters.update(self.recorder.counters())
+        out.append(bus_status(
+            f"ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
+            alive=self.client.gateway_alive, connected=self.client.network is not None,
+            achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
+            extra_error=self.recorder.error))
+        return out
+
+    def publish_diagnostics(self) -> None:
+        """Publish one DiagnosticArray with a status per joint and one for the bus."""
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = self._statuses()
+        self.diag_pub.publish(msg)
+        self.recorder.record("/diagnostics", msg, self.get_clock().now().nanoseconds)
+
+    # -- parameters ------------------------------------------------------------------------
+    def _on_set_parameters(self, params: list) -> SetParametersResult:
+        """Runtime changes: REG_PARA1 via the module (refused with its reason), rates."""
+        for p in params:
+            if p.name.endswith(".para1"):
+                joint = p.name[: -len(".para1")]
+                if joint in self.joints:
+                    reason = self.handlers.apply_para1(joint, int(p.value))
+                    if reason:
+                        return SetParametersResult(successful=False, reason=reason)
+            elif p.name == "publish_rate":
+                self.cycle_timer.timer_period_ns = int(1e9 / float(p.value))
+            elif p.name == "diagnostics_period":
+                self.diag_timer.timer_period_ns = int(1e9 * float(p.value))
+        return SetParametersResult(successful=True)
+
+    def shutdown(self) -> None:
+        """Stop recording, stop the bus side; safe to call twice."""
+        logbridge.uninstall()
+        self.recorder.stop()
+        self.client.close()
+        if self.gateway is not None:
+            self.gateway.stop()
+
+
+def _idle_read(out: bytearray) -> None:
+    """Process output byte 4 = REG_RD_ADR of the register shown while no handshake runs."""
+    out[4] = int(IDLE_READ_REGISTER)
+
+
+def _time_msg(ns: int):
+    from builtin_interfaces.msg import Time
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
+                 counters: ChannelCounters) -> ChannelStatus:
+    """Every bit of one channel's process input image, as ~/status carries it."""
+    sts, cmp = inp.sts, inp.cmp
+    m = ChannelStatus(joint=name, slot=slot)
+    m.process_input = list(sample.process_input)
+    m.reg_rd_data, m.reg_rd_adr, m.reg_rd_abort = inp.reg_rd_data, inp.reg_rd_adr, inp.reg_rd_abort
+    m.reg_wr_accept, m.reg_wr_akn = inp.reg_wr_accept, inp.reg_wr_akn
+    m.ssi_sts0, m.ssi_sts1, m.ssi_sts2, m.ssi_sts3 = (bool(inp.ssi_sts >> i & 1) for i in range(4))
+    m.sts_up, m.sts_dn = bool(cmp & cmp.STS_UP), bool(cmp & cmp.STS_DN)
+    m.rel_cmp2, m.flag_cmp2, m.sts_cmp2 = (bool(cmp & cmp.REL_CMP2), bool(cmp & cmp.FLAG_CMP2),
+                                           bool(cmp & cmp.STS_CMP2))
+    m.rel_cmp1, m.flag_cmp1, m.sts_cmp1 = (bool(cmp & cmp.REL_CMP1), bool(cmp & cmp.FLAG_CMP1),
+                                           bool(cmp & cmp.STS_CMP1))
+    m.sts_stop, m.err_para = bool(sts & sts.STS_STOP), bool(sts & sts.ERR_PARA)
+    m.sts_uflw, m.sts_oflw = bool(sts & sts.STS_UFLW), bool(sts & sts.STS_OFLW)
+    m.err_ssi, m.ssi_diag = bool(sts & sts.ERR_SSI), bool(sts & sts.SSI_DIAG)
+    m.reg_ssi_pos = int(sample.position)
+    m.ssi_frame_valid = (not inp.reg_rd_abort) and inp.reg_rd_adr == int(IDLE_READ_REGISTER)
+    m.ssi_frame = inp.reg_rd_data if m.ssi_frame_valid else 0
+    m.samples, m.stale_cycles, m.error_cycles = (counters.samples, counters.stale_cycles,
+                                                 counters.error_cycles)
+    return m
+
+
+__all__ = ["SsiBridgeNode", "QoSProfile", "qos_profile_sensor_data"]

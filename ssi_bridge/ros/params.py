@@ -1,0 +1,212 @@
+"""Every parameter of the node, declared in one place with descriptions and ranges.
+
+``ros2 param describe`` shows each one's meaning, unit and range. Per-joint parameters live
+under ``<joint>.`` (e.g. ``joint1.para1``) and are declared after ``joints`` is known.
+Values are gathered into frozen settings dataclasses that the rest of the node reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType,
+)
+from rclpy.node import Node
+
+from ssi_bridge.exceptions import ConfigError
+
+DEFAULT_PARA1 = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary, ZERO test on
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """Simulated shaft motion of one joint (revolutions or metres, on the node's clock)."""
+
+    #: "constant", "still" or "sine"
+    kind: str = "constant"
+    #: constant: speed in rev/s (rotary) or m/s (linear)
+    velocity: float = 0.25
+    #: sine: amplitude in rev or m
+    amplitude: float = 0.5
+    #: sine: frequency in Hz
+    frequency: float = 0.5
+    #: start position in rev or m
+    start: float = 0.0
+
+
+@dataclass(frozen=True)
+class JointSettings:
+    """One configured joint: which module slot, which encoder, how counts become units."""
+
+    name: str
+    slot: int
+    family: str = "GENERIC"
+    para1: int = DEFAULT_PARA1
+    #: 0: take it from the simulated encoder family
+    steps_per_rev: int = 0
+    revolutions: int = 0
+    measuring_step: float = 0.0
+    direction: int = 1
+    motion: MotionSettings = field(default_factory=MotionSettings)
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """Node-wide settings."""
+
+    joints: tuple[JointSettings, ...]
+    publish_rate: float = 100.0
+    diagnostics_period: float = 1.0
+    frame_id: str = ""
+    simulation: bool = True
+    bus_interface: str = "virtual"
+    bus_channel: str = "ssi_bridge"
+    bus_bitrate: int = 500_000
+    node_id: int = 1
+    storage_path: str = ""
+    velocity_window: int = 5
+    stale_cycles: int = 5
+    record_enabled: bool = False
+    record_root: str = "ssi_bridge_sessions"
+    record_path: str = ""
+    record_compression: str = "zstd"
+
+
+def _describe(description: str, *, read_only: bool = False,
+              int_range: tuple[int, int] | None = None,
+              float_range: tuple[float, float] | None = None) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if int_range is not None:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float(float_range[0]), to_value=float(float_range[1]), step=0.0)]
+    return d
+
+
+#: name -> (default, descriptor); node-wide parameters
+NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
+    "joints": (["joint1"], _describe(
+        "Joint names, one per XN-1SSI channel; per-joint settings are '<joint>.*'",
+        read_only=True)),
+    "publish_rate": (100.0, _describe(
+        "Cycle rate in Hz: one SYNC, one acquisition and one joint_states message per cycle",
+        float_range=(1.0, 2000.0))),
+    "diagnostics_period": (1.0, _describe(
+        "Seconds between /diagnostics messages (also sent at once on a level change)",
+        float_range=(0.1, 60.0))),
+    "frame_id": ("", _describe("header.frame_id of joint_states and ~/status")),
+    "simulation": (True, _describe(
+        "true: run the simulated encoders, XN-1SSI modules and gateway in-process on the bus; "
+        "false: talk to a real XN-GW-CANOPEN station", read_only=True)),
+    "bus.interface": ("virtual", _describe(
+        "python-can interface (virtual, socketcan, pcan, kvaser, ...)", read_only=True)),
+    "bus.channel": ("ssi_bridge", _describe(
+        "python-can channel (virtual: any name; socketcan: can0, ...)", read_only=True)),
+    "bus.bitrate": (500_000, _describe(
+        "CAN bit rate in bit/s (CiA 301 rates; ignored by the virtual interface)",
+        read_only=True, int_range=(10_000, 1_000_000))),
+    "bus.node_id": (1, _describe("CANopen node id of the XN-GW-CANOPEN gateway",
+                                 read_only=True, int_range=(1, 127))),
+    "storage_path": ("", _describe(
+        "File holding the retentive registers of the simulated modules (000: REG_PARA1, "
+        "limits, offset, mask); empty: keep them in memory only", read_only=True)),
+    "velocity_window": (5, _describe(
+        "Samples in the velocity estimate (newest - oldest over their time difference)",
+        int_range=(2, 100))),
+    "stale_cycles": (5, _describe(
+        "Cycles without a fresh sample before a joint's diagnostics go STALE",
+        int_range=(1, 1000))),
+    "record.enabled": (False, _describe(
+        "Record a session from start-up (also ~/start_recording)", read_only=True)),
+    "record.root": ("ssi_bridge_sessions", _describe(
+        "Directory under which session bags are created", read_only=True)),
+    "record.path": ("", _describe(
+        "Bag directory name under record.root for the start-up session; empty: timestamped",
+        read_only=True)),
+    "record.compression": ("zstd", _describe("MCAP chunk compression: zstd, lz4 or none",
+                                             read_only=True)),
+}
+
+#: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
+JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
+    "slot": (0, _describe("XN-1SSI module slot in the station (1-8, the object subindex); "
+                          "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
+    "family": ("GENERIC", _describe(
+        "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
+    "para1": (DEFAULT_PARA1, _describe(
+        "REG_PARA1 (000 Table 18/19): frame length, bit rate, Gray/binary, invalid bits, "
+        "ZERO test; a change is written to the module and refused with its ERR_PARA reason",
+        int_range=(0, 0xFFFF_FFFF))),
+    "steps_per_rev": (0, _describe(
+        "Counts per revolution of REG_SSI_POS; 0: from the encoder family",
+        read_only=True, int_range=(0, 1 << 31))),
+    "revolutions": (0, _describe("Distinguishable revolutions; 0: from the encoder family",
+                                 read_only=True, int_range=(0, 1 << 31))),
+    "measuring_step": (0.0, _describe(
+        "Linear encoders: metres per count; 0: from the encoder family", read_only=True,
+        float_range=(0.0, 1.0))),
+    "direction": (1, _describe("+1 or -1: sign of the joint against the count direction",
+                               read_only=True, int_range=(-1, 1))),
+    "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
+                                          read_only=True)),
+    "motion.velocity": (0.25, _describe("constant: speed in rev/s or m/s", read_only=True,
+                                        float_range=(-1000.0, 1000.0))),
+    "motion.amplitude": (0.5, _describe("sine: amplitude in rev or m", read_only=True,
+                                        float_range=(0.0, 1e6))),
+    "motion.frequency": (0.5, _describe("sine: frequency in Hz", read_only=True,
+                                        float_range=(0.0, 100.0))),
+    "motion.start": (0.0, _describe("start position in rev or m", read_only=True,
+                                    float_range=(-1e6, 1e6))),
+}
+
+MOTION_KINDS = ("constant", "still", "sine")
+
+
+def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
+    descriptor.name = name
+    if isinstance(default, list):
+        descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
+    return node.declare_parameter(name, default, descriptor).value
+
+
+def declare_parameters(node: Node) -> NodeSettings:
+    """Declare every parameter on ``node`` and return the validated settings."""
+    values = {name: _declare(node, name, d, desc) for name, (d, desc) in NODE_PARAMETERS.items()}
+    names = [str(j) for j in values["joints"]]
+    if not names or len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"joints {names} must be non-empty, unique names")
+    if len(names) > 8:
+        raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")
+    joints = []
+    for index, joint in enumerate(names):
+        jv = {key: _declare(node, f"{joint}.{key}", d, desc)
+              for key, (d, desc) in JOINT_PARAMETERS.items()}
+        if jv["motion.kind"] not in MOTION_KINDS:
+            raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
+        if jv["direction"] not in (1, -1):
+            raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
+        joints.append(JointSettings(
+            name=joint, slot=jv["slot"] or index + 1, family=jv["family"],
+            para1=jv["para1"], steps_per_rev=jv["steps_per_rev"],
+            revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
+            direction=jv["direction"],
+            motion=MotionSettings(kind=jv["motion.kind"], velocity=jv["motion.velocity"],
+                                  amplitude=jv["motion.amplitude"],
+                                  frequency=jv["motion.frequency"], start=jv["motion.start"])))
+    slots = [j.slot for j in joints]
+    if len(set(slots)) != len(slots):
+        raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
+    if values["record.compression"] not in ("zstd", "lz4", "none"):
+        raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
+    return NodeSettings(
+        joints=tuple(joints), publish_rate=values["publish_rate"],
+        diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
+        simulation=values["simulation"], bus_interface=values["bus.interface"],
+        bus_channel=values["bus.channel"], bus_bitrate=values["bus.bitrate"],
+        node_id=values["bus.node_id"], storage_path=values["storage_path"],
+        velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
+        record_enabled=values["record.enabled"], record_root=values["record.root"],
+        record_path=values["record.path"], record_compression=values["record.compression"])

@@ -1,0 +1,151 @@
+"""Session recording from inside the node: the glue between the publishers and record/.
+
+Every message the node publishes is handed to :meth:`SessionRecorder.record` right after
+``publish``; while a session runs it is written to the bag with log time = publish time.
+A write error (disk full, file removed) ends the session, keeps the error for the bus
+diagnostics (ERROR) and never stops the publishing.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ssi_bridge import __version__
+from ssi_bridge.exceptions import RecordingError
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from ssi_bridge.record.bag import BagRecorder
+    from ssi_bridge.ros.params import NodeSettings
+
+#: type of every topic the node records, by the suffix of its resolved name
+TOPIC_TYPES = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "status": "ssi_bridge_msgs/msg/Status",
+    "events": "ssi_bridge_msgs/msg/Event",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
+
+
+class SessionRecorder:
+    """Starts, feeds and stops one bag at a time for a node."""
+
+    def __init__(self, node: Node, settings: NodeSettings) -> None:
+        self._node = node
+        self._settings = settings
+        self._lock = threading.Lock()
+        self._bag: BagRecorder | None = None
+        self._topics: set[str] = set()
+        #: the last write error, shown as ERROR on the bus diagnostics until a new session
+        self.error = ""
+        self.sessions = 0
+
+    @property
+    def active(self) -> bool:
+        """True while a session is being written."""
+        return self._bag is not None
+
+    def start(self, requested: str = "") -> Path:
+        """Open a new bag under ``record.root``; raises RecordingError with the reason."""
+        from ssi_bridge.record.bag import BagRecorder
+        from ssi_bridge.record.session import resolve_bag_path
+
+        with self._lock:
+            if self._bag is not None:
+                raise RecordingError(
+                    f"a recording is already running in {self._bag.directory}; stop it first")
+            root = Path(self._settings.record_root).expanduser()
+            try:
+                root.mkdir(parents=True, exist_ok=True)
+            except OSError as err:
+                raise RecordingError(f"cannot create recording root {root}: {err}") from err
+            path = resolve_bag_path(root, requested)
+            metadata = self._metadata()
+            self._bag = BagRecorder.open(path, compression=self._settings.record_compression,
+                                         metadata=metadata)
+            self._topics = set()
+            self.error = ""
+            self.sessions += 1
+        self._node.get_logger().info(f"recording to {path}")
+        return path
+
+    def stop(self) -> tuple[Path, int] | None:
+        """Close the running bag; returns (directory, messages) or None if none ran."""
+        with self._lock:
+            bag, self._bag = self._bag, None
+        if bag is None:
+            return None
+        summary = bag.close()
+        self._node.get_logger().info(
+            f"recording closed: {summary.directory} ({summary.message_count} messages)")
+        return Path(summary.directory), summary.message_count
+
+    def record(self, topic: str, msg: Any, stamp_ns: int) -> None:
+        """Write one published message if a session runs; a write error ends the session."""
+        bag = self._bag
+        if bag is None:
+            return
+        try:
+            if topic not in self._topics:
+                bag.add_topic(topic, self._type_of(topic))
+                self._topics.add(topic)
+            now_ns = self._node.get_clock().now().nanoseconds
+            bag.write(topic, msg, log_time_ns=now_ns, publish_time_ns=stamp_ns)
+        except (RecordingError, OSError) as err:
+            self.error = f"recording stopped: {err}"
+            self._node.get_logger().error(self.error)
+            with self._lock:
+                self._bag = None
+            try:
+                bag.close()
+            except (RecordingError, OSError):
+                pass
+
+    def counters(self) -> dict[str, int]:
+        """Recording figures for the bus diagnostics."""
+        bag = self._bag
+        return {"recording": int(bag is not None),
+                "recorded_messages": bag.message_count if bag is not None else 0}
+
+    def on_start(self, request: Any, response: Any) -> Any:
+        """~/start_recording."""
+        try:
+            response.bag_directory = str(self.start(request.path))
+            response.success, response.message = True, f"recording to {response.bag_directory}"
+        except (RecordingError, OSError, ValueError) as err:
+            response.success, response.message = False, f"start_recording: {err}"
+        return response
+
+    def on_stop(self, request: Any, response: Any) -> Any:
+        """~/stop_recording."""
+        try:
+            done = self.stop()
+        except (RecordingError, OSError) as err:
+            response.success, response.message = False, f"stop_recording: {err}"
+            return response
+        if done is None:
+            response.success, response.message = False, "stop_recording: no recording is running"
+            return response
+        response.bag_directory, response.message_count = str(done[0]), done[1]
+        response.success = True
+        response.message = f"closed {done[0]} with {done[1]} messages"
+        return response
+
+    def _type_of(self, topic: str) -> str:
+        for suffix, type_name in TOPIC_TYPES.items():
+            if topic == suffix or topic.endswith("/" + suffix.lstrip("/")):
+                return type_name
+        raise RecordingError(f"no message type known for topic {topic}")
+
+    def _metadata(self) -> dict[str, str]:
+        s = self._settings
+        meta = {"package_version": __version__, "bus": f"{s.bus_interface}:{s.bus_channel}",
+                "bus_bitrate": str(s.bus_bitrate), "node_id": str(s.node_id),
+                "simulation": str(s.simulation), "publish_rate": f"{s.publish_rate:g}"}
+        for j in s.joints:
+            meta[f"joint.{j.name}"] = (f"slot={j.slot} family={j.family} "
+                                       f"para1=0x{j.para1:08X}")
+        return meta

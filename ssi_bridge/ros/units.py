@@ -1,0 +1,117 @@
+"""Counts to joint units, and the velocity estimate published in ``joint_states``.
+
+ROS-free so it is unit-tested with exact numbers. Position is REG_SSI_POS read as the
+Integer32 of object 0x6820 (000, Table 40), so a preset that moves the zero point below the
+encoder's value gives a negative position instead of a jump to 4 294 967 295 steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from ssi_bridge.exceptions import ConfigError
+
+
+def to_int32(value: int) -> int:
+    """Read a 32-bit register value as the Integer32 of CANopen object 0x6820."""
+    value &= 0xFFFF_FFFF
+    return value - (1 << 32) if value & 0x8000_0000 else value
+
+
+@dataclass(frozen=True)
+class JointScale:
+    """How one count of REG_SSI_POS maps to joint units (rad for rotary, m for linear)."""
+
+    #: counts per revolution as REG_SSI_POS sees them (after INVALID_BITS_LSB shifting)
+    counts_per_rev: float = 8192.0
+    #: distinguishable revolutions (the multiturn range); counts wrap at counts_per_rev * this
+    revolutions: float = 4096.0
+    #: linear encoder: one count is ``measuring_step_m`` metres and the joint unit is m
+    linear: bool = False
+    #: metres per count for linear encoders
+    measuring_step_m: float = 1e-6
+    #: +1 or -1: flips the joint's sign against the count direction (mounting)
+    direction: int = 1
+
+    def __post_init__(self) -> None:
+        if self.linear:
+            if not self.measuring_step_m > 0:
+                raise ConfigError(f"measuring_step_m {self.measuring_step_m} must be > 0")
+        elif not (self.counts_per_rev > 0 and self.revolutions >= 1):
+            raise ConfigError(
+                f"counts_per_rev {self.counts_per_rev} must be > 0 and revolutions "
+                f"{self.revolutions} >= 1")
+        if self.direction not in (1, -1):
+            raise ConfigError(f"direction {self.direction} must be 1 or -1")
+
+    @property
+    def unit_per_count(self) -> float:
+        """Joint units (rad or m) per count, signed by ``direction``."""
+        base = self.measuring_step_m if self.linear else 2.0 * math.pi / self.counts_per_rev
+        return base * self.direction
+
+    @property
+    def modulus(self) -> int | None:
+        """Counts after which the encoder value wraps (rotary), None for linear encoders."""
+        if self.linear:
+            return None
+        return int(round(self.counts_per_rev * self.revolutions))
+
+    def position(self, counts: int) -> float:
+        """Joint position of a REG_SSI_POS value (32-bit, read as Integer32)."""
+        return to_int32(counts) * self.unit_per_count
+
+    def counts(self, position: float) -> int:
+        """Nearest count for a joint position (inverse of :meth:`position`)."""
+        return int(round(position / self.unit_per_count))
+
+
+class VelocityEstimator:
+    """Velocity from the last ``window`` samples: (newest - oldest) / (their time difference).
+
+    Differences are unwrapped modulo the encoder range, so crossing the multiturn (or
+    round-axis) wrap gives the true speed, not a spike. For constant speed the estimate is
+    exact up to one count over the window; for a varying speed it lags by (window - 1) / 2
+    samples — the documented trade of quantisation noise against delay (docs/node.md).
+    """
+
+    def __init__(self, scale: JointScale, window: int = 5) -> None:
+        if window < 2:
+            raise ConfigError(f"velocity window {window} must be >= 2 samples")
+        self._scale = scale
+        self._samples: deque[tuple[float, int]] = deque(maxlen=window)
+        self._unwrapped = 0
+        self._last_raw: int | None = None
+
+    def reset(self) -> None:
+        """Forget history, e.g. after a preset or a fault (the next estimate restarts)."""
+        self._samples.clear()
+        self._last_raw = None
+        self._unwrapped = 0
+
+    def update(self, t: float, counts: int) -> float:
+        """Add a sample (latch time in s, raw REG_SSI_POS) and return the velocity estimate."""
+        raw = to_int32(counts)
+        if self._last_raw is None:
+            self._unwrapped = raw
+        else:
+            step = raw - self._last_raw
+            modulus = self._scale.modulus
+            if modulus:
+                step = (step + modulus // 2) % modulus - modulus // 2
+            self._unwrapped += step
+        self._last_raw = raw
+        if self._samples and t <= self._samples[-1][0]:
+            return self.velocity
+        self._samples.append((t, self._unwrapped))
+        return self.velocity
+
+    @property
+    def velocity(self) -> float:
+        """Current estimate in joint units per second (0.0 before two samples)."""
+        if len(self._samples) < 2:
+            return 0.0
+        (t0, c0), (t1, c1) = self._samples[0], self._samples[-1]
+        return (c1 - c0) / (t1 - t0) * self._scale.unit_per_count

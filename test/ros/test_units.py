@@ -1,0 +1,67 @@
+"""Counts -> joint units and the velocity estimate (ROS-free, exact numbers)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.ros.units import JointScale, VelocityEstimator, to_int32
+
+
+@pytest.mark.parametrize("raw, signed", [
+    (0, 0), (1, 1), (0x7FFF_FFFF, 2**31 - 1), (0x8000_0000, -(2**31)), (0xFFFF_FFFF, -1),
+])
+def test_reg_ssi_pos_is_read_as_integer32_of_object_6820(raw, signed):
+    # 000 Table 40: object 0x6820 (REG_SSI_POS) has data type Integer32
+    assert to_int32(raw) == signed
+
+
+def test_rotary_scale_full_turn_is_two_pi():
+    scale = JointScale(counts_per_rev=8192, revolutions=4096)
+    assert scale.position(8192) == pytest.approx(2 * math.pi)
+    assert scale.position(0xFFFF_FFFF) == pytest.approx(-2 * math.pi / 8192)
+    assert scale.counts(math.pi) == 4096
+    assert scale.modulus == 8192 * 4096
+
+
+def test_linear_scale_and_direction():
+    scale = JointScale(linear=True, measuring_step_m=1e-6, direction=-1)
+    assert scale.position(1000) == pytest.approx(-1e-3)
+    assert scale.modulus is None
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(counts_per_rev=0), dict(revolutions=0.5), dict(direction=2),
+    dict(linear=True, measuring_step_m=0.0),
+])
+def test_invalid_scales_are_refused(kwargs):
+    with pytest.raises(ConfigError):
+        JointScale(**kwargs)
+
+
+def test_velocity_exact_for_constant_speed_and_across_the_multiturn_wrap():
+    scale = JointScale(counts_per_rev=8192, revolutions=4096)
+    est = VelocityEstimator(scale, window=5)
+    modulus = scale.modulus
+    speed_counts = 2048.0  # counts/s = 0.25 rev/s
+    start = modulus - 100  # crosses the wrap of the 25-bit value after ~0.05 s
+    v = 0.0
+    for k in range(50):
+        t = k * 0.01
+        v = est.update(t, int(start + speed_counts * t) % modulus)
+    assert v == pytest.approx(2 * math.pi * 0.25, rel=1e-3)
+
+
+def test_velocity_zero_before_two_samples_and_after_reset():
+    est = VelocityEstimator(JointScale(), window=3)
+    assert est.update(0.0, 10) == 0.0
+    assert est.update(0.1, 20) != 0.0
+    est.reset()
+    assert est.velocity == 0.0
+
+
+def test_window_below_two_is_refused():
+    with pytest.raises(ConfigError):
+        VelocityEstimator(JointScale(), window=1)
