@@ -14,11 +14,12 @@ counted from the end of the 4-byte encapsulation header) costs one table lookup 
 
 from __future__ import annotations
 
-import importlib
 import re
 import struct
 import threading
 from typing import Any, Callable
+
+from ssi_bridge.record.types import message_class
 
 #: CDR encapsulation header: representation id CDR_LE (0x0001), options 0
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
@@ -49,13 +50,6 @@ def _run_structs(items: list[tuple[str, int, int]]) -> list[struct.Struct]:
             offset += pad + size * count
         table.append(struct.Struct(fmt))
     return table
-
-
-def _message_class(type_name: str) -> type:
-    """Import the rclpy class of ``pkg/Type`` or ``pkg/msg/Type``."""
-    parts = type_name.split("/")
-    pkg, name = parts[0], parts[-1]
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 class _Compiler:
@@ -113,7 +107,7 @@ class _Compiler:
                     f"{indent}b += _U32[len(b) & 7].pack(len(_s) + 1)",
                     f"{indent}b += _s",
                     f"{indent}b.append(0)"]
-        return [f"{indent}{self.compile(_message_class(elem))}({value}, b)"]
+        return [f"{indent}{self.compile(message_class(elem))}({value}, b)"]
 
     def _dynamic_field(self, attr: str, ftype: str) -> list[str]:
         """Source lines for a field whose size is only known at run time."""
