@@ -1,0 +1,136 @@
+"""Benchmark: the CANopen path between the bridge client and the simulated XN-GW-CANOPEN.
+
+* register read through the 000 handshake, and a plain SDO upload through the client, each
+  as a ratio to a bare canopen LocalNode/RemoteNode SDO round trip measured in the same run
+  (lower ratio = less overhead);
+* PDO cycle with 8 slots driven at 1 kHz: achieved SYNC rate (ratio to 1000/s, higher is
+  better) and missed cycles (a cycle whose TPDOs did not all arrive before the next SYNC).
+
+Prints one JSON object per line and appends them to bench/results/latest.jsonl; never fails.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+RESULTS = Path(__file__).resolve().parent / "results" / "latest.jsonl"
+NODE_ID = 11
+ROUNDS = 300
+CYCLE_HZ = 1000.0
+CYCLE_SECONDS = 2.0
+
+
+def _emit(records: list[dict], metric: str, value: float, unit: str,
+          baseline: float | None = None) -> None:
+    rec: dict = {"metric": metric, "value": round(value, 3), "unit": unit}
+    if baseline:
+        rec["baseline"] = round(baseline, 3)
+        rec["ratio"] = round(value / baseline, 3)
+    records.append(rec)
+    print(json.dumps(rec), flush=True)
+
+
+def _per_call_us(fn, rounds: int) -> float:
+    fn()
+    t0 = time.perf_counter()
+    for _ in range(rounds):
+        fn()
+    return (time.perf_counter() - t0) / rounds * 1e6
+
+
+def bare_sdo_us() -> float:
+    """A bare canopen LocalNode/RemoteNode SDO upload of a UNSIGNED32 on the virtual bus."""
+    import canopen
+
+    from ssi_bridge.gateway.dictionary import build_dictionary
+
+    server, master = canopen.Network(), canopen.Network()
+    server.NOTIFIER_CYCLE = master.NOTIFIER_CYCLE = 0.05
+    server.connect(interface="virtual", channel="bench-bare")
+    master.connect(interface="virtual", channel="bench-bare")
+    try:
+        server.add_node(canopen.LocalNode(NODE_ID, build_dictionary(NODE_ID, 1)))
+        remote = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, 1))
+        master.add_node(remote)
+        return _per_call_us(lambda: remote.sdo.upload(0x1000, 0), ROUNDS)
+    finally:
+        master.disconnect()
+        server.disconnect()
+
+
+def bridge_us(records: list[dict], baseline: float) -> None:
+    from ssi_bridge.client.master import BridgeClient
+    from ssi_bridge.gateway.bus import BusConfig
+    from ssi_bridge.gateway.gateway import XnGateway
+    from ssi_bridge.module.registers import Reg
+    from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+    config = BusConfig(channel="bench-bridge", node_id=NODE_ID)
+    with XnGateway(config, NODE_ID, [Xn1Ssi(None, slot=1)]):
+        with BridgeClient(config, NODE_ID, 1, assist_after=0.0005) as client:
+            _emit(records, "bus_sdo_upload_us", _per_call_us(
+                lambda: client.read_object(0x6820, 1), ROUNDS), "us", baseline)
+            _emit(records, "bus_register_read_handshake_us", _per_call_us(
+                lambda: client.read_register(1, Reg.REG_MAGIC_NO), ROUNDS), "us", baseline)
+            _emit(records, "bus_register_write_handshake_us", _per_call_us(
+                lambda: client.write_register(1, Reg.REG_CMP1, 1), ROUNDS // 3), "us", baseline)
+
+
+def pdo_cycle(records: list[dict]) -> None:
+    from ssi_bridge.client.master import BridgeClient
+    from ssi_bridge.gateway.bus import BusConfig
+    from ssi_bridge.gateway.gateway import XnGateway
+    from ssi_bridge.line.readout import LineReadout
+    from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+    class Reader:
+        def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
+            return LineReadout(latch_time=t, n_bits=n_bits, data=int(t * 1e4) & 0xFFFFFF)
+
+    config = BusConfig(channel="bench-cycle", node_id=NODE_ID)
+    modules = [Xn1Ssi(Reader(), slot=s) for s in range(1, 9)]
+    with XnGateway(config, NODE_ID, modules):
+        with BridgeClient(config, NODE_ID, 8) as client:
+            period = 1.0 / CYCLE_HZ
+            n = int(CYCLE_SECONDS * CYCLE_HZ)
+            missed = 0
+            t0 = time.perf_counter()
+            next_t = t0
+            for _ in range(n):
+                client.sync()
+                next_t += period
+                if not client.wait_cycle(max(next_t - time.perf_counter(), 0.0)):
+                    missed += 1
+                while time.perf_counter() < next_t:
+                    pass
+            rate = n / (time.perf_counter() - t0)
+    _emit(records, "bus_pdo_cycle_8_slots_rate", rate, "cycles/s", CYCLE_HZ)
+    _emit(records, "bus_pdo_cycle_8_slots_missed", float(missed), "cycles")
+    _emit(records, "bus_pdo_cycle_8_slots_missed_fraction", missed / n, "fraction")
+
+
+def main() -> None:
+    logging.basicConfig(level=logging.ERROR)
+    records: list[dict] = []
+    try:
+        baseline = bare_sdo_us()
+        _emit(records, "bus_bare_canopen_sdo_upload_us", baseline, "us")
+        bridge_us(records, baseline)
+        pdo_cycle(records)
+    except Exception as err:  # a benchmark reports, it never fails the run
+        print(json.dumps({"metric": "bus_benchmark_error", "value": 0, "unit": "",
+                          "error": repr(err)}), flush=True)
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    with RESULTS.open("a", encoding="utf-8") as fh:
+        for rec in records:
+            fh.write(json.dumps(rec) + "\n")
+
+
+if __name__ == "__main__":
+    main()
