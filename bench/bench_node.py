@@ -1,0 +1,288 @@
+"""Benchmark (issue 6): ssi_bridge_node's joint_states at 1 kHz against a bare rclpy publisher.
+
+For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs at
+``publish_rate`` 1000 Hz, and a subscriber in another process (``bench/node_subscriber.py``)
+records the receive wall time and ``header.stamp`` of every JointState. The same subscriber
+program then measures a bare rclpy timer publisher (this file with ``--bare``) of an equally
+sized JointState (same joint names, position and velocity arrays) at the same rate, in the
+same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per publisher:
+
+* ``rate_hz``: messages received per second of the window (higher is better; goal >= 0.99x bare)
+* ``jitter_p99_us``: p99 of |receive interval - 1/rate| (lower is better)
+* ``latency_p50_us`` / ``latency_p99_us``: receive wall time - header.stamp; the node stamps
+  the SSI latch (SYNC) time, the bare publisher the instant before publish() (lower is better;
+  goal p99 <= 1.2x bare)
+* ``cpu_s_per_s``: utime+stime of the publisher process (/proc/<pid>/stat) over the window per
+  second; the node's includes its simulated station, gateway and CAN bus (lower is better)
+
+QoS on both sides is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
+ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID.
+
+Prints one JSON object per line and appends them to bench/results/latest.jsonl; never fails
+(an error becomes a line with "error"; exit status 0).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+RESULTS = HERE / "results" / "latest.jsonl"
+NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
+SUBSCRIBER = HERE / "node_subscriber.py"
+
+RATE_HZ = 1000.0
+CASES = (1, 8)
+WARMUP_S = 2.0
+MEASURE_S = 5.0
+STARTUP_TIMEOUT_S = 20.0
+NODE_NS = "/bench_node"
+BARE_TOPIC = "/bench_bare/joint_states"
+
+UNITS = {"rate_hz": "Hz", "jitter_p99_us": "us", "latency_p50_us": "us",
+         "latency_p99_us": "us", "cpu_s_per_s": "s/s"}
+GOALS = {"rate_hz": (">=", 0.99), "latency_p99_us": ("<=", 1.2)}
+NOTES = {
+    "rate_hz": "messages received per second; higher is better",
+    "jitter_p99_us": "p99 of |receive interval - 1/rate|; lower is better",
+    "latency_p50_us": "receive wall time - header.stamp, median; lower is better",
+    "latency_p99_us": "receive wall time - header.stamp, p99; lower is better",
+    "cpu_s_per_s": "publisher process CPU s (utime+stime) per s of publishing; node includes "
+                   "its simulated station and CAN bus; lower is better",
+}
+
+
+# -- the bare publisher (a subprocess of this file) -------------------------------------------
+def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
+    """A bare rclpy timer publishing an N-joint JointState at ``rate``; runs until SIGINT."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    rclpy.init(args=None)
+    node = rclpy.create_node(f"bench_bare_{os.getpid()}")
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    pub = node.create_publisher(JointState, topic, qos)
+    names = [f"j{i + 1}" for i in range(n_joints)]
+    clock = node.get_clock()
+    count = [0]
+
+    def tick() -> None:
+        count[0] += 1
+        js = JointState()
+        js.header.stamp = clock.now().to_msg()
+        js.name = names
+        js.position = [count[0] * 1e-3] * n_joints
+        js.velocity = [1.0] * n_joints
+        pub.publish(js)
+
+    node.create_timer(1.0 / rate, tick)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+# -- measurement --------------------------------------------------------------------------------
+def _domain_id() -> int:
+    return random.Random(os.getpid() * 104729 + time.time_ns()).randint(1, 100)
+
+
+def _env(domain_id: int) -> dict[str, str]:
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _cpu_seconds(pid: int) -> float:
+    """utime + stime of ``pid`` in seconds (all its threads)."""
+    with open(f"/proc/{pid}/stat") as f:
+        stat = f.read()
+    fields = stat[stat.rindex(")") + 2:].split()
+    # fields[0] is field 3 (state); utime and stime are fields 14 and 15
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _stop(proc: subprocess.Popen, timeout: float = 8.0) -> None:
+    """SIGINT, then SIGKILL after ``timeout``; only this PID."""
+    if proc.poll() is not None:
+        return
+    try:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(5)
+    except ProcessLookupError:
+        pass
+
+
+def _tail(path: Path, n: int = 1500) -> str:
+    try:
+        return path.read_text(errors="replace")[-n:]
+    except OSError:
+        return ""
+
+
+def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path) -> dict:
+    """Run ``cmd`` (the publisher) and the subscriber; return the window's figures."""
+    import numpy as np
+
+    out = work / f"{tag}.samples"
+    ready = work / f"{tag}.ready"
+    pub_log = work / f"{tag}.pub.log"
+    sub_log = work / f"{tag}.sub.log"
+    procs: list[subprocess.Popen] = []
+    try:
+        with open(sub_log, "wb") as log:
+            sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out), str(ready)],
+                                   stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
+                                   start_new_session=True)
+        procs.append(sub)
+        with open(pub_log, "wb") as log:
+            pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
+                                   start_new_session=True)
+        procs.append(pub)
+        deadline = time.monotonic() + STARTUP_TIMEOUT_S
+        while not ready.exists():
+            for p, log in ((pub, pub_log), (sub, sub_log)):
+                if p.poll() is not None:
+                    raise RuntimeError(f"{tag}: {p.args[0]} exited {p.returncode}: {_tail(log)}")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{tag}: no message on {topic} within {STARTUP_TIMEOUT_S} s; "
+                                   f"publisher log: {_tail(pub_log)}")
+            time.sleep(0.05)
+        time.sleep(WARMUP_S)
+        cpu0, w0, m0 = _cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        time.sleep(MEASURE_S)
+        cpu1, w1, m1 = _cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        if pub.poll() is not None:
+            raise RuntimeError(f"{tag}: publisher exited {pub.returncode}: {_tail(pub_log)}")
+        _stop(sub)
+        if not out.exists():
+            raise RuntimeError(f"{tag}: subscriber wrote no samples: {_tail(sub_log)}")
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+
+    data = np.loadtxt(out, dtype=np.int64, ndmin=2)
+    recv, stamp = data[:, 0], data[:, 1]
+    sel = (recv >= w0) & (recv < w1)
+    recv, stamp = recv[sel], stamp[sel]
+    window = (w1 - w0) / 1e9
+    if len(recv) < 3:
+        raise RuntimeError(f"{tag}: only {len(recv)} messages in the {window:.1f} s window")
+    period_us = 1e6 / RATE_HZ
+    jitter = np.abs(np.diff(recv) / 1e3 - period_us)
+    latency = (recv - stamp) / 1e3
+    return {
+        "rate_hz": len(recv) / window,
+        "jitter_p99_us": float(np.percentile(jitter, 99)),
+        "latency_p50_us": float(np.percentile(latency, 50)),
+        "latency_p99_us": float(np.percentile(latency, 99)),
+        "cpu_s_per_s": (cpu1 - cpu0) / (m1 - m0),
+    }
+
+
+def node_cmd(n_joints: int, domain_id: int, work: Path) -> list[str]:
+    import yaml
+
+    names = [f"j{i + 1}" for i in range(n_joints)]
+    params: dict = {"publish_rate": RATE_HZ, "joints": names,
+                    "bus.channel": f"bench_node_{domain_id}_{n_joints}",
+                    "storage_path": str(work / f"bank{n_joints}" / "retentive.json")}
+    for i, name in enumerate(names):
+        params[f"{name}.slot"] = i + 1
+    pfile = work / f"params{n_joints}.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    return [str(NODE_EXE), "--ros-args", "--params-file", str(pfile),
+            "-r", f"__ns:={NODE_NS}"]
+
+
+def bare_cmd(n_joints: int) -> list[str]:
+    return [sys.executable, str(Path(__file__).resolve()), "--bare", str(n_joints),
+            str(RATE_HZ), BARE_TOPIC]
+
+
+def emit(records: list[dict], rec: dict) -> None:
+    records.append(rec)
+    print(json.dumps(rec), flush=True)
+
+
+def report(records: list[dict], n_joints: int, node: dict, bare: dict) -> None:
+    for key, note in NOTES.items():
+        value, base = node[key], bare[key]
+        rec: dict = {"metric": f"node_{n_joints}enc_{key}", "value": round(value, 3),
+                     "unit": UNITS[key], "baseline": round(base, 3)}
+        if base:
+            rec["ratio"] = round(value / base, 3)
+        if key in GOALS and "ratio" in rec:
+            op, goal = GOALS[key]
+            rec["goal"] = f"ratio {op} {goal}"
+            rec["goal_met"] = bool(rec["ratio"] >= goal if op == ">=" else rec["ratio"] <= goal)
+        rec["note"] = (f"{note}; {n_joints} encoder(s) at {RATE_HZ:g} Hz, baseline = bare rclpy "
+                       f"timer publisher of a {n_joints}-joint JointState, same subscriber")
+        emit(records, rec)
+
+
+def run(records: list[dict]) -> None:
+    if not NODE_EXE.exists():
+        raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
+    domain_id = _domain_id()
+    env = _env(domain_id)
+    with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
+        work = Path(tmp)
+        for n in CASES:
+            try:
+                node = measure(f"node{n}", node_cmd(n, domain_id, work),
+                               f"{NODE_NS}/joint_states", env, work)
+                bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work)
+                report(records, n, node, bare)
+            except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
+                emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
+                               "note": traceback.format_exc(limit=3)[-800:]})
+
+
+def main() -> int:
+    records: list[dict] = []
+    try:
+        run(records)
+    except Exception as err:  # noqa: BLE001
+        emit(records, {"metric": "node", "error": f"{type(err).__name__}: {err}"})
+    try:
+        RESULTS.parent.mkdir(parents=True, exist_ok=True)
+        with open(RESULTS, "a") as f:
+            for rec in records:
+                f.write(json.dumps(rec) + "\n")
+    except OSError as err:
+        print(json.dumps({"metric": "node_results_file", "error": str(err)}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 5 and sys.argv[1] == "--bare":
+        sys.exit(bare_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
+    sys.exit(main())
