@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -26,23 +27,25 @@ from ssi_bridge_msgs.srv import (
 )
 
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
 from ssi_bridge.module.images import ProcessInput
-from ssi_bridge.module.registers import Para1, Reg
+from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_status
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
-from ssi_bridge.ros.station import SimStation
+from ssi_bridge.ros.station import SimStation, count_factor
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
 #: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
 IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
+#: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
+ENCODER_CONFIG = 0x5801
 
 
 class SsiBridgeNode(Node):
@@ -70,6 +73,7 @@ class SsiBridgeNode(Node):
         self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
         self.client.connect()
         for joint in s.joints:
+            self._configure_para1(joint)
             self.client.edit_output(joint.slot, _idle_read)
         self.scales = {j.name: self._scale(j) for j in s.joints}
         self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
@@ -124,6 +128,22 @@ class SsiBridgeNode(Node):
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
 
+    def _configure_para1(self, joint: JointSettings) -> None:
+        """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
+
+        This is what a CANopen master does at start-up; an invalid set is refused by the
+        gateway with an SDO abort, which stops the node with the module's reason.
+        """
+        current = int(self.client.read_object(ENCODER_CONFIG, joint.slot))
+        if current == joint.para1:
+            return
+        reason = validate_para1(joint.para1)
+        if reason:
+            raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
+        self.client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
+        self.get_logger().info(f"{joint.name}: REG_PARA1 0x{current:08X} -> 0x{joint.para1:08X} "
+                               f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
+
     # -- time ------------------------------------------------------------------------------
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
@@ -134,23 +154,33 @@ class SsiBridgeNode(Node):
         now_ns = self.get_clock().now().nanoseconds
         return now_ns - int((time.monotonic() - monotonic_t) * 1e9)
 
-    def _scale(self, joint: JointSettings) -> JointScale:
-        """Counts -> units: parameters win; else the simulated encoder's own resolution."""
-        enc = self.station.channels[joint.name].encoder if self.station else None
-        linear = bool(enc.linear) if enc else joint.measuring_step > 0
-        shift = 1 << Para1.decode(joint.para1).invalid_bits_lsb
-        if linear:
-            step = joint.measuring_step or (enc.measuring_step_m if enc else 1e-6)
-            return JointScale(linear=True, measuring_step_m=step * shift,
+    def _scale(self, joint: JointSettings, para1: int | None = None) -> JointScale:
+        """Counts -> units for the joint's current REG_PARA1.
+
+        Simulated: from the encoder's resolution and frame layout (:func:`count_factor`).
+        Real hardware: ``steps_per_rev``/``revolutions`` or ``measuring_step`` are the
+        resolution of REG_SSI_POS itself, as the user configured the module.
+        """
+        para1 = joint.para1 if para1 is None else para1
+        if self.station is not None:
+            enc = self.station.channels[joint.name].encoder
+            factor = count_factor(enc, para1)
+            if enc.linear:
+                return JointScale(linear=True, measuring_step_m=enc.measuring_step_m / factor,
+                                  direction=joint.direction)
+            return JointScale(counts_per_rev=enc.steps_per_rev * factor,
+                              revolutions=enc.revolutions, direction=joint.direction)
+        if joint.measuring_step > 0:
+            return JointScale(linear=True, measuring_step_m=joint.measuring_step,
                               direction=joint.direction)
-        steps = joint.steps_per_rev or (enc.steps_per_rev if enc else 8192)
-        revs = joint.revolutions or (enc.revolutions if enc else 4096)
-        return JointScale(counts_per_rev=steps / shift, revolutions=revs,
-                          direction=joint.direction)
+        return JointScale(counts_per_rev=joint.steps_per_rev or 8192,
+                          revolutions=joint.revolutions or 4096, direction=joint.direction)
 
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:
         """SYNC, collect the TPDOs of this cycle, publish joint_states and ~/status."""
+        if not self.context.ok():
+            return  # shutting down: the publishers' context is gone
         if self.faults is not None and self.faults.active:
             for done in self.faults.expire():
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
@@ -169,8 +199,8 @@ class SsiBridgeNode(Node):
             self._update_joint(joint, t_sync, js, status)
         if not js.name:
             return
-        self.joint_pub.publish(js)
-        self.status_pub.publish(status)
+        if not (self.publish_safe(self.joint_pub, js) and self.publish_safe(self.status_pub, status)):
+            return
         self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
         self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
         levels = tuple(st.level for st in self._statuses())
@@ -211,6 +241,16 @@ class SsiBridgeNode(Node):
         js.velocity.append(velocity)
         status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
 
+    def publish_safe(self, publisher: Any, msg: Any) -> bool:
+        """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
+        try:
+            publisher.publish(msg)
+        except RCLError:
+            if self.context.ok():
+                raise
+            return False
+        return True
+
     # -- diagnostics -----------------------------------------------------------------------
     def achieved_rate(self) -> float:
         """Cycles per second over the last diagnostics period."""
@@ -238,10 +278,13 @@ class SsiBridgeNode(Node):
 
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
+        if not self.context.ok():
+            return
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = self._statuses()
-        self.diag_pub.publish(msg)
+        if not self.publish_safe(self.diag_pub, msg):
+            return
         self.recorder.record("/diagnostics", msg, self.get_clock().now().nanoseconds)
 
     # -- parameters ------------------------------------------------------------------------
@@ -254,6 +297,9 @@ class SsiBridgeNode(Node):
                     reason = self.handlers.apply_para1(joint, int(p.value))
                     if reason:
                         return SetParametersResult(successful=False, reason=reason)
+                    self.scales[joint] = self._scale(self.joints[joint], int(p.value))
+                    self.velocity[joint] = VelocityEstimator(self.scales[joint],
+                                                             self.settings.velocity_window)
             elif p.name == "publish_rate":
                 self.cycle_timer.timer_period_ns = int(1e9 / float(p.value))
             elif p.name == "diagnostics_period":

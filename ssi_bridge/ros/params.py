@@ -43,6 +43,10 @@ class JointSettings:
     name: str
     slot: int
     family: str = "GENERIC"
+    #: simulated encoder's transmit code: "" (family default), "binary" or "gray"
+    code: str = ""
+    #: simulated SSI cable length (m): sets the line delay and the 004 §2.7 bit-rate check
+    cable_length: float = 10.0
     para1: int = DEFAULT_PARA1
     #: 0: take it from the simulated encoder family
     steps_per_rev: int = 0
@@ -136,6 +140,12 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
                           "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
     "family": ("GENERIC", _describe(
         "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
+    "code": ("", _describe(
+        "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
+        "SSI_CODE_G/D must match it", read_only=True)),
+    "cable_length": (10.0, _describe(
+        "Simulated SSI cable length in m (line delay; 004 §2.7 bit-rate recommendation)",
+        read_only=True, float_range=(0.0, 1200.0))),
     "para1": (DEFAULT_PARA1, _describe(
         "REG_PARA1 (000 Table 18/19): frame length, bit rate, Gray/binary, invalid bits, "
         "ZERO test; a change is written to the module and refused with its ERR_PARA reason",
@@ -163,6 +173,7 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
 }
 
 MOTION_KINDS = ("constant", "still", "sine")
+CODES = ("", "binary", "gray")
 
 
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
@@ -186,10 +197,13 @@ def declare_parameters(node: Node) -> NodeSettings:
               for key, (d, desc) in JOINT_PARAMETERS.items()}
         if jv["motion.kind"] not in MOTION_KINDS:
             raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
+        if jv["code"] not in CODES:
+            raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
         if jv["direction"] not in (1, -1):
             raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
         joints.append(JointSettings(
-            name=joint, slot=jv["slot"] or index + 1, family=jv["family"],
+            name=joint, slot=jv["slot"] or index + 1, family=jv["family"], code=jv["code"],
+            cable_length=jv["cable_length"],
             para1=jv["para1"], steps_per_rev=jv["steps_per_rev"],
             revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
             direction=jv["direction"],

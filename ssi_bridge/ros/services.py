@@ -48,7 +48,7 @@ class BridgeServices:
         now = self.node.get_clock().now()
         ev = Event(kind=kind, joint=joint, request=request, success=success, message=message)
         ev.header.stamp = Time(sec=now.nanoseconds // 10**9, nanosec=now.nanoseconds % 10**9)
-        self.events.publish(ev)
+        self.node.publish_safe(self.events, ev)
         self.node.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 from pathlib import Path
 
 from ssi_bridge.encoder.encoder import SsiEncoder
 from ssi_bridge.encoder.families import make_encoder
 from ssi_bridge.encoder.motion import ConstantVelocity, MotionProfile, Sine, Still
-from ssi_bridge.line.line import SsiLine
+from ssi_bridge.encoder.codes import Code
+from ssi_bridge.line.line import LineConfig, SsiLine
+from ssi_bridge.module.registers import Para1
 from ssi_bridge.module.store import MemoryStore, RetentiveStore
 from ssi_bridge.module.xn1ssi import Xn1Ssi
 from ssi_bridge.ros.params import JointSettings, MotionSettings, NodeSettings
@@ -30,6 +33,48 @@ def make_motion(m: MotionSettings) -> MotionProfile:
     if m.kind == "sine":
         return Sine(m.amplitude, m.frequency, offset=m.start)
     return ConstantVelocity(m.velocity, start=m.start)
+
+
+def encoder_overrides(joint: JointSettings) -> dict[str, Any]:
+    """EncoderConfig fields a joint's parameters set on top of its family preset."""
+    out: dict[str, Any] = {}
+    if joint.code:
+        out["code"] = Code.GRAY if joint.code == "gray" else Code.BINARY
+    if joint.steps_per_rev:
+        out["steps_per_rev"] = float(joint.steps_per_rev)
+    if joint.revolutions:
+        out["revolutions_numerator"] = int(joint.revolutions)
+    if joint.measuring_step:
+        out["measuring_step_m"] = float(joint.measuring_step)
+    return out
+
+
+def count_factor(encoder: SsiEncoder, para1: int) -> float:
+    """REG_SSI_POS counts per encoder step for a REG_PARA1 reading this encoder.
+
+    The encoder's position LSB sits ``frame_bits - position_bits`` bits before the end of its
+    frame (special and filler bits follow, 004 §2.3; SSI-SHIFT-RIGHT loses one more). The
+    module clocks SSI_FRAME_LEN bits — fewer cut the frame's end, more read 0s after it
+    (004 §3.6) — then shifts INVALID_BITS_LSB out (000 Table 19). So the step lands at bit
+    ``SSI_FRAME_LEN - frame_bits + lsb - INVALID_BITS_LSB`` of REG_SSI_POS.
+    """
+    cfg = encoder.config
+    p = Para1.decode(para1)
+    lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
+    return 2.0 ** (p.ssi_frame_len - cfg.frame_bits + lsb - p.invalid_bits_lsb)
+
+
+def para1_mismatch(encoder: SsiEncoder, para1: int) -> str | None:
+    """Why REG_PARA1 does not fit the simulated encoder (a start-up warning), or None."""
+    cfg = encoder.config
+    p = Para1.decode(para1)
+    problems = []
+    if p.ssi_frame_len != cfg.frame_bits:
+        problems.append(f"SSI_FRAME_LEN {p.ssi_frame_len} but the encoder sends {cfg.frame_bits} bits")
+    if p.ssi_code_gray != (cfg.code is Code.GRAY):
+        problems.append(f"SSI_CODE_G/D {'Gray' if p.ssi_code_gray else 'binary'} but the encoder sends "
+                        f"{cfg.code.name.lower()}")
+    return "; ".join(problems) or None
 
 
 @dataclass
@@ -56,13 +101,19 @@ class SimStation:
             if joint is None:
                 self.modules.append(Xn1Ssi(None, store=store, slot=slot))
                 continue
-            encoder = make_encoder(joint.family, make_motion(joint.motion))
-            line = SsiLine(encoder)
+            encoder = make_encoder(joint.family, make_motion(joint.motion),
+                                   **encoder_overrides(joint))
+            line = SsiLine(encoder, LineConfig(cable_length_m=joint.cable_length))
             module = Xn1Ssi(line, store=store, slot=slot)
             self.modules.append(module)
             self.channels[joint.name] = SimChannel(joint, encoder, line, module)
-            logger.info("slot %d: %s encoder (%d-bit frame) for joint %s", slot, joint.family,
-                        encoder.frame_bits, joint.name)
+            logger.info("slot %d: %s encoder (%d-bit %s frame) for joint %s", slot,
+                        joint.family, encoder.frame_bits, encoder.config.code.name.lower(),
+                        joint.name)
+            mismatch = para1_mismatch(encoder, joint.para1)
+            if mismatch:
+                logger.warning("joint %s: REG_PARA1 0x%08X does not match the simulated %s "
+                               "encoder: %s", joint.name, joint.para1, joint.family, mismatch)
 
     @staticmethod
     def _store(storage_path: str, slot: int) -> RetentiveStore | MemoryStore:
