@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Direction, EncoderConfig,
                                        ErrorOutput, SpecialBit, SsiMode, SyncReference)
@@ -36,9 +36,13 @@ __all__ = ["EncoderConfig", "EncoderFrame", "SsiEncoder"]
 logger = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True, slots=True)
-class EncoderFrame:
-    """The frame an encoder latched, with the ground truth it was made from."""
+class EncoderFrame(NamedTuple):
+    """The frame an encoder latched, with the ground truth it was made from.
+
+    A :class:`typing.NamedTuple` (immutable, built once per latch in the scalar hot path,
+    where a frozen dataclass's per-field ``object.__setattr__`` cost about 1.2 µs); use
+    ``frame._replace(...)`` for a modified copy.
+    """
 
     #: frame bits, first transmitted bit = most significant bit of ``bits``
     bits: int

@@ -121,8 +121,7 @@ def test_multiple_transmission(bursts, flip_burst, mismatch, chosen) -> None:
             r = orig(t, n, rate, **kw)
             calls["n"] += 1
             if calls["n"] - 1 == flip_burst:
-                import dataclasses
-                r = dataclasses.replace(r, data=r.data ^ 4)
+                r = r._replace(data=r.data ^ 4)
             return r
         line.read = read          # type: ignore[method-assign]
     res = mt.read(0.0, 25, 1e6)
