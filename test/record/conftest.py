@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -76,13 +75,3 @@ def write_session(directory: Path, n: int, compression: str = "zstd") -> Path:
 def session_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A closed 2 s bag of the four topics (shared, read-only)."""
     return write_session(tmp_path_factory.mktemp("bags") / "session", 2000)
-
-
-@pytest.fixture
-def ros_env(worker_id: str = "main") -> dict[str, str]:
-    """Environment for a subprocess with a test-unique DDS domain, discovery on localhost."""
-    env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(100 + os.getpid() % 100)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
