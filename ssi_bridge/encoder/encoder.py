@@ -24,8 +24,10 @@ import logging
 import math
 from typing import NamedTuple
 
-from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Direction, EncoderConfig,
-                                       ErrorOutput, SpecialBit, SsiMode, SyncReference)
+from ssi_bridge.encoder.codes import Code
+from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Alignment, Direction,
+                                       EncoderConfig, ErrorOutput, SpecialBit, SsiMode,
+                                       SyncReference)
 from ssi_bridge.encoder.layout import encode_area
 from ssi_bridge.encoder.motion import MotionProfile
 from ssi_bridge.encoder.special import SpecialState
@@ -66,6 +68,25 @@ class EncoderFrame(NamedTuple):
     power_failure: bool = False
 
 
+#: the flags of a frame without special bits (one shared empty set, not one per frame)
+_NO_FLAGS: frozenset[SpecialBit] = frozenset()
+
+
+def _plain_area_shift(cfg: EncoderConfig) -> int | None:
+    """Shift that turns a value into its position area, when :func:`encode_area` is one.
+
+    True for non-negative binary values right- or MSB-justified without SSI-SHIFT-RIGHT
+    (001 §5.2.4.1, 004 §3.1): ``encode_area(cfg, v) == v << shift``. None otherwise
+    (Gray, BCD, Gray-excess, Tannenbaum, negative values, shift right), which keep the
+    general :func:`encode_area`.
+    """
+    if (cfg.origin < 0 or cfg.code is not Code.BINARY or cfg.shift_right
+            or cfg.alignment is Alignment.TANNENBAUM):
+        return None
+    shift = cfg.data_bits - cfg.value_bits if cfg.alignment is Alignment.LEFT else 0
+    return shift + cfg.trailing_zero_bits
+
+
 class SsiEncoder:
     """An absolute encoder with an SSI output, driven by a motion profile."""
 
@@ -85,6 +106,16 @@ class SsiEncoder:
         self._layout_bits = frozenset(config.special_bits)
         self._frame_bits = config.frame_bits
         self._fill = config.frame_bits - config.position_bits
+        # per-config constants of the hot path (frame_at runs once per latch); the config
+        # is frozen, so they are computed once here instead of on every frame
+        self._sync = config.ssi_mode is SsiMode.SYNC
+        self._sync_burst_end = self._sync and config.sync_reference is SyncReference.BURST_END
+        self._period = config.formation_period_s
+        self._origin = config.origin
+        self._range = config.range_steps
+        self._steps_per_unit = config.steps_per_unit
+        self._flags_on_error = config.error_output is ErrorOutput.FLAGS
+        self._area_shift = _plain_area_shift(config)
 
     # -- description --------------------------------------------------------------------
     @property
@@ -156,9 +187,9 @@ class SsiEncoder:
     # -- the data path ------------------------------------------------------------------
     def value_at(self, position: float) -> int:
         """Output value for a ground-truth position (rev or m), 001 §5.1.2."""
-        cfg = self.config
-        raw = math.floor(self._sign * position * cfg.steps_per_unit) + self._offset
-        return cfg.origin + (raw - cfg.origin) % cfg.range_steps
+        origin = self._origin
+        raw = math.floor(self._sign * position * self._steps_per_unit) + self._offset
+        return origin + (raw - origin) % self._range
 
     def sample_time(self, t: float) -> float:
         """Formation time of the value a latch at ``t`` loads (004 §2.8, §3.1, §3.4)."""
@@ -175,29 +206,46 @@ class SsiEncoder:
 
     def end_burst(self, t_end: float) -> None:
         """The master's last clock ended at ``t_end`` (sync mode, 004 §3.1: +20 µs)."""
-        cfg = self.config
-        if cfg.ssi_mode is SsiMode.SYNC and cfg.sync_reference is SyncReference.BURST_END:
-            self._sync_next = t_end + cfg.sync_delay_s
+        if self._sync_burst_end:
+            self._sync_next = t_end + self.config.sync_delay_s
 
     def frame_at(self, t: float) -> EncoderFrame:
-        """Latch at ``t``: form (or reuse) the position and assemble the frame bits."""
+        """Latch at ``t``: form (or reuse) the position and assemble the frame bits.
+
+        The hot path of the scalar line (once per latch): :meth:`sample_time` and
+        :meth:`value_at` are inlined for the asynchronous modes, and a plain binary layout
+        places the value with one shift instead of :func:`encode_area` (same bits).
+        """
         cfg = self.config
-        ts = self.sample_time(t)
-        pos = self.motion.position(ts)
-        value = self.value_at(pos)
+        if self._sync:
+            ts = self.sample_time(t)
+        else:
+            period = self._period
+            if period > 0.0:
+                ts = math.floor((t - self.phase_s) / period) * period + self.phase_s
+            else:
+                ts = t
+        motion = self.motion
+        pos = motion.position(ts)
+        origin = self._origin
+        value = origin + (math.floor(self._sign * pos * self._steps_per_unit) + self._offset
+                          - origin) % self._range
         errors = self._errors
-        if errors and cfg.error_output is ErrorOutput.ALL_ONES:
-            area = (1 << cfg.position_bits) - 1
-        elif errors and cfg.error_output is ErrorOutput.ERROR_VALUE:
-            area = cfg.error_value << cfg.trailing_zero_bits
+        if errors and not self._flags_on_error:
+            if cfg.error_output is ErrorOutput.ALL_ONES:
+                area = (1 << cfg.position_bits) - 1
+            else:
+                area = cfg.error_value << cfg.trailing_zero_bits
+        elif self._area_shift is not None:
+            area = value << self._area_shift
         else:
             area = encode_area(cfg, value)
         special = self._special
         if special is None:
             return EncoderFrame(area << self._fill, self._frame_bits,
-                                value, pos, self.motion.velocity(ts), t, ts, frozenset(),
+                                value, pos, motion.velocity(ts), t, ts, _NO_FLAGS,
                                 bool(errors), self.power_failure)
-        vel = self.motion.velocity(ts)
+        vel = motion.velocity(ts)
         speed_rps = vel if not cfg.linear else 0.0
         active = special.active(ts, value, speed_rps, errors, self.power_failure)
         frame = area

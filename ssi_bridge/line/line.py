@@ -28,6 +28,7 @@ import random
 from collections.abc import Callable
 from operator import itemgetter
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from ssi_bridge.encoder.config import FrameFormat, SsiMode
 from ssi_bridge.encoder.encoder import EncoderFrame, SsiEncoder
@@ -98,6 +99,35 @@ class LineFaults:
         return self.data_break or self.clock_break or bool(self.stuck) or self.bit_error_rate > 0
 
 
+class _Burst(NamedTuple):
+    """Constants of one burst shape ``(n_bits, bit rate)``, computed on its first read.
+
+    ``const``, ``initial``, ``full`` and ``runs`` turn the cached edge schedule
+    (:meth:`SsiLine._schedule`) into integer operations on the frame bits: the bits of
+    ``const`` are samples that see the idle-high level, those of ``initial`` the level before
+    the first shift (high, low inside a repeat); ``runs`` copy consecutive frame bits
+    ``(source shift, width mask, destination shift)`` and ``full`` is the destination shift
+    when one run copies the whole frame (the usual case: lag 1, tm longer than the burst).
+    """
+
+    #: half a clock period (s)
+    half: float
+    #: first to last falling edge, ``(clocks - 1) * period`` (s)
+    span: float
+    #: clocks per burst, ``n_bits + 1``
+    clocks: int
+    #: mask of the ``n_bits`` data bits
+    data_mask: int
+    #: warnings that depend only on the configuration and the burst shape
+    static: tuple[str, ...]
+    #: frame length the placement below was computed for
+    length: int
+    const: int
+    initial: int
+    full: int | None
+    runs: tuple[tuple[int, int, int], ...]
+
+
 class SsiLine:
     """An encoder at the end of a cable, read by bursts of clocks (an ``SsiReader``)."""
 
@@ -113,7 +143,8 @@ class SsiLine:
         self._repeats = 0
         self._last_end: float | None = None
         self._last_pause: float | None = None
-        self._static: dict[tuple[int, float], tuple[str, ...]] = {}
+        self._bursts: dict[tuple[int, float], _Burst] = {}
+        self._two_tm = 2.0 * self._tm
         self._schedules: dict[tuple[int, float, int], tuple[int, ...]] = {}
         self._pickers: dict[tuple[int, float, int], Callable[[str], tuple[str, ...]]] = {}
         ecfg = encoder.config
@@ -136,31 +167,27 @@ class SsiLine:
 
         ``expect_repeat`` marks a deliberate repeat burst inside tm (multiple transmission):
         its short pause is then not reported and not used for the async pause check.
+
+        This is the scalar hot path: everything that depends only on the burst shape (the
+        timing figures, the static warnings, where each schedule level goes in the sample
+        word) comes from :meth:`_burst`, cached on the first read of that shape.
         """
-        if n_bits < 1 or bit_rate_hz <= 0:
-            raise ConfigError(f"burst of {n_bits} bits at {bit_rate_hz} Hz is not possible")
-        cfg, faults, tm = self.config, self.faults, self._tm
-        period = 1.0 / bit_rate_hz
-        half = 0.5 * period
-        clocks = n_bits + 1
-        key = (n_bits, bit_rate_hz)
-        static = self._static.get(key)
-        if static is None:
-            static = static_warnings(self.encoder.config, cfg.cable_length_m, tm, cfg.tv,
-                                     n_bits, bit_rate_hz, cfg.check_cable_table)
-            self._static[key] = static
-            for w in static:
-                logger.warning("SSI line: %s", w)
-        warnings = list(static)
-        if self._last_end is not None and not expect_repeat:
-            pause = t - self._last_end
-            if self._pause_rules or pause < 2.0 * tm:
-                warnings += pause_warnings(self.encoder.config, pause, self._last_pause, tm)
+        burst = self._bursts.get((n_bits, bit_rate_hz))
+        if burst is None:
+            burst = self._burst(n_bits, bit_rate_hz)
+        half, span, clocks, data_mask, warnings, length, const, initial, full, runs = burst
+        faults = self.faults
+        last_end = self._last_end
+        if last_end is not None and not expect_repeat:
+            pause = t - last_end
+            if self._pause_rules or pause < self._two_tm:
+                extra = pause_warnings(self.encoder.config, pause, self._last_pause, self._tm)
+                if extra:
+                    warnings += tuple(extra)
             self._last_pause = pause
         self.bursts += 1
         clock_ok = not faults.clock_break
         line_low = t < self._mono_until           # monoflop of the previous burst running
-        bits = length = 0
         if clock_ok:
             latched = self._latched
             if line_low and latched is not None and not (self._repeat_once and self._repeats):
@@ -171,30 +198,82 @@ class SsiLine:
                 self._repeats = 0
                 self.latches += 1
             self.last_frame = latched
-            bits, length = latched.bits, latched.length
+            bits = latched.bits
+            if latched.length == length and bits >= 0 and not bits >> length:
+                # place the levels the schedule names with integer operations
+                if full is not None:
+                    samples = const | (bits << full)
+                else:
+                    samples = const
+                    for src, mask, dst in runs:
+                        samples |= ((bits >> src) & mask) << dst
+                if not line_low:
+                    samples |= initial
+            else:                                  # a word wider than its frame: by string
+                samples = self._pick_samples(latched, n_bits, 1.0 / bit_rate_hz,
+                                             0 if line_low else 1)
         else:
             self.last_frame = None
-        initial = 0 if (line_low and clock_ok) else 1
-        last_fall = t + (clocks - 1) * period
-        if clock_ok:
-            # extended word: the sources a sample can see; the edge schedule picks one
-            # level per master sample (string indexing keeps the per-bit walk in C)
-            word = (initial << (length + 2)) | (1 << (length + 1)) | (bits << 1)
-            pick = self._picker(n_bits, period, length)
-            samples = int("".join(pick(format(word, self._fmt(length)))), 2)
-        else:
-            samples = (1 << (clocks + 1)) - 1          # encoder never clocked: idle high
-        if faults.active:
+            samples = (1 << (clocks + 1)) - 1      # encoder never clocked: idle high
+        if faults.data_break or not clock_ok or faults.stuck or faults.bit_error_rate > 0:
             samples = self._apply_faults(samples, clocks + 1)
+        last_fall = t + span
         end_time = last_fall + half
         if clock_ok:
-            self._mono_until = last_fall + tm
+            self._mono_until = last_fall + self._tm
             self.encoder.end_burst(end_time)
         self._last_end = end_time
-        return LineReadout(
-            latch_time=t, n_bits=n_bits, data=(samples >> 1) & ((1 << n_bits) - 1),
-            start_bit=samples >> (clocks), trailer_bit=samples & 1, end_time=end_time,
-            warnings=tuple(warnings))
+        return LineReadout(t, n_bits, (samples >> 1) & data_mask, samples >> clocks,
+                           samples & 1, end_time, warnings)
+
+    def _burst(self, n_bits: int, bit_rate_hz: float) -> _Burst:
+        """Validate a burst shape and cache its constants (logs its static warnings once)."""
+        if n_bits < 1 or bit_rate_hz <= 0:
+            raise ConfigError(f"burst of {n_bits} bits at {bit_rate_hz} Hz is not possible")
+        cfg, tm = self.config, self._tm
+        period = 1.0 / bit_rate_hz
+        clocks = n_bits + 1
+        static = static_warnings(self.encoder.config, cfg.cable_length_m, tm, cfg.tv,
+                                 n_bits, bit_rate_hz, cfg.check_cable_table)
+        for w in static:
+            logger.warning("SSI line: %s", w)
+        length = self.encoder.frame_bits
+        sched = self._schedule(n_bits, period, length)
+        n_samples = clocks + 1
+        const = initial = 0
+        runs: list[tuple[int, int, int]] = []
+        k = 0
+        while k < n_samples:
+            src, pos = sched[k], n_samples - 1 - k
+            if src == length + 2:
+                initial |= 1 << pos
+            elif src == length + 1:
+                const |= 1 << pos
+            elif src > 0:                          # frame bit src - 1: extend the run
+                m = 1
+                while k + m < n_samples and sched[k + m] == src - m >= 1:
+                    m += 1
+                runs.append((src - m, (1 << m) - 1, pos - m + 1))
+                k += m
+                continue
+            k += 1
+        full = runs[0][2] if len(runs) == 1 and runs[0][:2] == (0, (1 << length) - 1) else None
+        burst = _Burst(0.5 * period, (clocks - 1) * period, clocks, (1 << n_bits) - 1,
+                       static, length, const, initial, full, tuple(runs))
+        self._bursts[(n_bits, bit_rate_hz)] = burst
+        return burst
+
+    def _pick_samples(self, frame: EncoderFrame, n_bits: int, period: float,
+                      initial: int) -> int:
+        """Sample word by picking characters of the extended word's binary string.
+
+        The general form of the integer placement in :meth:`read`, kept for a frame whose
+        bits do not fit its length (e.g. an error value wider than the position area).
+        """
+        length = frame.length
+        word = (initial << (length + 2)) | (1 << (length + 1)) | (frame.bits << 1)
+        pick = self._picker(n_bits, period, length)
+        return int("".join(pick(format(word, self._fmt(length)))), 2)
 
     @staticmethod
     def _fmt(length: int) -> str:
