@@ -37,6 +37,13 @@ class MasterStatus(IntFlag):
     DATA_MISMATCH = 0x08
 
 
+_DATA_ERROR = MasterStatus.DATA_ERROR.value
+_FRAME_ERROR = MasterStatus.FRAME_ERROR.value
+_POWER_FAILURE = MasterStatus.POWER_FAILURE.value
+#: every combination of the four status bits, indexed by value (the same cached members)
+_STATUS: tuple[MasterStatus, ...] = tuple(MasterStatus(v) for v in range(16))
+
+
 def check_readout(readout: LineReadout, *, zero_test: bool = True,
                   power_fail_bit: bool = False, expect_start: bool = True) -> MasterStatus:
     """Status a master derives from one readout.
@@ -46,14 +53,14 @@ def check_readout(readout: LineReadout, *, zero_test: bool = True,
     is False for repeat bursts of a multiple transmission, where the line is still held low
     by the monoflop when the first clock samples it.
     """
-    status = MasterStatus.OK
+    status = 0                      # plain int: IntFlag "|" builds a member per operation
     if expect_start and readout.start_bit == 0:
-        status |= MasterStatus.DATA_ERROR
+        status = _DATA_ERROR
     if zero_test and readout.trailer_bit != 0:
-        status |= MasterStatus.FRAME_ERROR
+        status |= _FRAME_ERROR
     if power_fail_bit and readout.data & 1:
-        status |= MasterStatus.POWER_FAILURE
-    return status
+        status |= _POWER_FAILURE
+    return _STATUS[status]
 
 
 def decode_frame(data: int, frame_bits: int, *, invalid_lsb: int = 0, invalid_msb: int = 0,
