@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
+from ssi_bridge.encoder.config import ERROR_BITS, SpecialBit
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.ros.station import SimStation
 
@@ -44,6 +45,21 @@ class ActiveFault:
     joint: str
     rate: float
     until: float | None
+
+
+def _visibility_note(fault: FaultKind, channel: object) -> str:
+    """Say when the encoder's frame layout has no bit that could show the fault."""
+    if channel is None:
+        return ""
+    cfg = channel.encoder.config  # type: ignore[attr-defined]
+    bits = set(cfg.special_bits)
+    if fault is FaultKind.POWER_FAILURE and SpecialBit.POWER_FAIL not in bits:
+        return (f"the {cfg.name} frame has no power-fail bit (003), so nothing on the wire "
+                "changes")
+    if fault is FaultKind.ENCODER_ERROR and not bits & ERROR_BITS:
+        return (f"the {cfg.name} frame has no error bit (004 §2.3); it shows only where the "
+                "family sends an error value")
+    return ""
 
 
 class FaultInjector:
@@ -83,7 +99,8 @@ class FaultInjector:
         where = f"joint {joint}" if channel else "the bus"
         span = f"for {duration:g} s" if until is not None else "until CLEAR_ALL"
         logger.warning("fault injected: %s on %s %s", fault.name, where, span)
-        return f"{fault.name} injected on {where} {span}"
+        note = _visibility_note(fault, channel)
+        return f"{fault.name} injected on {where} {span}" + (f"; {note}" if note else "")
 
     def expire(self) -> list[ActiveFault]:
         """Clear faults whose duration has run out; returns the ones cleared."""

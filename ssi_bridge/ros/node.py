@@ -17,7 +17,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import QoSProfile
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import ChannelStatus, Status
@@ -44,6 +44,8 @@ from ssi_bridge.ros.units import JointScale, VelocityEstimator
 #: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
 IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
+#: services keep up to 100 pending requests (rclpy's default of 10 drops bursts)
+SERVICE_QOS = QoSProfile(depth=100)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
 
@@ -97,21 +99,23 @@ class SsiBridgeNode(Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         g = self._service_group
+        # a deep request queue: a burst of calls is answered in order, not silently dropped
+        sq = SERVICE_QOS
         self.create_service(ReadRegister, "~/read_register", self.handlers.read_register,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.create_service(WriteRegister, "~/write_register", self.handlers.write_register,
-                            callback_group=g)
-        self.create_service(SetPreset, "~/set_preset", self.handlers.set_preset, callback_group=g)
+                            callback_group=g, qos_profile=sq)
+        self.create_service(SetPreset, "~/set_preset", self.handlers.set_preset, callback_group=g, qos_profile=sq)
         self.create_service(ResetRegisters, "~/reset_registers", self.handlers.reset_registers,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.create_service(SetControl, "~/set_control", self.handlers.set_control,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.create_service(InjectFault, "~/inject_fault", self.handlers.inject_fault,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.create_service(StartRecording, "~/start_recording", self.recorder.on_start,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.create_service(StopRecording, "~/stop_recording", self.recorder.on_stop,
-                            callback_group=g)
+                            callback_group=g, qos_profile=sq)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if s.record_enabled:
             try:
@@ -350,4 +354,4 @@ def _channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
     return m
 
 
-__all__ = ["SsiBridgeNode", "QoSProfile", "qos_profile_sensor_data"]
+__all__ = ["SsiBridgeNode"]

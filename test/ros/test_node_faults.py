@@ -1,0 +1,116 @@
+"""Fault injection -> diagnostics levels, and recovery after clearing (docs/node.md table).
+
+Detection follows the manuals: a broken data or clock wire fails the XN-1SSI ZERO test /
+start level -> ERR_SSI (000 "Error detection / messages"); an encoder error bit mapped by
+REG_SSI_MASK with EN_D0_DS raises SSI_DIAG (000 Table 3); a silent gateway stops its
+heartbeat (CiA 301) -> the bus status goes ERROR.
+"""
+
+from __future__ import annotations
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from ssi_bridge_msgs.srv import InjectFault, WriteRegister
+
+PERIOD = 0.5
+K = InjectFault.Request
+
+
+def _level_of(diags, name):
+    for _, arr in reversed(diags):
+        for st in arr.status:
+            if st.name == name:
+                return st
+    return None
+
+
+def _wait_level(probe, node, diags, name, level, timeout):
+    probe.wait_for(lambda: (st := _level_of(diags, name)) is not None and st.level == level,
+                   timeout, f"{name} at level {level!r}", node)
+
+
+def _inject(probe, node, **kw):
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(**kw))
+    assert res.success, res.message
+    return res
+
+
+@pytest.mark.parametrize("kind", [K.DATA_WIRE_BREAK, K.CLOCK_WIRE_BREAK])
+def test_wire_faults_are_errors_until_cleared(running, probe, kind):
+    node = running({"diagnostics_period": PERIOD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    _inject(probe, node, kind=kind)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    st = _level_of(diags, "ssi_bridge: joint1")
+    assert "ERR_SSI" in st.message, st.message
+    _inject(probe, node, kind=K.CLEAR_ALL)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+
+
+def test_power_failure_on_an_encoder_without_the_bit_says_so(running, probe):
+    node = running()
+    res = _inject(probe, node, kind=K.POWER_FAILURE)
+    assert "no power-fail bit" in res.message, res.message
+
+
+def test_fault_with_a_duration_clears_itself(running, probe):
+    node = running({"diagnostics_period": PERIOD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    res = _inject(probe, node, kind=K.DATA_WIRE_BREAK, duration=1.0)
+    assert "for 1 s" in res.message
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
+
+
+def test_encoder_error_bit_via_reg_ssi_mask_warns(running, probe):
+    # AHM36 multiturn: 12 + 14 position bits + error bit = 27-bit frame (004 §3.1); the error
+    # bit is frame bit 0, REG_SSI_MASK byte 0 = EN_D0_RMS0 | EN_D0_DS | SEL 0 = 0xC0
+    node = running({"joints": ["a"], "a.family": "AHM36_MULTI", "a.para1": 0x1B010100,
+                    "diagnostics_period": PERIOD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    ok = probe.call(WriteRegister, node.topic("~/write_register"),
+                    WriteRegister.Request(address=51, value=0xC0))
+    assert ok.success, ok.message
+    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.OK, 5.0)
+    _inject(probe, node, kind=K.ENCODER_ERROR)
+    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.WARN, 2 * PERIOD + 1)
+    assert "SSI_DIAG" in _level_of(diags, "ssi_bridge: a").message
+    _inject(probe, node, kind=K.CLEAR_ALL)
+    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.OK, 2 * PERIOD + 1)
+
+
+def test_silent_gateway_is_a_bus_error_and_recovers(running, probe):
+    node = running({"diagnostics_period": PERIOD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.OK, 5.0)
+    _inject(probe, node, kind=K.GATEWAY_SILENT)
+    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    assert "silent" in _level_of(diags, "ssi_bridge: bus").message
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    _inject(probe, node, kind=K.CLEAR_ALL)
+    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+
+
+def test_total_can_frame_loss_makes_the_joint_stale(running, probe):
+    node = running({"diagnostics_period": PERIOD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    _inject(probe, node, kind=K.CAN_FRAME_LOSS, rate=1.0)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    _inject(probe, node, kind=K.CLEAR_ALL)
+    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 3 * PERIOD + 2)
+
+
+@pytest.mark.parametrize("request_, words", [
+    (K(kind=99), "unknown fault kind 99"),
+    (K(kind=K.BIT_NOISE, rate=0.0), "needs a rate in (0, 1]"),
+    (K(kind=K.DATA_WIRE_BREAK, duration=-1.0), "duration"),
+    (K(kind=K.DATA_WIRE_BREAK, joint="nope"), "unknown joint"),
+])
+def test_bad_fault_requests_are_refused(running, probe, request_, words):
+    node = running()
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), request_)
+    assert not res.success and words in res.message, res.message
