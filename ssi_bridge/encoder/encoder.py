@@ -70,6 +70,9 @@ class EncoderFrame(NamedTuple):
 
 #: the flags of a frame without special bits (one shared empty set, not one per frame)
 _NO_FLAGS: frozenset[SpecialBit] = frozenset()
+#: builds a NamedTuple from its fields in declaration order without the generated
+#: ``__new__`` (a Python-level call per frame); the result is the same object type
+_tuple_new = tuple.__new__
 
 
 def _plain_area_shift(cfg: EncoderConfig) -> int | None:
@@ -116,6 +119,9 @@ class SsiEncoder:
         self._steps_per_unit = config.steps_per_unit
         self._flags_on_error = config.error_output is ErrorOutput.FLAGS
         self._area_shift = _plain_area_shift(config)
+        #: frame = value << this, for a plain binary area and no special bits; else None
+        self._plain_shift = (self._area_shift + self._fill
+                             if self._area_shift is not None and self._special is None else None)
 
     # -- description --------------------------------------------------------------------
     @property
@@ -216,21 +222,26 @@ class SsiEncoder:
         :meth:`value_at` are inlined for the asynchronous modes, and a plain binary layout
         places the value with one shift instead of :func:`encode_area` (same bits).
         """
-        cfg = self.config
         if self._sync:
             ts = self.sample_time(t)
-        else:
+        elif self._period > 0.0:
             period = self._period
-            if period > 0.0:
-                ts = math.floor((t - self.phase_s) / period) * period + self.phase_s
-            else:
-                ts = t
+            ts = math.floor((t - self.phase_s) / period) * period + self.phase_s
+        else:
+            ts = t
         motion = self.motion
         pos = motion.position(ts)
         origin = self._origin
         value = origin + (math.floor(self._sign * pos * self._steps_per_unit) + self._offset
                           - origin) % self._range
         errors = self._errors
+        shift = self._plain_shift
+        if shift is not None and not errors:
+            # plain binary frame without special bits (GENERIC): the value shifted is the frame
+            return _tuple_new(EncoderFrame, (value << shift, self._frame_bits, value, pos,
+                                             motion.velocity(ts), t, ts, _NO_FLAGS, False,
+                                             self.power_failure))
+        cfg = self.config
         if errors and not self._flags_on_error:
             if cfg.error_output is ErrorOutput.ALL_ONES:
                 area = (1 << cfg.position_bits) - 1

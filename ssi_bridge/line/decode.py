@@ -73,6 +73,8 @@ def decode_frame(data: int, frame_bits: int, *, invalid_lsb: int = 0, invalid_ms
     :param invalid_msb: bits zeroed on the MSB side by masking
     :param gray: the encoder sends Gray code
     """
+    if not (invalid_lsb or invalid_msb or gray) and 1 <= frame_bits <= max_bits:
+        return data & ((1 << frame_bits) - 1)          # the plain frame: mask only
     if not 1 <= frame_bits <= max_bits:
         raise ConfigError(f"frame length {frame_bits} outside 1..{max_bits}")
     if invalid_lsb < 0 or invalid_msb < 0 or invalid_lsb + invalid_msb >= frame_bits:

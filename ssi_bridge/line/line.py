@@ -42,6 +42,10 @@ __all__ = ["LineConfig", "LineFaults", "SsiLine", "decode_frame", "check_readout
 
 logger = logging.getLogger(__name__)
 
+#: builds the :class:`LineReadout` NamedTuple from its fields in declaration order, without
+#: the generated ``__new__`` (a Python-level call per burst); same type, same fields
+_tuple_new = tuple.__new__
+
 
 @dataclass(frozen=True)
 class LineConfig:
@@ -199,7 +203,7 @@ class SsiLine:
                 self.latches += 1
             self.last_frame = latched
             bits = latched.bits
-            if latched.length == length and bits >= 0 and not bits >> length:
+            if latched.length == length and not bits >> length:   # 0 <= bits < 2**length
                 # place the levels the schedule names with integer operations
                 if full is not None:
                     samples = const | (bits << full)
@@ -223,8 +227,8 @@ class SsiLine:
             self._mono_until = last_fall + self._tm
             self.encoder.end_burst(end_time)
         self._last_end = end_time
-        return LineReadout(t, n_bits, (samples >> 1) & data_mask, samples >> clocks,
-                           samples & 1, end_time, warnings)
+        return _tuple_new(LineReadout, (t, n_bits, (samples >> 1) & data_mask,
+                                        samples >> clocks, samples & 1, end_time, warnings))
 
     def _burst(self, n_bits: int, bit_rate_hz: float) -> _Burst:
         """Validate a burst shape and cache its constants (logs its static warnings once)."""
