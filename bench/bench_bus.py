@@ -4,9 +4,14 @@
   as a ratio to a bare canopen LocalNode/RemoteNode SDO round trip measured in the same run
   (lower ratio = less overhead);
 * PDO cycle with 8 slots driven at 1 kHz: achieved SYNC rate (ratio to 1000/s, higher is
-  better) and missed cycles (a cycle whose TPDOs did not all arrive before the next SYNC).
+  better) and missed cycles (a cycle whose TPDOs did not all arrive before the next SYNC);
+* CPU per cycle (``cycle_cpu_us``, 1 and 8 slots): ``time.process_time()`` (all threads of
+  the process: client, gateway, bus) of ``sync()`` -> ``wait_cycle()`` back to back, with
+  real encoders on SSI lines behind the modules as the ROS node wires them; the goal is a
+  share of the 1 ms period small enough to leave the node room (<= 250 / 800 us).
 
 Prints one JSON object per line and appends them to bench/results/latest.jsonl; never fails.
+``--cpu`` runs only the CPU-per-cycle part.
 """
 
 from __future__ import annotations
@@ -24,14 +29,19 @@ NODE_ID = 11
 ROUNDS = 300
 CYCLE_HZ = 1000.0
 CYCLE_SECONDS = 2.0
+CPU_CYCLES = 2000
+#: CPU budget per SYNC cycle (us) for 1 and 8 slots, the 1 kHz node's share for the bus
+CPU_GOAL_US = {1: 250.0, 8: 800.0}
 
 
 def _emit(records: list[dict], metric: str, value: float, unit: str,
-          baseline: float | None = None) -> None:
+          baseline: float | None = None, note: str | None = None) -> None:
     rec: dict = {"metric": metric, "value": round(value, 3), "unit": unit}
     if baseline:
         rec["baseline"] = round(baseline, 3)
         rec["ratio"] = round(value / baseline, 3)
+    if note:
+        rec["note"] = note
     records.append(rec)
     print(json.dumps(rec), flush=True)
 
@@ -115,14 +125,58 @@ def pdo_cycle(records: list[dict]) -> None:
     _emit(records, "bus_pdo_cycle_8_slots_missed_fraction", missed / n, "fraction")
 
 
+def cycle_cpu(records: list[dict], slots: int) -> None:
+    """CPU time per sync -> all TPDOs received, gateway + client + modules in one process."""
+    from ssi_bridge.client.master import BridgeClient
+    from ssi_bridge.encoder.families import make_encoder
+    from ssi_bridge.encoder.motion import Sine
+    from ssi_bridge.gateway.bus import BusConfig
+    from ssi_bridge.gateway.gateway import XnGateway
+    from ssi_bridge.line.line import LineConfig, SsiLine
+    from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+    config = BusConfig(channel=f"bench-cpu-{slots}", node_id=NODE_ID)
+    modules = [Xn1Ssi(SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0 + s)),
+                              LineConfig(check_cable_table=False)), slot=s)
+               for s in range(1, slots + 1)]
+    with XnGateway(config, NODE_ID, modules):
+        with BridgeClient(config, NODE_ID, slots) as client:
+            for _ in range(50):  # warm-up: first samples, caches
+                client.sync()
+                client.wait_cycle(0.05)
+            incomplete = 0
+            per_cycle = []
+            clock = time.process_time
+            t0 = clock()
+            for _ in range(CPU_CYCLES):
+                c0 = clock()
+                client.sync()
+                if not client.wait_cycle(0.05):
+                    incomplete += 1
+                per_cycle.append(clock() - c0)
+            total = clock() - t0
+    per_cycle.sort()
+    mean_us = total / CPU_CYCLES * 1e6
+    note = (f"process CPU per sync -> all TPDOs received, {slots} slot(s), {CPU_CYCLES} "
+            f"cycles back to back; p50 {per_cycle[len(per_cycle) // 2] * 1e6:.0f} us, "
+            f"p99 {per_cycle[int(len(per_cycle) * 0.99)] * 1e6:.0f} us, {incomplete} "
+            f"incomplete; baseline = goal; lower is better")
+    _emit(records, f"bus_cycle_cpu_us_{slots}_slot{'s' if slots > 1 else ''}", mean_us, "us",
+          CPU_GOAL_US[slots], note)
+
+
 def main() -> None:
     logging.basicConfig(level=logging.ERROR)
     records: list[dict] = []
+    cpu_only = sys.argv[1:] == ["--cpu"]
     try:
-        baseline = bare_sdo_us()
-        _emit(records, "bus_bare_canopen_sdo_upload_us", baseline, "us")
-        bridge_us(records, baseline)
-        pdo_cycle(records)
+        if not cpu_only:
+            baseline = bare_sdo_us()
+            _emit(records, "bus_bare_canopen_sdo_upload_us", baseline, "us")
+            bridge_us(records, baseline)
+            pdo_cycle(records)
+        for slots in (1, 8):
+            cycle_cpu(records, slots)
     except Exception as err:  # a benchmark reports, it never fails the run
         print(json.dumps({"metric": "bus_benchmark_error", "value": 0, "unit": "",
                           "error": repr(err)}), flush=True)
