@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections import deque
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -33,7 +34,8 @@ from ssi_bridge.gateway.gateway import XnGateway
 from ssi_bridge.module.images import ProcessInput
 from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
-from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_status
+from ssi_bridge.ros.cycle import CycleThread
+from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
@@ -82,7 +84,7 @@ class SsiBridgeNode(Node):
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
         self.positions = {j.name: 0.0 for j in s.joints}
-        self._cycle_times: list[float] = []
+        self._cycle_times: deque[float] = deque()
         self._last_levels: tuple[int, ...] = ()
 
         self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
@@ -90,11 +92,9 @@ class SsiBridgeNode(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.recorder = SessionRecorder(self, s)
 
-        self._cycle_group = MutuallyExclusiveCallbackGroup()
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._diag_group = MutuallyExclusiveCallbackGroup()
-        self.cycle_timer = self.create_timer(1.0 / s.publish_rate, self._on_cycle,
-                                             callback_group=self._cycle_group)
+        self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
         self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
@@ -124,6 +124,7 @@ class SsiBridgeNode(Node):
                 # the bridge still runs; the bus diagnostics show the error until fixed
                 self.recorder.error = f"record.enabled: {err}"
                 self.get_logger().error(self.recorder.error)
+        self.cycle.start()
         self.get_logger().info(
             f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
@@ -197,23 +198,25 @@ class SsiBridgeNode(Node):
         js = JointState()
         js.header.stamp = stamp
         js.header.frame_id = self.settings.frame_id
-        status = Status()
-        status.header = js.header
+        # ~/status costs as much as the rest of the cycle: build it only for a listener
+        want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
+        status = Status(header=js.header) if want_status else None
         for joint in self.settings.joints:
             self._update_joint(joint, t_sync, js, status)
         if not js.name:
             return
-        if not (self.publish_safe(self.joint_pub, js) and self.publish_safe(self.status_pub, status)):
+        if not self.publish_safe(self.joint_pub, js):
             return
         self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
-        self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
-        levels = tuple(st.level for st in self._statuses())
+        if status is not None and self.publish_safe(self.status_pub, status):
+            self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
+        levels = self._levels()
         if self._last_levels and levels != self._last_levels:
             self.publish_diagnostics()
         self._last_levels = levels
 
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
-                      status: Status) -> None:
+                      status: Status | None) -> None:
         name = joint.name
         counters = self.counters[name]
         sample = self.client.latest(joint.slot)
@@ -243,7 +246,8 @@ class SsiBridgeNode(Node):
         js.name.append(name)
         js.position.append(position)
         js.velocity.append(velocity)
-        status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
+        if status is not None:
+            status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
@@ -257,11 +261,21 @@ class SsiBridgeNode(Node):
 
     # -- diagnostics -----------------------------------------------------------------------
     def achieved_rate(self) -> float:
-        """Cycles per second over the last diagnostics period."""
+        """Cycles per second over the last diagnostics period (at least 1 s)."""
         now = time.monotonic()
         window = max(self.settings.diagnostics_period, 1.0)
-        self._cycle_times = [t for t in self._cycle_times if now - t <= window]
-        return len(self._cycle_times) / window
+        times = self._cycle_times
+        while times and now - times[0] > window:
+            times.popleft()
+        return len(times) / window
+
+    def _levels(self) -> tuple[int, ...]:
+        """The diagnostic levels without building the statuses (checked every cycle)."""
+        limit = self.settings.stale_cycles
+        levels = [channel_level(c.last_input, c.consecutive_stale, limit)[0]
+                  for c in self.counters.values()]
+        levels.append(int(self.client.gateway_alive) * 2 + int(bool(self.recorder.error)))
+        return tuple(levels)
 
     def _statuses(self) -> list:
         s = self.settings
@@ -305,7 +319,7 @@ class SsiBridgeNode(Node):
                     self.velocity[joint] = VelocityEstimator(self.scales[joint],
                                                              self.settings.velocity_window)
             elif p.name == "publish_rate":
-                self.cycle_timer.timer_period_ns = int(1e9 / float(p.value))
+                self.cycle.period = 1.0 / float(p.value)
             elif p.name == "diagnostics_period":
                 self.diag_timer.timer_period_ns = int(1e9 * float(p.value))
         return SetParametersResult(successful=True)
@@ -313,6 +327,7 @@ class SsiBridgeNode(Node):
     def shutdown(self) -> None:
         """Stop recording, stop the bus side; safe to call twice."""
         logbridge.uninstall()
+        self.cycle.stop()
         self.recorder.stop()
         self.client.close()
         if self.gateway is not None:
