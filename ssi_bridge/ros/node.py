@@ -70,7 +70,7 @@ class SsiBridgeNode(Node):
         if s.simulation:
             self.station = SimStation(s)
             self.gateway = XnGateway(self.bus_config, s.node_id, self.station.modules,
-                                     clock=self.sim_time)
+                                     clock=self.latch_time)
             self.gateway.start()
             self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
         n_slots = max(j.slot for j in s.joints)
@@ -153,6 +153,18 @@ class SsiBridgeNode(Node):
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
         return time.monotonic() - self._t0
+
+    def latch_time(self) -> float:
+        """Station clock for an acquisition: the sim time of the SYNC that triggered it.
+
+        A real XN-1SSI latches when the SYNC frame arrives, microseconds after it is on the
+        wire; the in-process gateway handles the frame whenever Python schedules it. Latching
+        at the SYNC's send time keeps the simulated sample where the real one would be, so
+        header.stamp (the SYNC time) is the true latch time.
+        """
+        client = getattr(self, "client", None)
+        sent = client.table.last_sync_monotonic if client is not None else 0.0
+        return (sent or time.monotonic()) - self._t0
 
     def _stamp_ns(self, monotonic_t: float) -> int:
         """ROS time (ns) of a past ``time.monotonic()`` instant."""

@@ -1,0 +1,82 @@
+"""Parameters (declared with descriptors and ranges, runtime REG_PARA1 changes refused with the
+module's ERR_PARA reason, 000 Table 19) and the process life cycle (clean exit codes)."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, SetParameters
+from ssi_bridge_msgs.srv import ReadRegister, StopRecording
+
+
+def _set(probe, node, name, value):
+    v = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
+    req = SetParameters.Request(parameters=[Parameter(name=name, value=v)])
+    res = probe.call(SetParameters, node.topic("~/set_parameters"), req)
+    return res.results[0]
+
+
+def test_parameters_are_described_with_ranges(running, probe):
+    node = running()
+    names = ["publish_rate", "bus.node_id", "joint1.para1", "joint1.slot", "record.root"]
+    res = probe.call(DescribeParameters, node.topic("~/describe_parameters"),
+                     DescribeParameters.Request(names=names))
+    by_name = {d.name: d for d in res.descriptors}
+    assert set(by_name) == set(names)
+    assert all(d.description for d in res.descriptors), "every parameter says what it means"
+    rate = by_name["publish_rate"].floating_point_range[0]
+    assert (rate.from_value, rate.to_value) == (1.0, 2000.0)
+    node_id = by_name["bus.node_id"].integer_range[0]
+    assert (node_id.from_value, node_id.to_value) == (1, 127) and by_name["bus.node_id"].read_only
+    assert "REG_PARA1" in by_name["joint1.para1"].description
+
+
+def test_runtime_para1_change_is_validated_by_the_module_rules(running, probe):
+    node = running()
+    # INVALID_BITS_LSB 15 + INVALID_BITS_MSB 7 = 22 is fine, but with a 20-bit frame it is not
+    bad = _set(probe, node, "joint1.para1", 0x14017F00)
+    assert not bad.successful
+    assert "INVALID_BITS" in bad.reason and "SSI_FRAME_LEN" in bad.reason, bad.reason
+    reserved_rate = _set(probe, node, "joint1.para1", 0x19090000)  # bit-rate code 9: reserved
+    assert not reserved_rate.successful and "SSI_BIT_RATE" in reserved_rate.reason
+    good = _set(probe, node, "joint1.para1", 0x19020000)  # 250 kbit/s
+    assert good.successful, good.reason
+    back = probe.call(ReadRegister, node.topic("~/read_register"), ReadRegister.Request(address=20))
+    assert back.success and back.value == 0x19020000
+
+
+def test_out_of_range_value_is_refused_by_the_descriptor(running, probe):
+    node = running()
+    v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5000.0)
+    res = probe.call(SetParameters, node.topic("~/set_parameters"),
+                     SetParameters.Request(parameters=[Parameter(name="publish_rate", value=v)]))
+    assert not res.results[0].successful
+
+
+def test_sigterm_closes_the_recording_and_exits_zero(running, probe, tmp_path: Path):
+    from mcap.reader import make_reader
+
+    root = tmp_path / "rec"
+    node = running({"record.enabled": True, "record.root": str(root), "record.path": "s"})
+    probe.wait_for(lambda: (root / "s").exists(), 5.0, "the bag directory", node)
+    assert node.stop(signal.SIGTERM) == 0, node.log()[-3000:]
+    assert (root / "s" / "metadata.yaml").exists(), "metadata.yaml written on shutdown"
+    with open(root / "s" / "s_0.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics.message_count > 0
+
+
+def test_stop_recording_without_a_session_is_refused(running, probe):
+    node = running()
+    res = probe.call(StopRecording, node.topic("~/stop_recording"), StopRecording.Request())
+    assert not res.success and "no recording is running" in res.message
+
+
+def test_a_station_that_does_not_answer_exits_nonzero_with_the_reason(start_node):
+    node = start_node({"simulation": False})  # nobody serves node 1 on this virtual channel
+    code = node.proc.wait(30)
+    assert code == 1, node.log()
+    log = node.log()
+    assert "cannot start" in log and "Traceback" not in log, log
