@@ -333,9 +333,10 @@ class BridgeClient:
                 lambda pdo, c=carried: self.table.on_positions(c, bytes(pdo.data)))
 
     def _on_image(self, slot: int, data: bytes) -> None:
-        self.table.on_image(slot, data)
+        st = self.table.on_image(slot, data)
+        if st.pulse_seq is None:  # re-checked under the lock; set_control arms it there
+            return
         with self.table.cond:
-            st = self.table.slot(slot)
             if st.pulse_seq is None or self.table.sync_seq <= st.pulse_seq:
                 return
             st.pulse_seq = None

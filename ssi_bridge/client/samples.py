@@ -71,7 +71,13 @@ class _Slot:
 
 
 class SlotTable:
-    """Per-slot state shared by the network, timer and service threads."""
+    """Per-slot state shared by the network, timer and service threads.
+
+    The waiters are woken once per cycle, not per frame: ``_due`` counts the images and
+    positions not yet received for the current SYNC (``image_seq``/``position_seq`` behind
+    ``sync_seq``), so :meth:`cycle_complete` is ``_due == 0`` and a frame notifies only when
+    it completes the cycle or a handshake waits in :meth:`next_input`.
+    """
 
     def __init__(self, slots: int) -> None:
         self.slots = slots
@@ -81,6 +87,8 @@ class SlotTable:
         self.last_sync_monotonic = 0.0
         self._slots = {s: _Slot() for s in range(1, slots + 1)}
         self._times: dict[int, float] = {}
+        self._due = 2 * slots
+        self._input_waiters = 0
 
     def slot(self, slot: int) -> _Slot:
         """The state of ``slot`` (raises KeyError with the valid range)."""
@@ -93,27 +101,41 @@ class SlotTable:
         """Record a SYNC about to be sent; return its time."""
         with self.cond:
             self.sync_seq += 1
+            self._due = 2 * self.slots
             self.sync_time = self.last_sync_monotonic = time.monotonic()
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
             return self.sync_time
 
-    def on_image(self, slot: int, data: bytes) -> None:
-        """Store a received process input image."""
+    def on_image(self, slot: int, data: bytes) -> _Slot:
+        """Store a received process input image; return the slot's state."""
         with self.cond:
             st = self._slots[slot]
-            st.image, st.image_seq = bytes(data), self.sync_seq
+            if st.image_seq != self.sync_seq:
+                st.image_seq = self.sync_seq
+                self._due -= 1
+            st.image = data if type(data) is bytes else bytes(data)
             st.image_count += 1
-            self.cond.notify_all()
+            if self._due == 0 or self._input_waiters:
+                self.cond.notify_all()
+            return st
 
     def on_positions(self, slots: list[int], data: bytes) -> None:
         """Store the positions of an encoder default PDO."""
-        values = POSITION_PAIR.unpack(bytes(data).ljust(8, b"\0"))
+        if len(data) == POSITION_PAIR.size:
+            values = POSITION_PAIR.unpack(data)
+        else:
+            values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
         with self.cond:
+            seq = self.sync_seq
             for slot, value in zip(slots, values):
                 st = self._slots[slot]
-                st.position, st.position_seq = value, self.sync_seq
-            self.cond.notify_all()
+                if st.position_seq != seq:
+                    st.position_seq = seq
+                    self._due -= 1
+                st.position = value
+            if self._due == 0:
+                self.cond.notify_all()
 
     def latest(self, slot: int) -> ChannelSample | None:
         """The newest complete sample of ``slot`` or None before the first one."""
@@ -126,8 +148,7 @@ class SlotTable:
 
     def cycle_complete(self) -> bool:
         """True when every slot's image and position arrived since the last SYNC."""
-        return all(st.image_seq == self.sync_seq and st.position_seq == self.sync_seq
-                   for st in self._slots.values())
+        return self._due == 0
 
     def wait_cycle(self, timeout: float) -> bool:
         """Wait until :meth:`cycle_complete` or ``timeout`` (s) elapses."""
@@ -138,7 +159,12 @@ class SlotTable:
         """Wait for an image newer than the slot's last output edit."""
         with self.cond:
             st = self._slots[slot]
-            if self.cond.wait_for(lambda: st.image_seq > st.edit_seq, timeout):
+            self._input_waiters += 1
+            try:
+                fresh = self.cond.wait_for(lambda: st.image_seq > st.edit_seq, timeout)
+            finally:
+                self._input_waiters -= 1
+            if fresh:
                 assert st.image is not None
                 return ProcessInput.decode(st.image)
             return None
