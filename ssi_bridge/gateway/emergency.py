@@ -51,6 +51,8 @@ class Emergencies:
         """Compare each slot's diagnostics byte with the last one and emit EMCYs."""
         was_active = self.error_register != 0
         for tracker, diag in zip(self._trackers, diags):
+            if diag == tracker.current:
+                continue  # no edge: the common case on every SYNC
             for edge in tracker.update(diag):
                 if not edge.rising:
                     continue

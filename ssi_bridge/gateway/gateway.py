@@ -109,7 +109,7 @@ class XnGateway:
         self.node.add_write_callback(self._check_write)
         self.node.add_write_callback(self.emergencies.on_write)
         self.node.add_write_callback(self.objects.on_write)
-        self.pdo = PdoEngine(self.node, self._send)
+        self.pdo = PdoEngine(self.node, self._send, self.objects.pdo_reader)
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         self._sync_cob: int | None = None

@@ -9,7 +9,8 @@ A refused write raises ``SdoAbortedError``, which canopen's ``SdoServer`` sends 
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+import struct
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from canopen.objectdictionary import ODVariable
@@ -19,7 +20,7 @@ from ssi_bridge.exceptions import ParameterError, RegisterWriteError
 from ssi_bridge.gateway.aborts import SdoAbort
 from ssi_bridge.gateway.dictionary import PROCESS_INPUT, PROCESS_OUTPUT
 from ssi_bridge.module.diagnostics import cam_state, to_int32
-from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus
+from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import Reg
 
 if TYPE_CHECKING:
@@ -44,6 +45,10 @@ AREA_OUT, AREA_OVER, AREA_UNDER = 0x01, 0x02, 0x04
 SERVED = frozenset({PROCESS_INPUT, PROCESS_OUTPUT, *REGISTER_OBJECTS, 0x5802, 0x5803, 0x5804,
                     0x5805, 0x5806, 0x6B00, CAM_ENABLE, CAM_POLARITY, 0x6C00})
 _IDLE_OUTPUT = bytes(8)
+#: objects decoded from the process input image (``module.status``), 6C00 = DS406 area state
+_STATUS_OBJECTS = frozenset({0x5802, 0x5803, 0x5805, 0x6C00})
+#: 0x6820 on the wire: REG_SSI_POS as Integer32, little endian (CiA 301 7.1.2.4)
+POSITION_STRUCT = struct.Struct("<I")
 
 
 class EncoderObjects:
@@ -78,7 +83,8 @@ class EncoderObjects:
         if module is None or index not in SERVED:
             return None
         slot = subindex - 1
-        status = module.status
+        if index in _STATUS_OBJECTS:
+            return self._status_value(index, module.status)
         if index == PROCESS_INPUT:
             return int.from_bytes(module.process_input(), "little")
         if index == PROCESS_OUTPUT:
@@ -86,17 +92,8 @@ class EncoderObjects:
         if index in REGISTER_OBJECTS:
             value = module.read_register(REGISTER_OBJECTS[index])
             return to_int32(value) if index in SIGNED_OBJECTS else value
-        if index == 0x5802:  # Table 21: STS_UP bit 7, STS_DN bit 6
-            return int(status.cmp & (CmpStatus.STS_UP | CmpStatus.STS_DN))
-        if index == 0x5803:  # Table 24
-            return (bool(CmpStatus.FLAG_CMP1 in status.cmp) << 3
-                    | bool(CmpStatus.FLAG_CMP2 in status.cmp) << 4
-                    | bool(ModuleStatus.STS_OFLW in status.sts) << 5
-                    | bool(ModuleStatus.STS_UFLW in status.sts) << 6)
         if index == 0x5804:  # Table 27
             return int(module.diag)
-        if index == 0x5805:  # Table 30: byte 0 = image byte 7, byte 1 = image byte 6
-            return int(status.sts) | int(status.cmp) << 8
         if index == 0x5806:  # Table 33: image byte 5, bits 6/7 masked
             return module.process_input()[5] & 0x3F
         if index == 0x6B00:  # Table 42
@@ -106,11 +103,41 @@ class EncoderObjects:
                              polarity=self._cam[CAM_POLARITY][slot])
         if index in self._cam:
             return self._cam[index][slot]
-        if index == 0x6C00:
-            over = ModuleStatus.STS_OFLW in status.sts
-            under = ModuleStatus.STS_UFLW in status.sts
-            return (AREA_OUT if over or under else 0) | (AREA_OVER if over else 0) | (
-                AREA_UNDER if under else 0)
+        return None
+
+    @staticmethod
+    def _status_value(index: int, status: ProcessInput) -> int:
+        """Objects decoded from process input bytes 6/7 (Tables 21, 24, 30; 6C00)."""
+        if index == 0x5802:  # Table 21: STS_UP bit 7, STS_DN bit 6
+            return int(status.cmp & (CmpStatus.STS_UP | CmpStatus.STS_DN))
+        over = ModuleStatus.STS_OFLW in status.sts
+        under = ModuleStatus.STS_UFLW in status.sts
+        if index == 0x5803:  # Table 24
+            return (bool(CmpStatus.FLAG_CMP1 in status.cmp) << 3
+                    | bool(CmpStatus.FLAG_CMP2 in status.cmp) << 4
+                    | over << 5 | under << 6)
+        if index == 0x5805:  # Table 30: byte 0 = image byte 7, byte 1 = image byte 6
+            return int(status.sts) | int(status.cmp) << 8
+        return (AREA_OUT if over or under else 0) | (AREA_OVER if over else 0) | (
+            AREA_UNDER if under else 0)
+
+    def pdo_reader(self, index: int, subindex: int) -> Callable[[], bytes] | None:
+        """A direct reader of the encoded value of a TPDO-mapped object, or None.
+
+        Covers what the master maps on every SYNC (000 Table 15): 0x2000:s (the 8-byte process
+        input image, :meth:`on_read` returns it as UNSIGNED64 little endian, i.e. the image
+        bytes unchanged) and 0x6820:s (REG_SSI_POS as Integer32). The bytes equal what
+        ``LocalNode.get_data`` would build through :meth:`on_read`, without the object
+        lookups and int round trips; any other object takes that generic path (None).
+        """
+        module = self._module(subindex)
+        if module is None:
+            return None
+        if index == PROCESS_INPUT:
+            return module.process_input
+        if index == 0x6820:
+            pack = POSITION_STRUCT.pack
+            return lambda: pack(module.ssi_pos & 0xFFFFFFFF)
         return None
 
     # -- SDO write --------------------------------------------------------------------------

@@ -9,13 +9,19 @@ mapped objects must exist and be mappable, at most 64 bits) and moves data:
   SYNC cycle when the mapped data changed (000 Table 15, "normally 255");
 * RPDOs: 0-240 = applied at the next SYNC, 254/255 = applied on reception.
 PDOs move only in NMT OPERATIONAL (the gateway checks the state before calling in).
+
+A TPDO's payload is read through one reader per mapped object, chosen when the PDO
+parameters are (re)loaded, i.e. once per mapping change: the ``fast_reader`` the gateway
+supplies for the objects it can encode directly, else ``LocalNode.get_data`` (the read
+callbacks, stored data, default).
 """
 
 from __future__ import annotations
 
 import logging
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
 from typing import Callable
 
 import canopen
@@ -33,6 +39,10 @@ U32 = struct.Struct("<I")
 _COB_FLAGS = 0xE000_0000
 #: synchronous transmission types (every n-th SYNC); 0 = acyclic synchronous
 SYNC_TYPES = range(0, 241)
+#: a reader of one mapped object's encoded bytes
+Reader = Callable[[], bytes]
+#: ``fast_reader(index, subindex)``: a direct reader for that object, or None
+FastReader = Callable[[int, int], Reader | None]
 
 
 @dataclass
@@ -46,16 +56,28 @@ class _Pdo:
     entries: list[tuple[int, int, int]]  # (index, subindex, bits)
     last: bytes | None = None
     pending: bytes | None = None
+    #: one reader per entry (TPDOs), fixed until the parameters are reloaded
+    readers: list[Reader] = field(default_factory=list)
+
+    def payload(self) -> bytes:
+        """The mapped objects' bytes, concatenated in mapping order."""
+        readers = self.readers
+        if len(readers) == 1:
+            return readers[0]()
+        return b"".join([read() for read in readers])
 
 
 class PdoEngine:
     """Read PDO parameters from ``node`` and transmit / apply PDO data."""
 
-    def __init__(self, node: canopen.LocalNode, send: Callable[[int, bytes], None]) -> None:
+    def __init__(self, node: canopen.LocalNode, send: Callable[[int, bytes], None],
+                 fast_reader: FastReader | None = None) -> None:
         self._node = node
         self._send = send
+        self._fast_reader = fast_reader
         self.tpdos: list[_Pdo] = []
         self.rpdos: list[_Pdo] = []
+        self._active: list[_Pdo] = []  # the valid, mapped TPDOs
         self._subscribed: dict[int, Callable] = {}
         self._sync_count = 0
 
@@ -72,9 +94,16 @@ class PdoEngine:
             entries.append((value >> 16, (value >> 8) & 0xFF, value & 0xFF))
         return _Pdo(number, cob & 0x7FF, not cob & PDO_INVALID, self._u(com, 2), entries)
 
+    def _reader(self, index: int, subindex: int) -> Reader:
+        fast = self._fast_reader(index, subindex) if self._fast_reader else None
+        return fast if fast is not None else partial(self._node.get_data, index, subindex)
+
     def reload(self) -> None:
-        """Re-read all PDO objects and (re)subscribe the valid RPDOs."""
+        """Re-read all PDO objects, choose the TPDO readers, (re)subscribe the valid RPDOs."""
         self.tpdos = [self._load(TPDO_COM + n, TPDO_MAP + n, n + 1) for n in range(N_PDOS)]
+        for pdo in self.tpdos:
+            pdo.readers = [self._reader(i, s) for i, s, _ in pdo.entries]
+        self._active = [pdo for pdo in self.tpdos if pdo.valid and pdo.entries]
         self.rpdos = [self._load(RPDO_COM + n, RPDO_MAP + n, n + 1) for n in range(N_PDOS)]
         network = self._node.network
         for cob, callback in self._subscribed.items():
@@ -144,20 +173,15 @@ class PdoEngine:
             raise SdoAbortedError(SdoAbort.PDO_TOO_LONG)
 
     # -- data ---------------------------------------------------------------------------------
-    def _payload(self, pdo: _Pdo) -> bytes:
-        return b"".join(self._node.get_data(i, s) for i, s, _ in pdo.entries)
-
     def on_sync(self) -> None:
         """Apply synchronous RPDOs and send the TPDOs due after this SYNC's module cycle."""
         self._sync_count = self._sync_count % 240 + 1
-        for pdo in self.tpdos:
-            if not pdo.valid or not pdo.entries:
-                continue
+        for pdo in self._active:
             if pdo.trans_type in SYNC_TYPES:
                 if pdo.trans_type == 0 or self._sync_count % pdo.trans_type == 0:
-                    self._send(pdo.cob_id, self._payload(pdo))
+                    self._send(pdo.cob_id, pdo.payload())
             elif pdo.trans_type >= 254:
-                data = self._payload(pdo)
+                data = pdo.payload()
                 if data != pdo.last:
                     pdo.last = data
                     self._send(pdo.cob_id, data)
