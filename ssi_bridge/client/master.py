@@ -32,7 +32,9 @@ from ssi_bridge.client.sdo import SdoAccess, position_pdos
 from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
-from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BusConfig, LossyBus, open_bus
+from ssi_bridge.gateway.bus import (
+    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, open_bus,
+)
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
 )
@@ -116,7 +118,7 @@ class BridgeClient:
         else:
             inner, self._source = self._source, None
         self.bus = LossyBus(inner)
-        self.network = canopen.Network(self.bus)
+        self.network = BridgeNetwork(self.bus)
         self.network.listeners.append(_FrameCounter(self.counters))
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()

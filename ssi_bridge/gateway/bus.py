@@ -3,7 +3,8 @@
 The station and the master each open their own python-can ``Bus`` on the same channel (on the
 default in-process ``virtual`` interface every bus sees the frames the others send, as on a
 real wire). :class:`LossyBus` wraps any bus to drop a seeded fraction of frames ("CAN frame
-loss" fault) or to go quiet entirely ("gateway silent").
+loss" fault) or to go quiet entirely ("gateway silent"). :class:`BridgeNetwork` is the
+canopen ``Network`` both sides use; its frames are cheap to deep-copy (:class:`WireMessage`).
 """
 
 from __future__ import annotations
@@ -11,10 +12,12 @@ from __future__ import annotations
 import logging
 import random
 import threading
+from copy import deepcopy
 from dataclasses import dataclass
 from typing import Any
 
 import can
+import canopen
 
 from ssi_bridge.exceptions import BusError, ConfigError
 
@@ -110,7 +113,7 @@ class LossyBus(can.BusABC):
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send ``msg`` unless muted or chosen for dropping."""
-        if self.muted or self._drop():
+        if self.muted or (self._loss_rate > 0.0 and self._drop()):
             return
         self._inner.send(msg, timeout)
 
@@ -124,3 +127,42 @@ class LossyBus(can.BusABC):
         """Shut the wrapped bus down too."""
         super().shutdown()
         self._inner.shutdown()
+
+
+class WireMessage(can.Message):
+    """A ``can.Message`` whose deep copy builds the payload copy directly.
+
+    python-can's ``virtual`` interface hands each receiving bus ``deepcopy(msg)``, and
+    ``Message.__deepcopy__`` copies the ``data`` bytearray through ``copy.deepcopy``'s generic
+    reduce protocol, the largest part of sending a frame in-process. Here the copy is
+    python-can's own ``Message.__copy__`` (a plain ``can.Message``, every field) with a new
+    bytearray of the payload: the same independent deep copy. Other interfaces never copy.
+    """
+
+    __slots__ = ()
+
+    def __deepcopy__(self, memo: dict[int, Any] | None) -> can.Message:
+        clone = self.__copy__()
+        clone.data = bytearray(self.data)
+        if not isinstance(clone.channel, (str, int, type(None))):
+            clone.channel = deepcopy(clone.channel, memo)
+        return clone
+
+
+class BridgeNetwork(canopen.Network):
+    """canopen's ``Network`` sending :class:`WireMessage` frames.
+
+    ``Network.send_message`` is canopen's documented hook for a custom back end; everything
+    canopen sends through it (NMT, SYNC, SDO, EMCY, PDOs) goes out unchanged on the wire, with
+    the same lock and the same check of the receive thread.
+    """
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
+        """Send one frame (raises ``can.CanError``, RuntimeError when not connected)."""
+        if not self.bus:
+            raise RuntimeError("Not connected to CAN bus")
+        frame = WireMessage(arbitration_id=can_id, is_extended_id=can_id > 0x7FF, data=data,
+                            is_remote_frame=remote)
+        with self.send_lock:
+            self.bus.send(frame)
+        self.check()

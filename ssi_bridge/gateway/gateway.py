@@ -32,7 +32,9 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.aborts import SdoAbort
-from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BusConfig, LossyBus, open_bus
+from ssi_bridge.gateway.bus import (
+    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, open_bus,
+)
 from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
 from ssi_bridge.gateway.objects import EncoderObjects
@@ -128,7 +130,7 @@ class XnGateway:
         else:
             inner, self._source = self._source, None
         self.bus = LossyBus(inner)
-        self.network = canopen.Network(self.bus)
+        self.network = BridgeNetwork(self.bus)
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.network.add_node(self.node)
