@@ -10,6 +10,7 @@ clock and does not care where frames come from (any :class:`SsiReader`).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 from ssi_bridge.exceptions import RegisterReadError, RegisterWriteError
 from ssi_bridge.line.readout import LineReadout, SsiReader
@@ -27,6 +28,18 @@ from ssi_bridge.module.registers import (
 from ssi_bridge.module.store import BankStore
 
 logger = logging.getLogger(__name__)
+
+# Status bits as plain ints: cycle() and the gateway's per-SYNC reads combine them on every
+# cycle, where each IntFlag operation would be a Python-level call.
+_SSI_DIAG, _ERR_SSI, _STS_OFLW, _STS_UFLW, _ERR_PARA, _STS_STOP = map(int, (
+    ModuleStatus.SSI_DIAG, ModuleStatus.ERR_SSI, ModuleStatus.STS_OFLW, ModuleStatus.STS_UFLW,
+    ModuleStatus.ERR_PARA, ModuleStatus.STS_STOP))
+#: diagnostics byte = process input byte 7 bits 0-4 (000 chapter 2 "Diagnostics")
+_DIAG_BITS = 0x1F
+_STS_UP, _STS_DN = int(CmpStatus.STS_UP), int(CmpStatus.STS_DN)
+#: comparator units: (register, EN_CMPx, CLR_CMPx, shift of STS/FLAG/REL_CMPx in byte 6)
+_CMP_UNITS = ((Reg.REG_CMP1, int(CmpControl.EN_CMP1), int(CmpControl.CLR_CMP1), 0),
+              (Reg.REG_CMP2, int(CmpControl.EN_CMP2), int(CmpControl.CLR_CMP2), 3))
 
 
 class Xn1Ssi:
@@ -68,27 +81,26 @@ class Xn1Ssi:
         """The 8-byte process input image (000 "Process input")."""
         return self.status.encode()
 
+    def _sts(self) -> int:
+        """Process input byte 7 as an int (000 "Process input"; STS_STOP also on ERR_PARA)."""
+        err_para = self.bank.err_para
+        return ((_SSI_DIAG if self._ssi_diag else 0) | (_ERR_SSI if self._err_ssi else 0)
+                | (_STS_OFLW if self._oflw else 0) | (_STS_UFLW if self._uflw else 0)
+                | (_ERR_PARA if err_para else 0)
+                | (_STS_STOP if self._stop_latched or err_para else 0))
+
     @property
     def status(self) -> ProcessInput:
         """The decoded process input image."""
-        sts = ModuleStatus(0)
-        err_para = self.bank.err_para
-        for flag, on in ((ModuleStatus.SSI_DIAG, self._ssi_diag),
-                         (ModuleStatus.ERR_SSI, self._err_ssi),
-                         (ModuleStatus.STS_OFLW, self._oflw), (ModuleStatus.STS_UFLW, self._uflw),
-                         (ModuleStatus.ERR_PARA, err_para),
-                         (ModuleStatus.STS_STOP, self._stop_latched or err_para)):
-            if on:
-                sts |= flag
         adr, abort, data = self._rd
         return ProcessInput(reg_rd_data=data, reg_rd_adr=adr, reg_rd_abort=abort,
                             reg_wr_akn=self._wr_akn, reg_wr_accept=self._wr_accept,
-                            ssi_sts=self._ssi_sts, cmp=self._cmp, sts=sts)
+                            ssi_sts=self._ssi_sts, cmp=self._cmp, sts=ModuleStatus(self._sts()))
 
     @property
     def diag(self) -> Diag:
         """The diagnostics byte (000 chapter 2 "Diagnostics"), also REG_DIAG1."""
-        return Diag(int(self.status.sts) & 0x1F)
+        return Diag(self._sts() & _DIAG_BITS)
 
     @property
     def last_readout(self) -> LineReadout | None:
@@ -139,24 +151,21 @@ class Xn1Ssi:
     def _evaluate(self, out: ProcessOutput, moved: tuple[bool, bool]) -> None:
         """SSI status bits, comparators, limits, direction (000 chapter 1, Tables 1-3)."""
         bank = self.bank
-        mask = bank.value(Reg.REG_SSI_MASK)
-        self._ssi_sts, self._ssi_diag = acquisition.ssi_status(self._frame, mask)
-        cmp = CmpStatus(0)
-        units = ((Reg.REG_CMP1, CmpControl.EN_CMP1, CmpControl.CLR_CMP1, 0),
-                 (Reg.REG_CMP2, CmpControl.EN_CMP2, CmpControl.CLR_CMP2, 3))
-        for i, (reg, en, clr, shift) in enumerate(units):
-            sts, flag, rel = acquisition.compare(self._pos, bank.value(reg),
-                                                 enabled=en in out.cmp, clear=clr in out.cmp,
-                                                 flag=self._flags[i])
-            self._flags[i] = flag
-            cmp |= CmpStatus((sts | flag << 1 | rel << 2) << shift)
-        if moved[0]:
-            cmp |= CmpStatus.STS_UP
-        if moved[1]:
-            cmp |= CmpStatus.STS_DN
-        self._cmp = cmp
+        pos = self._pos
+        self._ssi_sts, self._ssi_diag = acquisition.ssi_status(self._frame,
+                                                               bank.value(Reg.REG_SSI_MASK))
+        control = int(out.cmp)
+        cmp = (_STS_UP if moved[0] else 0) | (_STS_DN if moved[1] else 0)
+        flags = self._flags
+        for i, (reg, en, clr, shift) in enumerate(_CMP_UNITS):
+            sts, flag, rel = acquisition.compare(pos, bank.value(reg),
+                                                 enabled=bool(control & en),
+                                                 clear=bool(control & clr), flag=flags[i])
+            flags[i] = flag
+            cmp |= (sts | flag << 1 | rel << 2) << shift
+        self._cmp = CmpStatus(cmp)
         self._oflw, self._uflw = acquisition.limits(
-            self._pos, bank.value(Reg.REG_LOWER_LIMIT), bank.value(Reg.REG_UPPER_LIMIT))
+            pos, bank.value(Reg.REG_LOWER_LIMIT), bank.value(Reg.REG_UPPER_LIMIT))
 
     def _handshake(self, out: ProcessOutput) -> None:
         """Register write then read handshake (000 "Internal registers", "Process output")."""
@@ -181,14 +190,8 @@ class Xn1Ssi:
         reason = describe_refusal(addr, write=False)
         if reason is not None:
             raise RegisterReadError(addr, reason)
-        live = {
-            Reg.REG_SSI_POS: self._pos, Reg.REG_MAGIC_NO: MAGIC_NO, Reg.REG_HW_VER: HW_VERSION,
-            Reg.REG_SW_VER: SW_VERSION, Reg.REG_WR_ADR: self._out.reg_wr_adr,
-            Reg.REG_RD_ADR: self._out.reg_rd_adr, Reg.REG_DIAG1: int(self.diag),
-            Reg.REG_GRAY_POS: self._gray, Reg.REG_SSI_FRAME: self._frame,
-        }
-        reg = Reg(addr)
-        return live[reg] if reg in live else self.bank.value(reg)
+        live = _LIVE_REGISTERS.get(addr)
+        return live(self) if live is not None else self.bank.value(Reg(addr))
 
     def write_register(self, addr: int, value: int) -> None:
         """Write register ``addr`` as the process output would (raises RegisterWriteError)."""
@@ -212,3 +215,17 @@ class Xn1Ssi:
     def validate_para1(value: int) -> str | None:
         """Why ``value`` would be refused as REG_PARA1 (None = valid); writes nothing."""
         return validate_para1(value)
+
+
+#: registers the module computes instead of storing them (000 interface table), by address
+_LIVE_REGISTERS: dict[int, Callable[[Xn1Ssi], int]] = {
+    Reg.REG_SSI_POS: lambda m: m._pos,
+    Reg.REG_MAGIC_NO: lambda m: MAGIC_NO,
+    Reg.REG_HW_VER: lambda m: HW_VERSION,
+    Reg.REG_SW_VER: lambda m: SW_VERSION,
+    Reg.REG_WR_ADR: lambda m: m._out.reg_wr_adr,
+    Reg.REG_RD_ADR: lambda m: m._out.reg_rd_adr,
+    Reg.REG_DIAG1: lambda m: int(m.diag),
+    Reg.REG_GRAY_POS: lambda m: m._gray,
+    Reg.REG_SSI_FRAME: lambda m: m._frame,
+}
