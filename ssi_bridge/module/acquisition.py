@@ -15,7 +15,7 @@ REG_SSI_POS = encoder - REG_OFFSET goes negative below the offset.  The limit de
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from ssi_bridge.encoder.codes import bin_to_gray, gray_to_bin
 from ssi_bridge.line.decode import XN_MAX_FRAME_BITS, MasterStatus, check_readout, decode_frame
@@ -28,10 +28,12 @@ from ssi_bridge.module.registers import VALUE_MAX
 __all__ = ["Acquired", "bin_to_gray", "compare", "direction", "extract", "gray_to_bin",
            "limits", "ssi_status"]
 
+#: EN_Dx_RMSx (bit 7) of each of the four REG_SSI_MASK bytes (000 Table 3)
+_EN_RMS_ANY = 0x80808080
 
-@dataclass(frozen=True)
-class Acquired:
-    """What one clock burst yields after the module's processing."""
+
+class Acquired(NamedTuple):
+    """What one clock burst yields after the module's processing (built once per cycle)."""
 
     #: REG_SSI_FRAME: the complete frame as read (SSI_FRAME_LEN bits, first bit = MSB)
     frame: int
@@ -70,6 +72,8 @@ def ssi_status(frame: int, mask: int) -> tuple[int, bool]:
     SSI_DIAG = OR over x of (SSI_STSx & EN_Dx_DS), as the manual's formula is written, so a
     status bit reaches SSI_DIAG only when it is also copied (EN_Dx_RMSx = 1).
     """
+    if not mask & _EN_RMS_ANY:
+        return 0, False  # no status bit copied (the default mask 0): nothing to look at
     sts = 0
     diag = False
     for x in range(4):

@@ -71,6 +71,7 @@ class Xn1Ssi:
         self._stop_latched = False
         self._wr_akn = self._wr_accept = False
         self._rd = (0, False, 0)  # REG_RD_ADR echo, REG_RD_ABORT, REG_RD_DATA
+        self._image: tuple[bool, bytes] | None = None  # (ERR_PARA, encoded input image)
 
     # -- process data ---------------------------------------------------------------------
     def set_process_output(self, image: bytes) -> None:
@@ -78,8 +79,16 @@ class Xn1Ssi:
         self._out = ProcessOutput.decode(bytes(image))
 
     def process_input(self) -> bytes:
-        """The 8-byte process input image (000 "Process input")."""
-        return self.status.encode()
+        """The 8-byte process input image (000 "Process input").
+
+        Encoded once per cycle: only :meth:`cycle` changes the module's own state, and the one
+        outside input, ERR_PARA (a parameter set written at any time), is part of the key.
+        """
+        err_para = self.bank.err_para
+        image = self._image
+        if image is None or image[0] != err_para:
+            image = self._image = (err_para, self.status.encode())
+        return image[1]
 
     def _sts(self) -> int:
         """Process input byte 7 as an int (000 "Process input"; STS_STOP also on ERR_PARA)."""
@@ -130,6 +139,7 @@ class Xn1Ssi:
     # -- one cycle ------------------------------------------------------------------------
     def cycle(self, t: float) -> None:
         """Run one module cycle at time ``t`` (s) on the current process output image."""
+        self._image = None  # first: even a cycle that fails half-way must not leave it stale
         out = self._out
         para = self.bank.para
         self._stop_latched = out.stop
