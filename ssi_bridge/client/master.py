@@ -6,10 +6,10 @@ set the heartbeat producer time, start the node (OPERATIONAL). ``sync()`` produc
 (the module cycle), TPDO callbacks keep the newest sample per slot, and the register
 handshake of 000 runs over the process-image PDOs (or SDO, ``transport="sdo"``).
 
-A supervisor thread consumes the heartbeat: a silent gateway is reported
-(``gateway_alive`` False), a boot-up message or a non-OPERATIONAL heartbeat triggers an
-automatic re-configuration, and while no heartbeat comes the gateway is probed over SDO so a
-restarted station whose heartbeat is off again is found as well.
+A supervisor thread (``client/liveness.py``) consumes the heartbeat: a silent gateway is
+reported (``gateway_alive`` False), a boot-up message or a non-OPERATIONAL heartbeat triggers
+an automatic re-configuration, and while no heartbeat comes the gateway is probed over SDO so
+a restarted station whose heartbeat is off again is found as well.
 
 Threads: ``sync``/``latest``/``wait_cycle`` (timer thread), ``read_register``/
 ``write_register``/``set_control`` (service thread) and the network thread share
@@ -27,6 +27,7 @@ import can
 import canopen
 
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
+from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess, position_pdos
 from ssi_bridge.exceptions import (
@@ -43,8 +44,6 @@ from ssi_bridge.module.images import CmpControl, Control, ProcessInput
 logger = logging.getLogger(__name__)
 
 SYNC_COB_ID = 0x80
-HEARTBEAT_OBJECT = 0x1017
-NMT_BOOTUP, NMT_OPERATIONAL = 0, 5
 
 
 class _FrameCounter(can.Listener):
@@ -98,13 +97,7 @@ class BridgeClient:
         self._handshake = Handshake(self, handshake_timeout, WRITE_STEPS * handshake_timeout)
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
         self._send_lock = threading.Lock()
-        self._last_heartbeat = 0.0
-        self._heartbeat_state: int | None = None
-        self._reconfigure = threading.Event()
-        self._stop = threading.Event()
-        self._supervisor: threading.Thread | None = None
-        self._was_alive = False
-        self._configuring = False
+        self._liveness = Liveness(self)
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self) -> None:
@@ -125,7 +118,7 @@ class BridgeClient:
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
         self.network.add_node(self.node)
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
-        self.node.nmt.add_heartbeat_callback(self._on_heartbeat)
+        self.node.nmt.add_heartbeat_callback(self._liveness.on_heartbeat)
         self.node.emcy.add_callback(self._on_emcy)
         self._subscribe_tpdos()
         try:
@@ -133,18 +126,11 @@ class BridgeClient:
         except SsiBridgeError:
             self.close()
             raise
-        self._stop.clear()
-        self._reconfigure.clear()
-        self._supervisor = threading.Thread(target=self._supervise, daemon=True,
-                                            name=f"bridge-supervisor-{self.node_id}")
-        self._supervisor.start()
+        self._liveness.start()
 
     def close(self) -> None:
         """Stop the supervisor and shut the bus down (the gateway keeps running)."""
-        self._stop.set()
-        if self._supervisor is not None and self._supervisor is not threading.current_thread():
-            self._supervisor.join(timeout=2 * self.sdo_timeout + 1.0)
-        self._supervisor = None
+        self._liveness.stop(timeout=2 * self.sdo_timeout + 1.0)
         if self.network is not None:
             network, self.network = self.network, None
             network.disconnect()
@@ -161,7 +147,7 @@ class BridgeClient:
         """(Re)configure the gateway: PRE-OP, PDOs, heartbeat, OPERATIONAL, resend outputs."""
         assert self.sdo is not None and self.node is not None
         with self.sdo.lock:
-            self._configuring = True
+            self._liveness.configuring = True
             try:
                 self.sdo.read(0x1000)  # probe: a clear error when nobody answers
                 self.node.nmt.state = "PRE-OPERATIONAL"
@@ -169,8 +155,8 @@ class BridgeClient:
                 self.sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
                 self.node.nmt.state = "OPERATIONAL"
             finally:
-                self._configuring = False
-            self._last_heartbeat = time.monotonic()
+                self._liveness.configuring = False
+            self._liveness.last_heartbeat = time.monotonic()
             self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))
@@ -203,8 +189,7 @@ class BridgeClient:
     @property
     def gateway_alive(self) -> bool:
         """True while the gateway's heartbeat is current."""
-        return (self.network is not None
-                and time.monotonic() - self._last_heartbeat <= self.heartbeat_timeout)
+        return self.network is not None and self._liveness.alive()
 
     @property
     def emergencies(self) -> canopen.emcy.EmcyConsumer:
@@ -346,41 +331,6 @@ class BridgeClient:
             out = bytes(st.output)
         self._send_output(slot, out)
 
-    def _on_heartbeat(self, state: int) -> None:
-        self._last_heartbeat = time.monotonic()
-        self._heartbeat_state = state
-        if state == NMT_BOOTUP:
-            self.counters.restarts += 1
-            logger.warning("gateway node %d booted (restart?); re-configuring", self.node_id)
-            self._reconfigure.set()
-        elif state != NMT_OPERATIONAL and not self._configuring:
-            self._reconfigure.set()
-
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1
         logger.info("gateway node %d EMCY %s data %s", self.node_id, error, error.data.hex())
-
-    def _supervise(self) -> None:
-        period = max(self.heartbeat_ms / 1000.0, 0.02)
-        next_probe = 0.0
-        while not self._stop.wait(period):
-            alive = self.gateway_alive
-            if self._was_alive and not alive:
-                logger.warning("gateway node %d silent: no heartbeat for %.3f s", self.node_id,
-                               self.heartbeat_timeout)
-            self._was_alive = alive
-            if not alive and time.monotonic() >= next_probe and not self._reconfigure.is_set():
-                next_probe = time.monotonic() + 5 * period
-                try:
-                    assert self.sdo is not None
-                    self.sdo.read(HEARTBEAT_OBJECT)
-                    self._reconfigure.set()  # it answers but sends no heartbeat: restarted
-                except SsiBridgeError:
-                    self.counters.timeouts += 1
-            if self._reconfigure.is_set() and not self._stop.is_set():
-                self._reconfigure.clear()
-                try:
-                    self.configure()
-                except SsiBridgeError as err:
-                    self._reconfigure.set()
-                    logger.warning("gateway node %d re-configuration failed: %s", self.node_id, err)

@@ -1,0 +1,101 @@
+"""The master's watch on the gateway: heartbeat consumer, SDO probe and re-configuration.
+
+CiA 301 heartbeat consumer: the gateway counts as silent after ``heartbeat_timeout`` without a
+heartbeat (4 producer periods, 0x1017 as the client configured it). A boot-up message (state
+0) or a heartbeat in any state but OPERATIONAL (the station was reset or restarted, 000
+chapter 4: it boots into PRE-OPERATIONAL with every PDO invalid) asks the supervisor thread to
+run ``configure()`` again. While no heartbeat comes at all the gateway is probed over SDO
+every 5 periods: a restarted station has its heartbeat producer off again (0x1017 = 0), so it
+only shows up by answering.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import TYPE_CHECKING
+
+from ssi_bridge.exceptions import SsiBridgeError
+
+if TYPE_CHECKING:
+    from ssi_bridge.client.master import BridgeClient
+
+logger = logging.getLogger(__name__)
+
+HEARTBEAT_OBJECT = 0x1017
+NMT_BOOTUP, NMT_OPERATIONAL = 0, 5
+
+
+class Liveness:
+    """Heartbeat state of one :class:`BridgeClient` and its supervisor thread."""
+
+    def __init__(self, client: BridgeClient) -> None:
+        self._client = client
+        #: time.monotonic() of the last heartbeat (or of the last configuration)
+        self.last_heartbeat = 0.0
+        #: NMT state of the last heartbeat, None before the first
+        self.state: int | None = None
+        #: True while configure() runs (its own NMT commands must not re-trigger it)
+        self.configuring = False
+        self._reconfigure = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._was_alive = False
+
+    def alive(self) -> bool:
+        """True while the last heartbeat is younger than the client's heartbeat timeout."""
+        return time.monotonic() - self.last_heartbeat <= self._client.heartbeat_timeout
+
+    def start(self) -> None:
+        """Start the supervisor thread (after the first configuration)."""
+        self._stop.clear()
+        self._reconfigure.clear()
+        self._thread = threading.Thread(target=self._supervise, daemon=True,
+                                        name=f"bridge-supervisor-{self._client.node_id}")
+        self._thread.start()
+
+    def stop(self, timeout: float) -> None:
+        """Stop the supervisor thread, waiting up to ``timeout`` s (not from itself)."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=timeout)
+        self._thread = None
+
+    def on_heartbeat(self, state: int) -> None:
+        """canopen heartbeat callback (network thread)."""
+        self.last_heartbeat = time.monotonic()
+        self.state = state
+        if state == NMT_BOOTUP:
+            self._client.counters.restarts += 1
+            logger.warning("gateway node %d booted (restart?); re-configuring",
+                           self._client.node_id)
+            self._reconfigure.set()
+        elif state != NMT_OPERATIONAL and not self.configuring:
+            self._reconfigure.set()
+
+    def _supervise(self) -> None:
+        client = self._client
+        period = max(client.heartbeat_ms / 1000.0, 0.02)
+        next_probe = 0.0
+        while not self._stop.wait(period):
+            alive = client.gateway_alive
+            if self._was_alive and not alive:
+                logger.warning("gateway node %d silent: no heartbeat for %.3f s",
+                               client.node_id, client.heartbeat_timeout)
+            self._was_alive = alive
+            if not alive and time.monotonic() >= next_probe and not self._reconfigure.is_set():
+                next_probe = time.monotonic() + 5 * period
+                try:
+                    client.read_object(HEARTBEAT_OBJECT)
+                    self._reconfigure.set()  # it answers but sends no heartbeat: restarted
+                except SsiBridgeError:
+                    client.counters.timeouts += 1
+            if self._reconfigure.is_set() and not self._stop.is_set():
+                self._reconfigure.clear()
+                try:
+                    client.configure()
+                except SsiBridgeError as err:
+                    self._reconfigure.set()
+                    logger.warning("gateway node %d re-configuration failed: %s",
+                                   client.node_id, err)
