@@ -39,7 +39,11 @@ KILLS = 30
 
 
 def _kill_during_saves(path: Path, fsync: bool, start: int, reports: int) -> int:
-    """Run the writer until it has reported ``reports`` saves, SIGKILL it, return the last report."""
+    """Run the writer until it has reported ``reports`` saves, SIGKILL it, return the last report.
+
+    The writer keeps saving while the kill is on its way, so the saves it reported before
+    dying are drained from the pipe too: the bank may hold the last of them or the one after.
+    """
     proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path), "1" if fsync else "0",
                              str(start)], stdout=subprocess.PIPE, text=True, cwd=REPO)
     last = start
@@ -53,6 +57,9 @@ def _kill_during_saves(path: Path, fsync: bool, start: int, reports: int) -> int
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     assert proc.returncode == -signal.SIGKILL
+    assert proc.stdout is not None
+    for line in proc.stdout.read().split():
+        last = int(line)
     return last
 
 
