@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
@@ -92,6 +93,15 @@ class Player:
             time.sleep(0.01)
         logger.warning("not every replayed topic has a subscriber; playing anyway")
 
+    def wait_for_delivery(self, timeout_s: float = 2.0) -> bool:
+        """Wait until reliable subscribers acknowledged everything (before the process ends).
+
+        Without it the last messages of a replay can die with the publisher: DDS drops what a
+        destroyed writer has not had acknowledged yet.
+        """
+        deadline = Duration(nanoseconds=int(timeout_s * 1e9))
+        return all(p.wait_for_all_acked(deadline) for p in self.publishers.values())
+
     def _publish_clock(self, bag_ns: int) -> None:
         """Publish /clock = ``bag_ns``."""
         assert self.clock_pub is not None
@@ -139,4 +149,5 @@ class Player:
         while True:
             self.play_once(progress)
             if not self.options.loop:
+                self.wait_for_delivery()
                 return self.published
