@@ -10,6 +10,7 @@ register handshake over the bus in their own callback group, so the cycle never 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections import deque
 from typing import Any
@@ -31,7 +32,7 @@ from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.module.images import ProcessInput
+from ssi_bridge.module.images import ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
@@ -46,6 +47,8 @@ from ssi_bridge.ros.units import JointScale, VelocityEstimator
 #: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
 IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
+#: status bits under which the module does not acquire (000 "Error detection / messages")
+NOT_MEASURING = ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP
 #: services keep up to 100 pending requests (rclpy's default of 10 drops bursts)
 SERVICE_QOS = QoSProfile(depth=100)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
@@ -85,6 +88,7 @@ class SsiBridgeNode(Node):
         self.counters = {j.name: ChannelCounters() for j in s.joints}
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
+        self._cycle_started = time.monotonic()
         self._last_levels: tuple[int, ...] = ()
 
         self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
@@ -124,6 +128,7 @@ class SsiBridgeNode(Node):
                 # the bridge still runs; the bus diagnostics show the error until fixed
                 self.recorder.error = f"record.enabled: {err}"
                 self.get_logger().error(self.recorder.error)
+        self._cycle_started = time.monotonic()
         self.cycle.start()
         self.get_logger().info(
             f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
@@ -250,10 +255,16 @@ class SsiBridgeNode(Node):
             counters.error_cycles += 1
         scale = self.scales[name]
         position = scale.position(sample.position)
-        if fresh:
-            velocity = self.velocity[name].update(sample.sync_time, sample.position)
+        estimator = self.velocity[name]
+        if inp.sts & NOT_MEASURING:
+            # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
+            # last good one and the speed is unknown; the estimate restarts on recovery
+            estimator.reset()
+            velocity = math.nan
+        elif fresh:
+            velocity = estimator.update(sample.sync_time, sample.position)
         else:
-            velocity = self.velocity[name].velocity
+            velocity = estimator.velocity
         self.positions[name] = position
         js.name.append(name)
         js.position.append(position)
@@ -273,9 +284,11 @@ class SsiBridgeNode(Node):
 
     # -- diagnostics -----------------------------------------------------------------------
     def achieved_rate(self) -> float:
-        """Cycles per second over the last diagnostics period (at least 1 s)."""
+        """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
         now = time.monotonic()
-        window = max(self.settings.diagnostics_period, 1.0)
+        window = min(max(self.settings.diagnostics_period, 1.0), now - self._cycle_started)
+        if window <= 0:
+            return 0.0
         times = self._cycle_times
         while times and now - times[0] > window:
             times.popleft()

@@ -8,6 +8,7 @@ no exception escapes into the executor. Each call is also recorded as an event.
 from __future__ import annotations
 
 import math
+import time
 from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
@@ -126,9 +127,15 @@ class BridgeServices:
             pos = client.read_register(slot, Reg.REG_SSI_POS)
             encoder = (pos + old_offset) & 0xFFFF_FFFF
             offset = (encoder - target) & 0xFFFF_FFFF
-            client.write_register(slot, Reg.REG_OFFSET, offset)
-            self.node.velocity[joint].reset()
-            after = client.read_register(slot, Reg.REG_SSI_POS)
+            estimator = self.node.velocity[joint]
+            # hold the speed while the zero point moves: samples until the read-back may
+            # still carry the old offset, so none of them enters the estimate
+            estimator.reset(after=math.inf, hold=True)
+            try:
+                client.write_register(slot, Reg.REG_OFFSET, offset)
+                after = client.read_register(slot, Reg.REG_SSI_POS)
+            finally:
+                estimator.reset(after=time.monotonic(), hold=True)
             response.offset = to_int32(offset)
             response.position = scale.position(after)
             return (f"REG_OFFSET <- {to_int32(offset)}; position now {response.position:.6f} "
@@ -139,8 +146,12 @@ class BridgeServices:
         """~/reset_registers: REG_SF = "LD20" (with parameters) or "LD48" (without)."""
         def body(joint: str) -> str:
             value = SF_LD20 if request.include_parameters else SF_LD48
-            self.node.client.write_register(self._slot(joint), Reg.REG_SF, value)
-            self.node.velocity[joint].reset()
+            estimator = self.node.velocity[joint]
+            estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
+            try:
+                self.node.client.write_register(self._slot(joint), Reg.REG_SF, value)
+            finally:
+                estimator.reset(after=time.monotonic() + 0.05, hold=True)
             which = "LD20: retentive registers incl. REG_PARA1" if request.include_parameters \
                 else "LD48: retentive registers except REG_PARA1"
             return f"{which} restored to defaults"

@@ -84,15 +84,28 @@ class VelocityEstimator:
         self._samples: deque[tuple[float, int]] = deque(maxlen=window)
         self._unwrapped = 0
         self._last_raw: int | None = None
+        self._ignore_until: float | None = None
+        self._held: float | None = None
 
-    def reset(self) -> None:
-        """Forget history, e.g. after a preset or a fault (the next estimate restarts)."""
+    def reset(self, after: float | None = None, hold: bool = False) -> None:
+        """Forget history, e.g. after a preset or a fault (the next estimate restarts).
+
+        ``after``: also ignore samples latched at or before this time (``math.inf``: all
+        until the next reset) — those a cycle may still deliver from before a preset took
+        effect. ``hold``: report the current estimate until two new samples give a fresh
+        one; a preset moves the zero point, not the shaft, so the speed does not jump.
+        """
+        held = self.velocity if hold else None
         self._samples.clear()
         self._last_raw = None
         self._unwrapped = 0
+        self._ignore_until = after
+        self._held = held
 
     def update(self, t: float, counts: int) -> float:
         """Add a sample (latch time in s, raw REG_SSI_POS) and return the velocity estimate."""
+        if self._ignore_until is not None and t <= self._ignore_until:
+            return self.velocity
         raw = to_int32(counts)
         if self._last_raw is None:
             self._unwrapped = raw
@@ -110,8 +123,8 @@ class VelocityEstimator:
 
     @property
     def velocity(self) -> float:
-        """Current estimate in joint units per second (0.0 before two samples)."""
+        """Current estimate in joint units per second (0.0 before two samples, or the held one)."""
         if len(self._samples) < 2:
-            return 0.0
+            return self._held if self._held is not None else 0.0
         (t0, c0), (t1, c1) = self._samples[0], self._samples[-1]
         return (c1 - c0) / (t1 - t0) * self._scale.unit_per_count

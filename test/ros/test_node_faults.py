@@ -8,8 +8,12 @@ heartbeat (CiA 301) -> the bus status goes ERROR.
 
 from __future__ import annotations
 
+import math
+import time
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault, WriteRegister
 
 PERIOD = 0.5
@@ -57,11 +61,21 @@ def test_power_failure_on_an_encoder_without_the_bit_says_so(running, probe):
 def test_fault_with_a_duration_clears_itself(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    joints = probe.subscribe(JointState, node.topic("joint_states"))
     _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
     res = _inject(probe, node, kind=K.DATA_WIRE_BREAK, duration=1.0)
     assert "for 1 s" in res.message
     _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
     _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
+    probe.wait_for(lambda: len(joints) > 0 and not math.isnan(joints[-1][1].velocity[0]), 2.0,
+                   "a measured velocity after recovery", node)
+    time.sleep(0.3)
+    v = [m.velocity[0] for _, m in joints]
+    assert any(math.isnan(x) for x in v), "velocity is NaN (unknown) while ERR_SSI freezes REG_SSI_POS"
+    speed = 2 * math.pi * 0.25  # the default simulated shaft
+    after = [x for x in v[-20:] if not math.isnan(x)]
+    assert after and max(abs(x - speed) for x in after) < 0.1 * speed, \
+        "no velocity spike when the frozen position catches up after the fault"
 
 
 def test_encoder_error_bit_via_reg_ssi_mask_warns(running, probe):

@@ -65,3 +65,28 @@ def test_velocity_zero_before_two_samples_and_after_reset():
 def test_window_below_two_is_refused():
     with pytest.raises(ConfigError):
         VelocityEstimator(JointScale(), window=1)
+
+
+def test_samples_latched_before_a_reset_time_are_ignored():
+    scale = JointScale(counts_per_rev=8192, revolutions=4096)
+    est = VelocityEstimator(scale, window=3)
+    for k in range(3):
+        est.update(k * 0.01, 1000 + 100 * k)
+    est.reset(after=0.025)
+    # a late sample from before the preset (old zero point) must not enter the estimate
+    assert est.update(0.02, 1200) == 0.0
+    est.update(0.03, 10)
+    assert est.update(0.04, 110) == pytest.approx(100 / 0.01 * scale.unit_per_count)
+
+
+def test_hold_keeps_the_speed_through_a_preset():
+    scale = JointScale(counts_per_rev=8192, revolutions=4096)
+    est = VelocityEstimator(scale, window=3)
+    for k in range(3):
+        est.update(k * 0.01, 1000 + 100 * k)
+    speed = est.velocity
+    est.reset(after=float("inf"), hold=True)
+    assert est.update(0.03, 5) == speed, "samples during the preset are ignored, speed held"
+    est.reset(after=0.035, hold=True)
+    assert est.update(0.04, 10) == speed, "one new sample is not enough: still held"
+    assert est.update(0.05, 110) == pytest.approx(speed), "then the fresh estimate"
