@@ -244,6 +244,20 @@ class XnGateway:
             with self._lock:
                 self._boot(reset_application=data[0] == NMT_CMD_RESET_NODE)
 
+    def _acquisition_time(self, timestamp: float) -> float:
+        """Station time at which the SYNC frame was on the wire: every module latches then.
+
+        A real XN-1SSI latches on the SYNC's arrival, microseconds after it was sent; this
+        model's notifier thread may handle the frame much later (and two SYNCs back to back),
+        so the frame's receive timestamp (``time.time()`` base, set by python-can) is moved
+        into the ``clock`` base by subtracting the frame's age. Without a timestamp: now.
+        """
+        now = self.clock()
+        if not timestamp:
+            return now
+        age = time.time() - timestamp
+        return now - age if 0.0 <= age < 1.0 else now
+
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._lock:
             state = self.node.nmt.state
@@ -253,7 +267,7 @@ class XnGateway:
             if operational:
                 self.pdo.apply_pending()
             try:
-                self.objects.cycle(self.clock())
+                self.objects.cycle(self._acquisition_time(timestamp))
             except Exception:  # a module bug must not kill the notifier thread
                 logger.exception("module cycle failed")
             self.cycles += 1

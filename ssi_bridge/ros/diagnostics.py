@@ -35,34 +35,48 @@ class ChannelCounters:
     consecutive_stale: int = 0
     error_cycles: int = 0
     handshake_failures: int = 0
-    last_input: ProcessInput | None = None
+    #: the latest 8-byte process input image (decoded only when a status is built)
+    last_image: bytes | None = None
     last_position: int = 0
     extra: dict[str, str] = field(default_factory=dict)
 
+    @property
+    def last_input(self) -> ProcessInput | None:
+        """The latest process input image, decoded."""
+        return ProcessInput.decode(self.last_image) if self.last_image is not None else None
 
-def channel_level(inp: ProcessInput | None, consecutive_stale: int, stale_limit: int
+    @property
+    def last_sts(self) -> int | None:
+        """Byte 7 of the latest image (STS_STOP, ERR_PARA, ... SSI_DIAG), None before one."""
+        return self.last_image[7] if self.last_image is not None else None
+
+
+_WARN_BITS = (
+    (int(ModuleStatus.STS_OFLW), "STS_OFLW: above REG_UPPER_LIMIT"),
+    (int(ModuleStatus.STS_UFLW), "STS_UFLW: below REG_LOWER_LIMIT"),
+    (int(ModuleStatus.SSI_DIAG), "SSI_DIAG: an enabled encoder status bit is set"),
+    (int(ModuleStatus.STS_STOP), "STS_STOP: acquisition stopped by STOP"),
+)
+_WARN_MASK = sum(bit for bit, _ in _WARN_BITS)
+_ERR_PARA, _ERR_SSI = int(ModuleStatus.ERR_PARA), int(ModuleStatus.ERR_SSI)
+
+
+def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
                   ) -> tuple[int, str]:
-    """Level and one-line message of a joint channel from its latest process input."""
-    if inp is None:
+    """Level and one-line message of a joint channel from byte 7 of its process input.
+
+    Plain int tests: this runs every cycle for every joint.
+    """
+    if sts is None:
         return STALE, "no sample received yet"
     if consecutive_stale >= stale_limit:
         return STALE, f"no fresh sample for {consecutive_stale} cycles"
-    sts = inp.sts
-    if ModuleStatus.ERR_PARA in sts:
+    if sts & _ERR_PARA:
         return ERROR, "ERR_PARA: the module rejected REG_PARA1, encoder not read"
-    if ModuleStatus.ERR_SSI in sts:
+    if sts & _ERR_SSI:
         return ERROR, "ERR_SSI: SSI encoder signal faulty (wire break or no data)"
-    warnings = []
-    if ModuleStatus.STS_OFLW in sts:
-        warnings.append("STS_OFLW: above REG_UPPER_LIMIT")
-    if ModuleStatus.STS_UFLW in sts:
-        warnings.append("STS_UFLW: below REG_LOWER_LIMIT")
-    if ModuleStatus.SSI_DIAG in sts:
-        warnings.append("SSI_DIAG: an enabled encoder status bit is set")
-    if ModuleStatus.STS_STOP in sts:
-        warnings.append("STS_STOP: acquisition stopped by STOP")
-    if warnings:
-        return WARN, "; ".join(warnings)
+    if sts & _WARN_MASK:
+        return WARN, "; ".join(text for bit, text in _WARN_BITS if sts & bit)
     return OK, "reading"
 
 
@@ -70,7 +84,7 @@ def channel_status(joint: str, hardware_id: str, counters: ChannelCounters, stal
                    position: float) -> DiagnosticStatus:
     """The DiagnosticStatus ``ssi_bridge: <joint>`` with every status bit as a key/value."""
     inp = counters.last_input
-    level, message = channel_level(inp, counters.consecutive_stale, stale_limit)
+    level, message = channel_level(counters.last_sts, counters.consecutive_stale, stale_limit)
     values = {
         "position": f"{position:.6f}",
         "REG_SSI_POS": str(counters.last_position),

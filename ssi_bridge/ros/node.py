@@ -48,7 +48,9 @@ from ssi_bridge.ros.units import JointScale, VelocityEstimator
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
 IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
 #: status bits under which the module does not acquire (000 "Error detection / messages")
-NOT_MEASURING = ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP
+NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)
+#: status bits counted as error cycles
+ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: services keep up to 100 pending requests (rclpy's default of 10 drops bursts)
 SERVICE_QOS = QoSProfile(depth=100)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
@@ -73,7 +75,7 @@ class SsiBridgeNode(Node):
         if s.simulation:
             self.station = SimStation(s)
             self.gateway = XnGateway(self.bus_config, s.node_id, self.station.modules,
-                                     clock=self.latch_time)
+                                     clock=self.sim_time)
             self.gateway.start()
             self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
         n_slots = max(j.slot for j in s.joints)
@@ -159,18 +161,6 @@ class SsiBridgeNode(Node):
         """Seconds since the node started: the clock of the simulated station."""
         return time.monotonic() - self._t0
 
-    def latch_time(self) -> float:
-        """Station clock for an acquisition: the sim time of the SYNC that triggered it.
-
-        A real XN-1SSI latches when the SYNC frame arrives, microseconds after it is on the
-        wire; the in-process gateway handles the frame whenever Python schedules it. Latching
-        at the SYNC's send time keeps the simulated sample where the real one would be, so
-        header.stamp (the SYNC time) is the true latch time.
-        """
-        client = getattr(self, "client", None)
-        sent = client.table.last_sync_monotonic if client is not None else 0.0
-        return (sent or time.monotonic()) - self._t0
-
     def _stamp_ns(self, monotonic_t: float) -> int:
         """ROS time (ns) of a past ``time.monotonic()`` instant."""
         now_ns = self.get_clock().now().nanoseconds
@@ -200,9 +190,17 @@ class SsiBridgeNode(Node):
 
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:
-        """SYNC, collect the TPDOs of this cycle, publish joint_states and ~/status."""
+        """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
         if not self.context.ok():
-            return  # shutting down: the publishers' context is gone
+            return
+        try:
+            self._cycle()
+        except RCLError:
+            if self.context.ok():
+                raise
+
+    def _cycle(self) -> None:
+        """SYNC, collect the TPDOs of this cycle, publish joint_states and ~/status."""
         if self.faults is not None and self.faults.active:
             for done in self.faults.expire():
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
@@ -248,15 +246,16 @@ class SsiBridgeNode(Node):
         else:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
-        inp = ProcessInput.decode(sample.process_input)
-        counters.last_input = inp
+        image = sample.process_input
+        counters.last_image = image
         counters.last_position = sample.position
-        if inp.sts & (inp.sts.ERR_SSI | inp.sts.ERR_PARA):
+        sts = image[7]
+        if sts & ERRORS:
             counters.error_cycles += 1
         scale = self.scales[name]
         position = scale.position(sample.position)
         estimator = self.velocity[name]
-        if inp.sts & NOT_MEASURING:
+        if sts & NOT_MEASURING:
             # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
             # last good one and the speed is unknown; the estimate restarts on recovery
             estimator.reset()
@@ -270,6 +269,7 @@ class SsiBridgeNode(Node):
         js.position.append(position)
         js.velocity.append(velocity)
         if status is not None:
+            inp = ProcessInput.decode(image)
             status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
@@ -297,7 +297,7 @@ class SsiBridgeNode(Node):
     def _levels(self) -> tuple[int, ...]:
         """The diagnostic levels without building the statuses (checked every cycle)."""
         limit = self.settings.stale_cycles
-        levels = [channel_level(c.last_input, c.consecutive_stale, limit)[0]
+        levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
                   for c in self.counters.values()]
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self.recorder.error)))
         return tuple(levels)
