@@ -97,6 +97,8 @@ class SsiBridgeNode(Node):
         self.status_pub = self.create_publisher(Status, "~/status", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.recorder = SessionRecorder(self, s)
+        for pub in (self.joint_pub, self.status_pub, self.diag_pub):
+            self.recorder.offer(pub.topic_name, pub.qos_profile)
 
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._diag_group = MutuallyExclusiveCallbackGroup()

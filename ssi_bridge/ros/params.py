@@ -76,6 +76,7 @@ class NodeSettings:
     record_root: str = "ssi_bridge_sessions"
     record_path: str = ""
     record_compression: str = "zstd"
+    record_can_log: bool = False
 
 
 def _describe(description: str, *, read_only: bool = False,
@@ -132,6 +133,9 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         read_only=True)),
     "record.compression": ("zstd", _describe("MCAP chunk compression: zstd, lz4 or none",
                                              read_only=True)),
+    "record.can_log": (False, _describe(
+        "Also log the raw CAN traffic of each session beside the bag (can_0.log, candump "
+        "format, read by python-can's LogReader)", read_only=True)),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
@@ -223,4 +227,5 @@ def declare_parameters(node: Node) -> NodeSettings:
         node_id=values["bus.node_id"], storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
-        record_path=values["record.path"], record_compression=values["record.compression"])
+        record_path=values["record.path"], record_compression=values["record.compression"],
+        record_can_log=values["record.can_log"])

@@ -13,11 +13,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ssi_bridge import __version__
-from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.exceptions import BusError, RecordingError
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
+    from ssi_bridge.client.sniffer import CanSniffer
+    from ssi_bridge.client.sniffer import CanSniffer
     from ssi_bridge.record.bag import BagRecorder
     from ssi_bridge.ros.params import NodeSettings
 
@@ -39,9 +41,15 @@ class SessionRecorder:
         self._lock = threading.Lock()
         self._bag: BagRecorder | None = None
         self._topics: set[str] = set()
+        self._qos: dict[str, Any] = {}
+        self._sniffer: CanSniffer | None = None
         #: the last write error, shown as ERROR on the bus diagnostics until a new session
         self.error = ""
         self.sessions = 0
+
+    def offer(self, topic: str, qos: Any) -> None:
+        """Record ``topic`` with the QoS its publisher offers (rosbag2 stores it per channel)."""
+        self._qos[topic] = qos
 
     @property
     def active(self) -> bool:
@@ -67,6 +75,8 @@ class SessionRecorder:
             self._bag = BagRecorder.open(path, compression=self._settings.record_compression,
                                          metadata=metadata)
             self._topics = set()
+            if self._settings.record_can_log:
+                self._start_sniffer(path)
             self.error = ""
             self.sessions += 1
         self._node.get_logger().info(f"recording to {path}")
@@ -76,6 +86,10 @@ class SessionRecorder:
         """Close the running bag; returns (directory, messages) or None if none ran."""
         with self._lock:
             bag, self._bag = self._bag, None
+            sniffer, self._sniffer = self._sniffer, None
+        if sniffer is not None:
+            frames = sniffer.stop()
+            self._node.get_logger().info(f"CAN log closed: {sniffer.path} ({frames} frames)")
         if bag is None:
             return None
         summary = bag.close()
@@ -90,7 +104,7 @@ class SessionRecorder:
             return
         try:
             if topic not in self._topics:
-                bag.add_topic(topic, self._type_of(topic))
+                bag.add_topic(topic, self._type_of(topic), self._qos.get(topic))
                 self._topics.add(topic)
             now_ns = self._node.get_clock().now().nanoseconds
             bag.write(topic, msg, log_time_ns=now_ns, publish_time_ns=stamp_ns)
@@ -106,9 +120,25 @@ class SessionRecorder:
 
     def counters(self) -> dict[str, int]:
         """Recording figures for the bus diagnostics."""
-        bag = self._bag
+        bag, sniffer = self._bag, self._sniffer
         return {"recording": int(bag is not None),
-                "recorded_messages": bag.message_count if bag is not None else 0}
+                "recorded_messages": bag.message_count if bag is not None else 0,
+                "can_frames_logged": sniffer.frames if sniffer is not None else 0}
+
+    def _start_sniffer(self, bag_dir: Path) -> None:
+        """Log the raw CAN traffic beside the bag (``can_0.log``, candump format)."""
+        from ssi_bridge.client.sniffer import CanSniffer
+        from ssi_bridge.gateway.bus import BusConfig
+
+        s = self._settings
+        config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
+                           bitrate=s.bus_bitrate, node_id=s.node_id)
+        try:
+            self._sniffer = CanSniffer(config, bag_dir / "can_0.log")
+        except BusError as err:
+            # the bag still records; the reason shows on the bus diagnostics
+            self.error = f"CAN log not written: {err}"
+            self._node.get_logger().error(self.error)
 
     def on_start(self, request: Any, response: Any) -> Any:
         """~/start_recording."""
@@ -144,7 +174,8 @@ class SessionRecorder:
         s = self._settings
         meta = {"package_version": __version__, "bus": f"{s.bus_interface}:{s.bus_channel}",
                 "bus_bitrate": str(s.bus_bitrate), "node_id": str(s.node_id),
-                "simulation": str(s.simulation), "publish_rate": f"{s.publish_rate:g}"}
+                "simulation": str(s.simulation), "publish_rate": f"{s.publish_rate:g}",
+                "can_log": "can_0.log" if s.record_can_log else ""}
         for j in s.joints:
             meta[f"joint.{j.name}"] = (f"slot={j.slot} family={j.family} "
                                        f"para1=0x{j.para1:08X}")

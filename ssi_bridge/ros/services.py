@@ -33,6 +33,7 @@ class BridgeServices:
     def __init__(self, node: SsiBridgeNode) -> None:
         self.node = node
         self.events = node.create_publisher(Event, "~/events", 50)
+        node.recorder.offer(self.events.topic_name, self.events.qos_profile)
 
     # -- helpers ---------------------------------------------------------------------------
     def _joint(self, requested: str) -> str:

@@ -1,0 +1,32 @@
+"""The CAN sniffer logs both directions of a real exchange in python-can's candump format."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import can
+
+from ssi_bridge.client.sniffer import CanSniffer
+from ssi_bridge.gateway.bus import BusConfig
+
+
+def test_sniffer_logs_every_frame_and_the_log_reads_back(tmp_path: Path):
+    config = BusConfig(channel="sniffer_test")
+    sniffer = CanSniffer(config, tmp_path / "can_0.log")
+    a = can.Bus(interface="virtual", channel="sniffer_test")
+    b = can.Bus(interface="virtual", channel="sniffer_test")
+    try:
+        a.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))  # SYNC
+        b.send(can.Message(arbitration_id=0x181, data=bytes(range(8)), is_extended_id=False))
+        deadline = time.monotonic() + 2.0
+        while sniffer.frames < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        a.shutdown()
+        b.shutdown()
+        logged = sniffer.stop()
+    assert logged == 2
+    frames = list(can.LogReader(str(tmp_path / "can_0.log")))
+    assert [(f.arbitration_id, bytes(f.data)) for f in frames] == [
+        (0x080, b""), (0x181, bytes(range(8)))]
