@@ -19,40 +19,31 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
-from ssi_bridge_msgs.msg import ChannelStatus, Status
-from ssi_bridge_msgs.srv import (
-    InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
-    StopRecording, WriteRegister,
-)
+from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
-from ssi_bridge.module.registers import Reg, validate_para1
+from ssi_bridge.module.registers import validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.station import SimStation, count_factor
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
-#: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
-#: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
-IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
 #: status bits under which the module does not acquire (000 "Error detection / messages")
 NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)
 #: status bits counted as error cycles
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
-#: services keep up to 100 pending requests (rclpy's default of 10 drops bursts)
-SERVICE_QOS = QoSProfile(depth=100)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
 
@@ -83,7 +74,7 @@ class SsiBridgeNode(Node):
         self.client.connect()
         for joint in s.joints:
             self._configure_para1(joint)
-            self.client.edit_output(joint.slot, _idle_read)
+            self.client.edit_output(joint.slot, idle_read)
         self.scales = {j.name: self._scale(j) for j in s.joints}
         self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
                          for j in s.joints}
@@ -106,24 +97,7 @@ class SsiBridgeNode(Node):
         self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
-        g = self._service_group
-        # a deep request queue: a burst of calls is answered in order, not silently dropped
-        sq = SERVICE_QOS
-        self.create_service(ReadRegister, "~/read_register", self.handlers.read_register,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(WriteRegister, "~/write_register", self.handlers.write_register,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(SetPreset, "~/set_preset", self.handlers.set_preset, callback_group=g, qos_profile=sq)
-        self.create_service(ResetRegisters, "~/reset_registers", self.handlers.reset_registers,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(SetControl, "~/set_control", self.handlers.set_control,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(InjectFault, "~/inject_fault", self.handlers.inject_fault,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(StartRecording, "~/start_recording", self.recorder.on_start,
-                            callback_group=g, qos_profile=sq)
-        self.create_service(StopRecording, "~/stop_recording", self.recorder.on_stop,
-                            callback_group=g, qos_profile=sq)
+        self.handlers.register(self._service_group)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if s.record_enabled:
             try:
@@ -211,7 +185,7 @@ class SsiBridgeNode(Node):
         self.client.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
         self._cycle_times.append(t_sync)
         stamp_ns = self._stamp_ns(t_sync)
-        stamp = _time_msg(stamp_ns)
+        stamp = time_msg(stamp_ns)
         js = JointState()
         js.header.stamp = stamp
         js.header.frame_id = self.settings.frame_id
@@ -272,7 +246,7 @@ class SsiBridgeNode(Node):
         js.velocity.append(velocity)
         if status is not None:
             inp = ProcessInput.decode(image)
-            status.channels.append(_channel_msg(name, joint.slot, sample, inp, counters))
+            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters))
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
@@ -315,7 +289,7 @@ class SsiBridgeNode(Node):
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         out.append(bus_status(
-            f"ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
+            "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self.recorder.error))
@@ -359,41 +333,6 @@ class SsiBridgeNode(Node):
         self.client.close()
         if self.gateway is not None:
             self.gateway.stop()
-
-
-def _idle_read(out: bytearray) -> None:
-    """Process output byte 4 = REG_RD_ADR of the register shown while no handshake runs."""
-    out[4] = int(IDLE_READ_REGISTER)
-
-
-def _time_msg(ns: int):
-    from builtin_interfaces.msg import Time
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-
-
-def _channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
-                 counters: ChannelCounters) -> ChannelStatus:
-    """Every bit of one channel's process input image, as ~/status carries it."""
-    sts, cmp = inp.sts, inp.cmp
-    m = ChannelStatus(joint=name, slot=slot)
-    m.process_input = list(sample.process_input)
-    m.reg_rd_data, m.reg_rd_adr, m.reg_rd_abort = inp.reg_rd_data, inp.reg_rd_adr, inp.reg_rd_abort
-    m.reg_wr_accept, m.reg_wr_akn = inp.reg_wr_accept, inp.reg_wr_akn
-    m.ssi_sts0, m.ssi_sts1, m.ssi_sts2, m.ssi_sts3 = (bool(inp.ssi_sts >> i & 1) for i in range(4))
-    m.sts_up, m.sts_dn = bool(cmp & cmp.STS_UP), bool(cmp & cmp.STS_DN)
-    m.rel_cmp2, m.flag_cmp2, m.sts_cmp2 = (bool(cmp & cmp.REL_CMP2), bool(cmp & cmp.FLAG_CMP2),
-                                           bool(cmp & cmp.STS_CMP2))
-    m.rel_cmp1, m.flag_cmp1, m.sts_cmp1 = (bool(cmp & cmp.REL_CMP1), bool(cmp & cmp.FLAG_CMP1),
-                                           bool(cmp & cmp.STS_CMP1))
-    m.sts_stop, m.err_para = bool(sts & sts.STS_STOP), bool(sts & sts.ERR_PARA)
-    m.sts_uflw, m.sts_oflw = bool(sts & sts.STS_UFLW), bool(sts & sts.STS_OFLW)
-    m.err_ssi, m.ssi_diag = bool(sts & sts.ERR_SSI), bool(sts & sts.SSI_DIAG)
-    m.reg_ssi_pos = int(sample.position)
-    m.ssi_frame_valid = (not inp.reg_rd_abort) and inp.reg_rd_adr == int(IDLE_READ_REGISTER)
-    m.ssi_frame = inp.reg_rd_data if m.ssi_frame_valid else 0
-    m.samples, m.stale_cycles, m.error_cycles = (counters.samples, counters.stale_cycles,
-                                                 counters.error_cycles)
-    return m
 
 
 __all__ = ["SsiBridgeNode"]

@@ -19,7 +19,6 @@ if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ssi_bridge.client.sniffer import CanSniffer
-    from ssi_bridge.client.sniffer import CanSniffer
     from ssi_bridge.record.bag import BagRecorder
     from ssi_bridge.ros.params import NodeSettings
 

@@ -12,16 +12,23 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
+from rclpy.qos import QoSProfile
 
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
 from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros.units import to_int32
 from ssi_bridge_msgs.msg import Event
+from ssi_bridge_msgs.srv import (
+    InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
+    StopRecording, WriteRegister,
+)
 
 if TYPE_CHECKING:
     from ssi_bridge.ros.node import SsiBridgeNode
 
 MAX_ADDRESS = 63
+#: services keep up to 100 pending requests (rclpy's default of 10 drops a burst of calls)
+SERVICE_QOS = QoSProfile(depth=100)
 #: REG_SF signatures (000 "Resetting the register bank")
 SF_LD20 = 0x6C643230
 SF_LD48 = 0x6C643438
@@ -34,6 +41,22 @@ class BridgeServices:
         self.node = node
         self.events = node.create_publisher(Event, "~/events", 50)
         node.recorder.offer(self.events.topic_name, self.events.qos_profile)
+
+    def register(self, group: Any) -> None:
+        """Create every service of the contract in ``group`` (one at a time: a handshake
+        per slot is serialised anyway) with a deep request queue."""
+        node, rec = self.node, self.node.recorder
+        for srv_type, name, handler in (
+                (ReadRegister, "~/read_register", self.read_register),
+                (WriteRegister, "~/write_register", self.write_register),
+                (SetPreset, "~/set_preset", self.set_preset),
+                (ResetRegisters, "~/reset_registers", self.reset_registers),
+                (SetControl, "~/set_control", self.set_control),
+                (InjectFault, "~/inject_fault", self.inject_fault),
+                (StartRecording, "~/start_recording", rec.on_start),
+                (StopRecording, "~/stop_recording", rec.on_stop)):
+            node.create_service(srv_type, name, handler, callback_group=group,
+                                qos_profile=SERVICE_QOS)
 
     # -- helpers ---------------------------------------------------------------------------
     def _joint(self, requested: str) -> str:

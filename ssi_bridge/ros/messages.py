@@ -1,0 +1,55 @@
+"""ROS messages built from the bus samples: ~/status channels, stamps.
+
+Kept apart from the node so the per-cycle message building reads (and is timed) on its own.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from ssi_bridge_msgs.msg import ChannelStatus
+
+from ssi_bridge.module.images import ProcessInput
+from ssi_bridge.module.registers import Reg
+from ssi_bridge.ros.diagnostics import ChannelCounters
+
+#: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
+#: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
+IDLE_READ_REGISTER = Reg.REG_SSI_FRAME
+
+
+def idle_read(out: bytearray) -> None:
+    """Process output byte 4 = REG_RD_ADR of the register shown while no handshake runs."""
+    out[4] = int(IDLE_READ_REGISTER)
+
+
+def time_msg(ns: int) -> Time:
+    """builtin_interfaces/Time of a ROS time in nanoseconds."""
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
+                 counters: ChannelCounters) -> ChannelStatus:
+    """Every bit of one channel's process input image, as ~/status carries it."""
+    sts, cmp = inp.sts, inp.cmp
+    m = ChannelStatus(joint=name, slot=slot)
+    m.process_input = list(sample.process_input)
+    m.reg_rd_data, m.reg_rd_adr, m.reg_rd_abort = inp.reg_rd_data, inp.reg_rd_adr, inp.reg_rd_abort
+    m.reg_wr_accept, m.reg_wr_akn = inp.reg_wr_accept, inp.reg_wr_akn
+    m.ssi_sts0, m.ssi_sts1, m.ssi_sts2, m.ssi_sts3 = (bool(inp.ssi_sts >> i & 1) for i in range(4))
+    m.sts_up, m.sts_dn = bool(cmp & cmp.STS_UP), bool(cmp & cmp.STS_DN)
+    m.rel_cmp2, m.flag_cmp2, m.sts_cmp2 = (bool(cmp & cmp.REL_CMP2), bool(cmp & cmp.FLAG_CMP2),
+                                           bool(cmp & cmp.STS_CMP2))
+    m.rel_cmp1, m.flag_cmp1, m.sts_cmp1 = (bool(cmp & cmp.REL_CMP1), bool(cmp & cmp.FLAG_CMP1),
+                                           bool(cmp & cmp.STS_CMP1))
+    m.sts_stop, m.err_para = bool(sts & sts.STS_STOP), bool(sts & sts.ERR_PARA)
+    m.sts_uflw, m.sts_oflw = bool(sts & sts.STS_UFLW), bool(sts & sts.STS_OFLW)
+    m.err_ssi, m.ssi_diag = bool(sts & sts.ERR_SSI), bool(sts & sts.SSI_DIAG)
+    m.reg_ssi_pos = int(sample.position)
+    m.ssi_frame_valid = (not inp.reg_rd_abort) and inp.reg_rd_adr == int(IDLE_READ_REGISTER)
+    m.ssi_frame = inp.reg_rd_data if m.ssi_frame_valid else 0
+    m.samples, m.stale_cycles, m.error_cycles = (counters.samples, counters.stale_cycles,
+                                                 counters.error_cycles)
+    return m
+
