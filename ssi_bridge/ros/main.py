@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 
 import rclpy
+from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
 from ssi_bridge.exceptions import SsiBridgeError
@@ -25,7 +26,8 @@ def main(args: list[str] | None = None) -> int:
     try:
         try:
             node = SsiBridgeNode()
-        except (SsiBridgeError, ValueError, OSError) as err:
+        except (SsiBridgeError, ParameterException, NameValidationException, ValueError,
+                OSError) as err:
             print(f"ssi_bridge_node: cannot start: {err}", file=sys.stderr)
             return 1
         executor = MultiThreadedExecutor(num_threads=4)

@@ -80,3 +80,17 @@ def test_a_station_that_does_not_answer_exits_nonzero_with_the_reason(start_node
     assert code == 1, node.log()
     log = node.log()
     assert "cannot start" in log and "Traceback" not in log, log
+
+
+def test_a_bad_params_file_exits_nonzero_with_the_reason(start_node):
+    # `joints: [y]` is a YAML 1.1 boolean array, not names: a type error, said in one line
+    node = start_node({"joints": [True]})
+    assert node.proc.wait(30) == 1, node.log()
+    log = node.log()
+    assert "cannot start" in log and "joints" in log and "Traceback" not in log, log
+
+
+def test_duplicate_slots_are_refused_at_start(start_node):
+    node = start_node({"joints": ["a", "b"], "a.slot": 2, "b.slot": 2})
+    assert node.proc.wait(30) == 1, node.log()
+    assert "share a module slot" in node.log(), node.log()
