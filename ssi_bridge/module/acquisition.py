@@ -104,6 +104,8 @@ def compare(pos: int, cmp_value: int, *, enabled: bool, clear: bool,
 
 def limits(pos: int, lower: int, upper: int) -> tuple[bool, bool]:
     """(STS_OFLW, STS_UFLW) per 000 Tables 1 and 2: active only off the default values."""
+    if upper == VALUE_MAX and lower == 0:
+        return False, False  # both limits at their defaults: monitoring off, nothing to read
     p = to_int32(pos)
     oflw = upper != VALUE_MAX and p > to_int32(upper)
     uflw = lower != 0 and p < to_int32(lower)

@@ -12,7 +12,9 @@ so the bank in memory never runs ahead of the bank on disk.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 from ssi_bridge.exceptions import ParameterError, RegisterWriteError, StorageError
 from ssi_bridge.module.para1 import Para1, validate_para1
@@ -55,6 +57,8 @@ class RegisterBank:
         self.store = store
         self.slot = slot
         self._values: dict[Reg, int] = {r: i.default for r, i in REGISTERS.items() if i.writable}
+        #: read-only live view of the writable registers' values (the module's per-cycle reads)
+        self.values: Mapping[Reg, int] = MappingProxyType(self._values)
         self._counts: dict[Reg, int] = {r: 0 for r in RETENTIVE}
         snapshot = store.load() if store is not None else None
         if snapshot is not None:

@@ -88,6 +88,28 @@ _MODULE_STATUS_ALL = ModuleStatus(0x9F)
 _CMP_CONTROL_ALL = CmpControl(0x1B)
 
 
+# the same bits as plain ints, for encode_input (run by the module on every cycle)
+_RD_ABORT = int(ReadStatus.REG_RD_ABORT)
+_WR_AKN, _WR_ACCEPT = int(WriteStatus.REG_WR_AKN), int(WriteStatus.REG_WR_ACCEPT)
+_CMP_BYTE, _STS_BYTE = int(_CMP_STATUS_ALL), int(_MODULE_STATUS_ALL)
+
+
+def encode_input(reg_rd_data: int, reg_rd_adr: int, reg_rd_abort: bool, reg_wr_akn: bool,
+                 reg_wr_accept: bool, ssi_sts: int, cmp: int, sts: int) -> bytes:
+    """Process input image from its fields as ints (000 "Process input").
+
+    The one encoder of the image: :meth:`ProcessInput.encode` and the module's cycle, which
+    keeps its state as ints, both use it; plain int arithmetic, because an ``IntFlag``
+    operation is a Python-level call.  Reserved bits are sent as 0.
+    """
+    return IMAGE_STRUCT.pack(
+        reg_rd_data & 0xFFFFFFFF,
+        (reg_rd_adr & ADDRESS_MASK) | (_RD_ABORT if reg_rd_abort else 0),
+        (ssi_sts & _SSI_STS_MASK) | (_WR_AKN if reg_wr_akn else 0)
+        | (_WR_ACCEPT if reg_wr_accept else 0),
+        cmp & _CMP_BYTE, sts & _STS_BYTE)
+
+
 def _check_len(image: bytes) -> None:
     if len(image) != IMAGE_SIZE:
         raise ValueError(f"process image must be {IMAGE_SIZE} bytes, got {len(image)}")
@@ -116,14 +138,9 @@ class ProcessInput:
 
     def encode(self) -> bytes:
         """The 8 bytes as the gateway transports them."""
-        byte4 = self.reg_rd_adr & ADDRESS_MASK
-        byte4 |= ReadStatus.REG_RD_ABORT if self.reg_rd_abort else 0
-        byte5 = (self.ssi_sts & _SSI_STS_MASK)
-        byte5 |= WriteStatus.REG_WR_AKN if self.reg_wr_akn else 0
-        byte5 |= WriteStatus.REG_WR_ACCEPT if self.reg_wr_accept else 0
-        return IMAGE_STRUCT.pack(self.reg_rd_data & 0xFFFFFFFF, int(byte4), int(byte5),
-                                 int(self.cmp & _CMP_STATUS_ALL),
-                                 int(self.sts & _MODULE_STATUS_ALL))
+        return encode_input(self.reg_rd_data, self.reg_rd_adr, self.reg_rd_abort,
+                            self.reg_wr_akn, self.reg_wr_accept, self.ssi_sts, int(self.cmp),
+                            int(self.sts))
 
     @classmethod
     def decode(cls, image: bytes) -> ProcessInput:

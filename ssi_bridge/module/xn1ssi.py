@@ -18,7 +18,7 @@ from ssi_bridge.module import acquisition
 from ssi_bridge.module.bank import Endurance, RegisterBank
 from ssi_bridge.module.diagnostics import Diag
 from ssi_bridge.module.images import (
-    CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput,
+    CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput, encode_input,
 )
 from ssi_bridge.module.para1 import Para1
 from ssi_bridge.module.registers import (
@@ -30,7 +30,8 @@ from ssi_bridge.module.store import BankStore
 logger = logging.getLogger(__name__)
 
 # Status bits as plain ints: cycle() and the gateway's per-SYNC reads combine them on every
-# cycle, where each IntFlag operation would be a Python-level call.
+# cycle, where each IntFlag operation (&, |, construction) would be a Python-level call. The
+# IntFlag types stay the public face (status, diag); internal state is ints.
 _SSI_DIAG, _ERR_SSI, _STS_OFLW, _STS_UFLW, _ERR_PARA, _STS_STOP = map(int, (
     ModuleStatus.SSI_DIAG, ModuleStatus.ERR_SSI, ModuleStatus.STS_OFLW, ModuleStatus.STS_UFLW,
     ModuleStatus.ERR_PARA, ModuleStatus.STS_STOP))
@@ -38,8 +39,19 @@ _SSI_DIAG, _ERR_SSI, _STS_OFLW, _STS_UFLW, _ERR_PARA, _STS_STOP = map(int, (
 _DIAG_BITS = 0x1F
 _STS_UP, _STS_DN = int(CmpStatus.STS_UP), int(CmpStatus.STS_DN)
 #: comparator units: (register, EN_CMPx, CLR_CMPx, shift of STS/FLAG/REL_CMPx in byte 6)
-_CMP_UNITS = ((Reg.REG_CMP1, int(CmpControl.EN_CMP1), int(CmpControl.CLR_CMP1), 0),
-              (Reg.REG_CMP2, int(CmpControl.EN_CMP2), int(CmpControl.CLR_CMP2), 3))
+_CMP_UNITS = ((0, Reg.REG_CMP1, int(CmpControl.EN_CMP1), int(CmpControl.CLR_CMP1), 0),
+              (1, Reg.REG_CMP2, int(CmpControl.EN_CMP2), int(CmpControl.CLR_CMP2), 3))
+_REG_OFFSET, _REG_SSI_MASK = Reg.REG_OFFSET, Reg.REG_SSI_MASK
+_REG_LOWER_LIMIT, _REG_UPPER_LIMIT = Reg.REG_LOWER_LIMIT, Reg.REG_UPPER_LIMIT
+#: every value of process input bytes 6 / 7 and of the diagnostics byte as its IntFlag,
+#: built once, so handing the flag types to readers costs an index instead of a construction
+_CMP_FLAGS: tuple[CmpStatus, ...] = tuple(CmpStatus(v) for v in range(256))
+_STS_FLAGS: tuple[ModuleStatus, ...] = tuple(ModuleStatus(v) for v in range(256))
+_DIAG_FLAGS: tuple[Diag, ...] = tuple(Diag(v) for v in range(_DIAG_BITS + 1))
+#: why a process-data read of address 0..63 is refused (None = readable), from the 000
+#: interface table via describe_refusal, looked up once per address instead of once per cycle
+_READ_REFUSAL: tuple[str | None, ...] = tuple(
+    describe_refusal(addr, write=False) for addr in range(REGISTER_COUNT))
 
 
 class Xn1Ssi:
@@ -57,6 +69,12 @@ class Xn1Ssi:
         self.slot = slot
         self.bank = RegisterBank(store, slot)
         self._out = ProcessOutput()
+        self._control = 0  # process output byte 6 (EN_CMPx / CLR_CMPx) as an int
+        # figures of the REG_PARA1 set in force, derived once per set (000 Table 19)
+        self._para: Para1 | None = None
+        self._n_bits = 0
+        self._rate_hz = 0.0
+        self._width = 0
         self._last_readout: LineReadout | None = None
         self._frame = 0
         self._gray = 0
@@ -65,18 +83,21 @@ class Xn1Ssi:
         self._err_ssi = False
         self._ssi_sts = 0
         self._ssi_diag = False
-        self._cmp = CmpStatus(0)
+        self._cmp = 0  # process input byte 6 (CmpStatus bits)
         self._flags = [False, False]
         self._oflw = self._uflw = False
         self._stop_latched = False
         self._wr_akn = self._wr_accept = False
-        self._rd = (0, False, 0)  # REG_RD_ADR echo, REG_RD_ABORT, REG_RD_DATA
-        self._image: tuple[bool, bytes] | None = None  # (ERR_PARA, encoded input image)
+        self._rd_adr, self._rd_abort, self._rd_data = 0, False, 0  # REG_RD_ADR echo, ...
+        self._image: bytes | None = None  # the encoded input image of this cycle
+        self._image_err_para = False  # ERR_PARA when it was encoded
 
     # -- process data ---------------------------------------------------------------------
     def set_process_output(self, image: bytes) -> None:
         """Store the 8-byte process output image the next :meth:`cycle` acts on."""
-        self._out = ProcessOutput.decode(bytes(image))
+        out = ProcessOutput.decode(bytes(image))
+        self._out = out
+        self._control = int(out.cmp)
 
     def process_input(self) -> bytes:
         """The 8-byte process input image (000 "Process input").
@@ -86,9 +107,12 @@ class Xn1Ssi:
         """
         err_para = self.bank.err_para
         image = self._image
-        if image is None or image[0] != err_para:
-            image = self._image = (err_para, self.status.encode())
-        return image[1]
+        if image is None or self._image_err_para != err_para:
+            image = self._image = encode_input(
+                self._rd_data, self._rd_adr, self._rd_abort, self._wr_akn, self._wr_accept,
+                self._ssi_sts, self._cmp, self._sts())
+            self._image_err_para = err_para
+        return image
 
     def _sts(self) -> int:
         """Process input byte 7 as an int (000 "Process input"; STS_STOP also on ERR_PARA)."""
@@ -101,15 +125,15 @@ class Xn1Ssi:
     @property
     def status(self) -> ProcessInput:
         """The decoded process input image."""
-        adr, abort, data = self._rd
-        return ProcessInput(reg_rd_data=data, reg_rd_adr=adr, reg_rd_abort=abort,
-                            reg_wr_akn=self._wr_akn, reg_wr_accept=self._wr_accept,
-                            ssi_sts=self._ssi_sts, cmp=self._cmp, sts=ModuleStatus(self._sts()))
+        return ProcessInput(reg_rd_data=self._rd_data, reg_rd_adr=self._rd_adr,
+                            reg_rd_abort=self._rd_abort, reg_wr_akn=self._wr_akn,
+                            reg_wr_accept=self._wr_accept, ssi_sts=self._ssi_sts,
+                            cmp=_CMP_FLAGS[self._cmp], sts=_STS_FLAGS[self._sts()])
 
     @property
     def diag(self) -> Diag:
         """The diagnostics byte (000 chapter 2 "Diagnostics"), also REG_DIAG1."""
-        return Diag(self._sts() & _DIAG_BITS)
+        return _DIAG_FLAGS[self._sts() & _DIAG_BITS]
 
     @property
     def last_readout(self) -> LineReadout | None:
@@ -138,44 +162,64 @@ class Xn1Ssi:
 
     # -- one cycle ------------------------------------------------------------------------
     def cycle(self, t: float) -> None:
-        """Run one module cycle at time ``t`` (s) on the current process output image."""
+        """Run one module cycle at time ``t`` (s) on the current process output image.
+
+        Called for every slot on every SYNC, so the state stays ints and the REG_PARA1
+        figures (frame length, bit rate, word width) are derived once per accepted set.
+        """
         self._image = None  # first: even a cycle that fails half-way must not leave it stale
         out = self._out
-        para = self.bank.para
-        self._stop_latched = out.stop
-        moved = (False, False)
-        if not (out.stop or self.bank.err_para) and self.reader is not None:
-            readout = self.reader.read(t, para.ssi_frame_len, float(para.bit_rate_hz))
+        bank = self.bank
+        stop = out.stop
+        self._stop_latched = stop
+        up = down = False
+        reader = self.reader
+        if not (stop or bank.err_para) and reader is not None:
+            para = bank.para
+            if para is not self._para:
+                self._use_para(para)
+            readout = reader.read(t, self._n_bits, self._rate_hz)
             self._last_readout = readout
             got = acquisition.extract(readout, para)
             self._frame = got.frame
-            self._err_ssi = not got.ok
-            if got.ok:
-                moved = acquisition.direction(self._value, got.value, para.value_bits)
-                self._value, self._gray = got.value, got.gray
+            ok = got.ok
+            self._err_ssi = not ok
+            if ok:
+                value = got.value
+                up, down = acquisition.direction(self._value, value, self._width)
+                self._value, self._gray = value, got.gray
         if self._value is not None:
-            self._pos = (self._value - self.bank.value(Reg.REG_OFFSET)) & VALUE_MAX
-        self._evaluate(out, moved)
+            self._pos = (self._value - bank.values[_REG_OFFSET]) & VALUE_MAX
+        self._evaluate(up, down)
         self._handshake(out)
 
-    def _evaluate(self, out: ProcessOutput, moved: tuple[bool, bool]) -> None:
+    def _use_para(self, para: Para1) -> None:
+        """Derive what a cycle needs from a new REG_PARA1 set (000 Table 19)."""
+        self._para = para
+        self._n_bits = para.ssi_frame_len
+        self._rate_hz = float(para.bit_rate_hz)
+        self._width = para.value_bits
+
+    def _evaluate(self, up: bool, down: bool) -> None:
         """SSI status bits, comparators, limits, direction (000 chapter 1, Tables 1-3)."""
-        bank = self.bank
+        values = self.bank.values
         pos = self._pos
         self._ssi_sts, self._ssi_diag = acquisition.ssi_status(self._frame,
-                                                               bank.value(Reg.REG_SSI_MASK))
-        control = int(out.cmp)
-        cmp = (_STS_UP if moved[0] else 0) | (_STS_DN if moved[1] else 0)
+                                                               values[_REG_SSI_MASK])
+        control = self._control
+        cmp = (_STS_UP if up else 0) | (_STS_DN if down else 0)
         flags = self._flags
-        for i, (reg, en, clr, shift) in enumerate(_CMP_UNITS):
-            sts, flag, rel = acquisition.compare(pos, bank.value(reg),
-                                                 enabled=bool(control & en),
-                                                 clear=bool(control & clr), flag=flags[i])
-            flags[i] = flag
-            cmp |= (sts | flag << 1 | rel << 2) << shift
-        self._cmp = CmpStatus(cmp)
-        self._oflw, self._uflw = acquisition.limits(
-            pos, bank.value(Reg.REG_LOWER_LIMIT), bank.value(Reg.REG_UPPER_LIMIT))
+        for i, reg, en, clr, shift in _CMP_UNITS:
+            if control & en:
+                sts, flag, rel = acquisition.compare(pos, values[reg], enabled=True,
+                                                     clear=bool(control & clr), flag=flags[i])
+                flags[i] = flag
+                cmp |= (sts | flag << 1 | rel << 2) << shift
+            else:  # EN_CMPx = 0: STS/FLAG/REL_CMPx 0 and the latched flag forgotten (compare)
+                flags[i] = False
+        self._cmp = cmp
+        self._oflw, self._uflw = acquisition.limits(pos, values[_REG_LOWER_LIMIT],
+                                                    values[_REG_UPPER_LIMIT])
 
     def _handshake(self, out: ProcessOutput) -> None:
         """Register write then read handshake (000 "Internal registers", "Process output")."""
@@ -189,10 +233,12 @@ class Xn1Ssi:
             except RegisterWriteError as err:
                 logger.info("slot %d: process-data write refused: %s", self.slot, err)
                 self._wr_accept = False
-        try:
-            self._rd = (out.reg_rd_adr, False, self.read_register(out.reg_rd_adr))
-        except RegisterReadError:
-            self._rd = (out.reg_rd_adr, True, 0)
+        adr = out.reg_rd_adr  # 0..63: the image's 6-bit field
+        self._rd_adr = adr
+        if _READ_REFUSAL[adr] is None:
+            self._rd_abort, self._rd_data = False, self._read(adr)
+        else:
+            self._rd_abort, self._rd_data = True, 0
 
     # -- register bank --------------------------------------------------------------------
     def read_register(self, addr: int) -> int:
@@ -200,6 +246,10 @@ class Xn1Ssi:
         reason = describe_refusal(addr, write=False)
         if reason is not None:
             raise RegisterReadError(addr, reason)
+        return self._read(addr)
+
+    def _read(self, addr: int) -> int:
+        """Value of the readable register ``addr``: computed live or from the bank."""
         live = _LIVE_REGISTERS.get(addr)
         return live(self) if live is not None else self.bank.value(Reg(addr))
 
