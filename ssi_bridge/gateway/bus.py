@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import random
 import threading
+from collections.abc import Sequence
 from copy import deepcopy
 from dataclasses import dataclass
 from typing import Any
@@ -88,6 +89,9 @@ class LossyBus(can.BusABC):
         self.muted = False
         #: frames dropped so far (sent + received)
         self.dropped = 0
+        # an inner bus with python-can's own recv() loop is read one receive step at a time
+        # (its _recv_internal plus its filters): this wrapper's recv() is that same loop
+        self._inner_steps = type(inner).recv is can.BusABC.recv
         super().__init__(channel=getattr(inner, "channel_info", "lossy"))
         self.channel_info = f"lossy({inner.channel_info})"
 
@@ -118,7 +122,14 @@ class LossyBus(can.BusABC):
         self._inner.send(msg, timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        msg = self._inner.recv(timeout)
+        inner = self._inner
+        if self._inner_steps:
+            # one step of the inner bus: BusABC.recv (ours) retries until the timeout
+            msg, filtered = inner._recv_internal(timeout)
+            if msg is not None and not filtered and not inner._matches_filters(msg):
+                return None, False
+        else:
+            msg = inner.recv(timeout)
         if msg is not None and self.drop_received and self._drop():
             return None, False
         return msg, False
@@ -129,23 +140,39 @@ class LossyBus(can.BusABC):
         self._inner.shutdown()
 
 
+_new_message = can.Message.__new__
+
+
 class WireMessage(can.Message):
     """A ``can.Message`` whose deep copy builds the payload copy directly.
 
     python-can's ``virtual`` interface hands each receiving bus ``deepcopy(msg)``, and
     ``Message.__deepcopy__`` copies the ``data`` bytearray through ``copy.deepcopy``'s generic
-    reduce protocol, the largest part of sending a frame in-process. Here the copy is
-    python-can's own ``Message.__copy__`` (a plain ``can.Message``, every field) with a new
-    bytearray of the payload: the same independent deep copy. Other interfaces never copy.
+    reduce protocol, the largest part of sending a frame in-process. Here the copy is a
+    plain ``can.Message`` with every field of the original and a new bytearray of the
+    payload: the same independent deep copy. Other interfaces never copy.
     """
 
     __slots__ = ()
 
     def __deepcopy__(self, memo: dict[int, Any] | None) -> can.Message:
-        clone = self.__copy__()
+        # every field of can.Message (its __slots__; test_pdo_readers checks none is missed),
+        # assigned directly: Message.__init__ with keywords costs twice as much per frame
+        clone = _new_message(can.Message)
+        clone.timestamp = self.timestamp
+        clone.arbitration_id = self.arbitration_id
+        clone.is_extended_id = self.is_extended_id
+        clone.is_remote_frame = self.is_remote_frame
+        clone.is_error_frame = self.is_error_frame
+        channel = self.channel
+        clone.channel = (channel if isinstance(channel, (str, int, type(None)))
+                         else deepcopy(channel, memo))
+        clone.dlc = self.dlc
         clone.data = bytearray(self.data)
-        if not isinstance(clone.channel, (str, int, type(None))):
-            clone.channel = deepcopy(clone.channel, memo)
+        clone.is_fd = self.is_fd
+        clone.is_rx = self.is_rx
+        clone.bitrate_switch = self.bitrate_switch
+        clone.error_state_indicator = self.error_state_indicator
         return clone
 
 
@@ -166,3 +193,26 @@ class BridgeNetwork(canopen.Network):
         with self.send_lock:
             self.bus.send(frame)
         self.check()
+
+    def send_messages(self, frames: Sequence[tuple[int, bytes]]) -> list[tuple[int, can.CanError]]:
+        """Send data frames back to back under one lock; return those that failed.
+
+        The same frames as :meth:`send_message` for each, in order, with nothing of another
+        thread between them (a station's TPDOs after one SYNC); the lock and the receive
+        thread check are paid once. A frame the bus refuses (``can.CanError``) does not stop
+        the others: it is returned with its error. RuntimeError when not connected.
+        """
+        bus = self.bus
+        if not bus:
+            raise RuntimeError("Not connected to CAN bus")
+        failed: list[tuple[int, can.CanError]] = []
+        send = bus.send
+        with self.send_lock:
+            for can_id, data in frames:
+                try:
+                    send(WireMessage(arbitration_id=can_id, is_extended_id=can_id > 0x7FF,
+                                     data=data))
+                except can.CanError as err:
+                    failed.append((can_id, err))
+        self.check()
+        return failed

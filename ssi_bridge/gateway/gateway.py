@@ -111,9 +111,10 @@ class XnGateway:
         self.node.add_write_callback(self._check_write)
         self.node.add_write_callback(self.emergencies.on_write)
         self.node.add_write_callback(self.objects.on_write)
-        self.pdo = PdoEngine(self.node, self._send, self.objects.pdo_reader)
+        self.pdo = PdoEngine(self.node, self._send_frames, self.objects.pdo_reader,
+                             self.objects.pdo_packer)
         self.bus: LossyBus | None = None
-        self.network: canopen.Network | None = None
+        self.network: BridgeNetwork | None = None
         self._sync_cob: int | None = None
         #: SYNC cycles run so far
         self.cycles = 0
@@ -221,12 +222,11 @@ class XnGateway:
         elif index == SYNC_COB_OBJECT:
             self._subscribe_sync()
 
-    def _send(self, cob_id: int, data: bytes) -> None:
+    def _send_frames(self, frames: list[tuple[int, bytes]]) -> None:
+        """Send one SYNC cycle's TPDOs (a frame the bus refuses is logged, the rest go)."""
         if self.network is None:
             return
-        try:
-            self.network.send_message(cob_id, data)
-        except can.CanError as err:
+        for cob_id, err in self.network.send_messages(frames):
             logger.warning("gateway could not send 0x%03X: %s", cob_id, err)
 
     def _send_emcy(self, code: int, register: int, data: bytes) -> None:

@@ -49,6 +49,8 @@ _IDLE_OUTPUT = bytes(8)
 _STATUS_OBJECTS = frozenset({0x5802, 0x5803, 0x5805, 0x6C00})
 #: 0x6820 on the wire: REG_SSI_POS as Integer32, little endian (CiA 301 7.1.2.4)
 POSITION_STRUCT = struct.Struct("<I")
+#: REG_SSI_POS object (000 Table 40)
+POSITION = 0x6820
 
 
 class EncoderObjects:
@@ -60,6 +62,7 @@ class EncoderObjects:
         self.outputs = [_IDLE_OUTPUT] * len(self.modules)
         #: CLR_CMPx bits to pulse in the next cycle (flag reset via 5803/5805), per slot
         self.pending_clear = [CmpControl(0)] * len(self.modules)
+        self._clear_armed = False  # any pending_clear set: the cycle looks at them
         self._cam = {CAM_ENABLE: [0] * len(self.modules), CAM_POLARITY: [0] * len(self.modules)}
 
     def reset(self) -> None:
@@ -67,6 +70,7 @@ class EncoderObjects:
         n = len(self.modules)
         self.outputs = [_IDLE_OUTPUT] * n
         self.pending_clear = [CmpControl(0)] * n
+        self._clear_armed = False
         self._cam = {CAM_ENABLE: [0] * n, CAM_POLARITY: [0] * n}
         for module in self.modules:
             module.set_process_output(_IDLE_OUTPUT)
@@ -135,10 +139,28 @@ class EncoderObjects:
             return None
         if index == PROCESS_INPUT:
             return module.process_input
-        if index == 0x6820:
+        if index == POSITION:
             pack = POSITION_STRUCT.pack
             return lambda: pack(module.ssi_pos & 0xFFFFFFFF)
         return None
+
+    def pdo_packer(self, entries: Sequence[tuple[int, int]]) -> Callable[[], bytes] | None:
+        """One reader of a whole TPDO payload mapping only 0x6820 of several slots, or None.
+
+        The encoder default PDOs 9-12 carry REG_SSI_POS of a slot pair (000 Table 15): one
+        ``struct`` pack of both Integer32 values instead of one reader per entry and a join.
+        Same bytes as the per-entry readers (``ssi_pos`` is kept within 0..0xFFFFFFFF).
+        """
+        if len(entries) < 2 or any(index != POSITION for index, _ in entries):
+            return None
+        modules = [self._module(subindex) for _, subindex in entries]
+        if any(m is None for m in modules):
+            return None
+        pack = struct.Struct("<" + "I" * len(modules)).pack
+        if len(modules) == 2:
+            first, second = modules
+            return lambda: pack(first.ssi_pos, second.ssi_pos)
+        return lambda: pack(*[m.ssi_pos for m in modules])
 
     # -- SDO write --------------------------------------------------------------------------
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
@@ -152,6 +174,7 @@ class EncoderObjects:
             module.set_process_output(bytes(data))
         elif index in FLAG_RESET_OBJECTS:
             self.pending_clear[slot] = CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2
+            self._clear_armed = True
         elif index in self._cam:
             value = data[0]
             if value > 1:
@@ -178,6 +201,10 @@ class EncoderObjects:
     # -- cycle ------------------------------------------------------------------------------
     def cycle(self, t: float) -> None:
         """Run one module cycle per slot, pulsing pending flag resets for that one cycle."""
+        if not self._clear_armed:  # the common case: no flag reset pending
+            for module in self.modules:
+                module.cycle(t)
+            return
         for slot, module in enumerate(self.modules):
             clear = self.pending_clear[slot]
             if clear:
@@ -188,3 +215,4 @@ class EncoderObjects:
             if clear:
                 self.pending_clear[slot] = CmpControl(0)
                 module.set_process_output(self.outputs[slot])
+        self._clear_armed = False  # after the loop: a slot a failing cycle skipped stays due

@@ -10,10 +10,12 @@ mapped objects must exist and be mappable, at most 64 bits) and moves data:
 * RPDOs: 0-240 = applied at the next SYNC, 254/255 = applied on reception.
 PDOs move only in NMT OPERATIONAL (the gateway checks the state before calling in).
 
-A TPDO's payload is read through one reader per mapped object, chosen when the PDO
-parameters are (re)loaded, i.e. once per mapping change: the ``fast_reader`` the gateway
-supplies for the objects it can encode directly, else ``LocalNode.get_data`` (the read
-callbacks, stored data, default).
+A TPDO's payload is read through one reader per PDO, chosen when the PDO parameters are
+(re)loaded, i.e. once per mapping change: the gateway's ``fast_packer`` for a whole mapping it
+can encode in one step, else one reader per mapped object (the ``fast_reader`` the gateway
+supplies for the objects it can encode directly, else ``LocalNode.get_data``: the read
+callbacks, stored data, default), joined. The TPDOs due after one SYNC go to ``send`` as one
+batch, so the bus path is entered once per cycle, not once per frame.
 """
 
 from __future__ import annotations
@@ -37,12 +39,18 @@ logger = logging.getLogger(__name__)
 U32 = struct.Struct("<I")
 #: COB-ID bits that are not the 11-bit identifier (valid, RTR, frame)
 _COB_FLAGS = 0xE000_0000
-#: synchronous transmission types (every n-th SYNC); 0 = acyclic synchronous
-SYNC_TYPES = range(0, 241)
 #: a reader of one mapped object's encoded bytes
 Reader = Callable[[], bytes]
 #: ``fast_reader(index, subindex)``: a direct reader for that object, or None
 FastReader = Callable[[int, int], Reader | None]
+#: ``fast_packer([(index, subindex), ...])``: one reader of the whole payload, or None
+FastPacker = Callable[[list[tuple[int, int]]], Reader | None]
+#: sends the (COB-ID, payload) frames of one SYNC cycle, in order
+SendMany = Callable[[list[tuple[int, bytes]]], None]
+#: largest synchronous transmission type (1-240 = every n-th SYNC, 0 = acyclic synchronous)
+SYNC_TYPE_MAX = 240
+#: synchronous transmission types
+SYNC_TYPES = range(0, SYNC_TYPE_MAX + 1)
 
 
 @dataclass
@@ -58,23 +66,29 @@ class _Pdo:
     pending: bytes | None = None
     #: one reader per entry (TPDOs), fixed until the parameters are reloaded
     readers: list[Reader] = field(default_factory=list)
+    #: reader of the whole payload (TPDOs): a packer, the only entry's reader or
+    #: :meth:`joined`; chosen by the engine's reload (until then: no bytes)
+    read: Reader = bytes
+
+    def joined(self) -> bytes:
+        """The mapped objects' bytes, one reader per entry, concatenated in mapping order."""
+        return b"".join([read() for read in self.readers])
 
     def payload(self) -> bytes:
-        """The mapped objects' bytes, concatenated in mapping order."""
-        readers = self.readers
-        if len(readers) == 1:
-            return readers[0]()
-        return b"".join([read() for read in readers])
+        """The payload through the reader chosen at the last reload."""
+        return self.read()
 
 
 class PdoEngine:
     """Read PDO parameters from ``node`` and transmit / apply PDO data."""
 
-    def __init__(self, node: canopen.LocalNode, send: Callable[[int, bytes], None],
-                 fast_reader: FastReader | None = None) -> None:
+    def __init__(self, node: canopen.LocalNode, send: SendMany,
+                 fast_reader: FastReader | None = None,
+                 fast_packer: FastPacker | None = None) -> None:
         self._node = node
         self._send = send
         self._fast_reader = fast_reader
+        self._fast_packer = fast_packer
         self.tpdos: list[_Pdo] = []
         self.rpdos: list[_Pdo] = []
         self._active: list[_Pdo] = []  # the valid, mapped TPDOs
@@ -103,6 +117,12 @@ class PdoEngine:
         self.tpdos = [self._load(TPDO_COM + n, TPDO_MAP + n, n + 1) for n in range(N_PDOS)]
         for pdo in self.tpdos:
             pdo.readers = [self._reader(i, s) for i, s, _ in pdo.entries]
+            packed = (self._fast_packer([(i, s) for i, s, _ in pdo.entries])
+                      if self._fast_packer and pdo.entries else None)
+            if packed is not None:
+                pdo.read = packed
+            else:
+                pdo.read = pdo.readers[0] if len(pdo.readers) == 1 else pdo.joined
         self._active = [pdo for pdo in self.tpdos if pdo.valid and pdo.entries]
         self.rpdos = [self._load(RPDO_COM + n, RPDO_MAP + n, n + 1) for n in range(N_PDOS)]
         network = self._node.network
@@ -174,17 +194,21 @@ class PdoEngine:
 
     # -- data ---------------------------------------------------------------------------------
     def on_sync(self) -> None:
-        """Apply synchronous RPDOs and send the TPDOs due after this SYNC's module cycle."""
-        self._sync_count = self._sync_count % 240 + 1
+        """Send the TPDOs due after this SYNC's module cycle, as one batch in PDO order."""
+        count = self._sync_count = self._sync_count % 240 + 1
+        frames: list[tuple[int, bytes]] = []
         for pdo in self._active:
-            if pdo.trans_type in SYNC_TYPES:
-                if pdo.trans_type == 0 or self._sync_count % pdo.trans_type == 0:
-                    self._send(pdo.cob_id, pdo.payload())
-            elif pdo.trans_type >= 254:
-                data = pdo.payload()
+            trans = pdo.trans_type
+            if trans <= SYNC_TYPE_MAX:
+                if trans == 0 or count % trans == 0:
+                    frames.append((pdo.cob_id, pdo.read()))
+            elif trans >= 254:
+                data = pdo.read()
                 if data != pdo.last:
                     pdo.last = data
-                    self._send(pdo.cob_id, data)
+                    frames.append((pdo.cob_id, data))
+        if frames:
+            self._send(frames)
 
     def apply_pending(self) -> None:
         """Write the data of synchronous RPDOs received since the last SYNC."""
