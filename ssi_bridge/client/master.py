@@ -28,8 +28,9 @@ import canopen
 
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
+from ssi_bridge.client.receive import FrameListener, TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
-from ssi_bridge.client.sdo import SdoAccess, position_pdos
+from ssi_bridge.client.sdo import SdoAccess
 from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
@@ -44,16 +45,6 @@ from ssi_bridge.module.images import CmpControl, Control, ProcessInput
 logger = logging.getLogger(__name__)
 
 SYNC_COB_ID = 0x80
-
-
-class _FrameCounter(can.Listener):
-    def __init__(self, counters: ClientCounters) -> None:
-        self._counters = counters
-
-    def on_message_received(self, msg: can.Message) -> None:
-        self._counters.frames += 1
-        if msg.is_error_frame:
-            self._counters.can_errors += 1
 
 
 class BridgeClient:
@@ -98,6 +89,7 @@ class BridgeClient:
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
         self._send_lock = threading.Lock()
         self._liveness = Liveness(self)
+        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions)
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self) -> None:
@@ -112,7 +104,7 @@ class BridgeClient:
             inner, self._source = self._source, None
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        self.network.listeners.append(_FrameCounter(self.counters))
+        self.network.listeners[:] = [FrameListener(self.network, self.counters)]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
@@ -120,7 +112,7 @@ class BridgeClient:
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
         self.node.nmt.add_heartbeat_callback(self._liveness.on_heartbeat)
         self.node.emcy.add_callback(self._on_emcy)
-        self._subscribe_tpdos()
+        self._routes.attach(self.network)
         try:
             self.configure()
         except SsiBridgeError:
@@ -152,6 +144,7 @@ class BridgeClient:
                 self.sdo.read(0x1000)  # probe: a clear error when nobody answers
                 self.node.nmt.state = "PRE-OPERATIONAL"
                 self.sdo.configure_pdos(self.slots, images=self.transport == "pdo")
+                self._routes.release_maps(self.node)
                 self.sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
                 self.node.nmt.state = "OPERATIONAL"
             finally:
@@ -310,16 +303,12 @@ class BridgeClient:
             logger.warning("slot %d: process output not written: %s", slot, err)
 
     # -- network thread callbacks ------------------------------------------------------------
-    def _subscribe_tpdos(self) -> None:
-        assert self.node is not None
-        for slot in range(1, self.slots + 1):
-            self.node.tpdo[slot].add_callback(
-                lambda pdo, s=slot: self._on_image(s, bytes(pdo.data)))
-        for pdo_no, carried in position_pdos(self.slots):
-            self.node.tpdo[pdo_no].add_callback(
-                lambda pdo, c=carried: self.table.on_positions(c, bytes(pdo.data)))
+    # TPDOs arrive raw on their COB-IDs (client/receive.py), not through canopen's PdoMaps
+    def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
+                      timestamp: float) -> None:
+        self.table.on_positions(slots, data)
 
-    def _on_image(self, slot: int, data: bytes) -> None:
+    def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
         st = self.table.on_image(slot, data)
         if st.pulse_seq is None:  # re-checked under the lock; set_control arms it there
             return

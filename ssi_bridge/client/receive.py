@@ -1,0 +1,94 @@
+"""The master's receive path: frame counting and the TPDOs it configured, as raw frames.
+
+canopen hands a received PDO to its ``PdoMap`` (a condition variable, the callback list, the
+map object), and every frame passes the network's listeners. The bridge knows what its TPDOs
+carry because it mapped them itself (``client/sdo.py``, 000 Table 15): TPDO s = the 8-byte
+process input image of slot s (0x2000:s), TPDO 9.. = 0x6820 of a slot pair (Integer32 each).
+So :class:`TpdoRoutes` subscribes the client's handlers to those COB-IDs directly and, after
+every (re)configuration, takes canopen's ``PdoMap`` handlers that ``PdoMap.save`` subscribed
+off them again: each frame is handled once, from its raw bytes. The SDO configuration itself
+is unchanged. :class:`FrameListener` is canopen's network listener plus the frame counters.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from functools import partial
+
+import can
+import canopen
+from canopen.network import MessageListener
+
+from ssi_bridge.client.samples import ClientCounters
+from ssi_bridge.client.sdo import position_pdos
+from ssi_bridge.gateway.dictionary import tpdo_cob_base
+
+logger = logging.getLogger(__name__)
+
+#: a canopen network subscriber: (COB-ID, payload, receive timestamp)
+Subscriber = Callable[[int, bytearray, float], None]
+#: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
+ImageHandler = Callable[[int, int, bytearray, float], None]
+#: ``on_positions(slots, can_id, data, timestamp)``: an encoder default PDO arrived
+PositionHandler = Callable[[list[int], int, bytearray, float], None]
+
+
+class FrameListener(MessageListener):
+    """canopen's listener feeding the network, counting every frame on the way.
+
+    One listener per frame instead of canopen's plus a separate counter: the notifier calls
+    each listener for each frame of the bus.
+    """
+
+    def __init__(self, network: canopen.Network, counters: ClientCounters) -> None:
+        super().__init__(network)
+        self._counters = counters
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
+        counters = self._counters
+        counters.frames += 1
+        if msg.is_error_frame:
+            counters.can_errors += 1
+        MessageListener.on_message_received(self, msg)
+
+
+class TpdoRoutes:
+    """The client's handlers on the COB-IDs of the TPDOs it maps (000 Table 15).
+
+    :param node_id: the gateway's node id
+    :param slots: modules in the station (TPDO 1..slots carry the images)
+    :param on_image: called with the slot for TPDO s
+    :param on_positions: called with the slots carried for TPDO 9..12
+    """
+
+    def __init__(self, node_id: int, slots: int, on_image: ImageHandler,
+                 on_positions: PositionHandler) -> None:
+        self.routes: dict[int, Subscriber] = {}
+        #: PDO number of each route (the RemoteNode's map on the same COB-ID)
+        self.pdo_numbers: dict[int, int] = {}
+        for slot in range(1, slots + 1):
+            self._add(slot, node_id, partial(on_image, slot))
+        for pdo_no, carried in position_pdos(slots):
+            self._add(pdo_no, node_id, partial(on_positions, carried))
+
+    def _add(self, pdo_no: int, node_id: int, handler: Subscriber) -> None:
+        cob_id = tpdo_cob_base(pdo_no) + node_id
+        self.routes[cob_id] = handler
+        self.pdo_numbers[cob_id] = pdo_no
+
+    def attach(self, network: canopen.Network) -> None:
+        """Subscribe every route (once, before the PDOs are configured)."""
+        for cob_id, handler in self.routes.items():
+            network.subscribe(cob_id, handler)
+
+    def release_maps(self, node: canopen.RemoteNode) -> None:
+        """Take canopen's PdoMap handlers off the routed COB-IDs (after ``PdoMap.save``)."""
+        network = node.network
+        for cob_id, pdo_no in self.pdo_numbers.items():
+            handler = node.tpdo[pdo_no].on_message
+            if handler in network.subscribers.get(cob_id, ()):
+                network.unsubscribe(cob_id, handler)
+                logger.debug("TPDO%d 0x%03X: received raw, not through its PdoMap", pdo_no,
+                             cob_id)
