@@ -155,6 +155,31 @@ class WireMessage(can.Message):
 
     __slots__ = ()
 
+    @classmethod
+    def frame(cls, can_id: int, data: bytes | bytearray | Sequence[int] | None,
+              remote: bool = False) -> WireMessage:
+        """The frame canopen's ``Network.send_message`` sends, built field by field.
+
+        Equal in every field to ``Message(arbitration_id=can_id, is_extended_id=can_id >
+        0x7FF, data=data, is_remote_frame=remote)`` (checked by test_pdo_readers) at a third
+        of the cost of ``Message.__init__``'s keyword handling, paid once per frame sent.
+        """
+        msg = _new_message(cls)
+        payload = bytearray() if remote or data is None else bytearray(data)
+        msg.timestamp = 0.0
+        msg.arbitration_id = can_id
+        msg.is_extended_id = can_id > 0x7FF
+        msg.is_remote_frame = remote
+        msg.is_error_frame = False
+        msg.channel = None
+        msg.dlc = len(payload)
+        msg.data = payload
+        msg.is_fd = False
+        msg.is_rx = True
+        msg.bitrate_switch = False
+        msg.error_state_indicator = False
+        return msg
+
     def __deepcopy__(self, memo: dict[int, Any] | None) -> can.Message:
         # every field of can.Message (its __slots__; test_pdo_readers checks none is missed),
         # assigned directly: Message.__init__ with keywords costs twice as much per frame
@@ -188,8 +213,7 @@ class BridgeNetwork(canopen.Network):
         """Send one frame (raises ``can.CanError``, RuntimeError when not connected)."""
         if not self.bus:
             raise RuntimeError("Not connected to CAN bus")
-        frame = WireMessage(arbitration_id=can_id, is_extended_id=can_id > 0x7FF, data=data,
-                            is_remote_frame=remote)
+        frame = WireMessage.frame(can_id, data, remote)
         with self.send_lock:
             self.bus.send(frame)
         self.check()
@@ -206,12 +230,11 @@ class BridgeNetwork(canopen.Network):
         if not bus:
             raise RuntimeError("Not connected to CAN bus")
         failed: list[tuple[int, can.CanError]] = []
-        send = bus.send
+        send, frame = bus.send, WireMessage.frame
         with self.send_lock:
             for can_id, data in frames:
                 try:
-                    send(WireMessage(arbitration_id=can_id, is_extended_id=can_id > 0x7FF,
-                                     data=data))
+                    send(frame(can_id, data))
                 except can.CanError as err:
                     failed.append((can_id, err))
         self.check()
