@@ -1,0 +1,83 @@
+"""The client receives the TPDOs it maps as raw frames, once each, also after re-configuring.
+
+``client/receive.py``: the client's handlers sit on the COB-IDs of TPDO 1..n (process input
+images) and 9.. (slot-pair positions, 000 Table 15); canopen's PdoMap handlers, which
+``PdoMap.save`` subscribes during the SDO set-up, are taken off again.
+"""
+
+from __future__ import annotations
+
+import can
+from canopen.network import MessageListener
+
+from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.client.receive import FrameListener, TpdoRoutes
+from ssi_bridge.client.samples import ClientCounters
+from ssi_bridge.gateway.bus import BusConfig
+from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.module.registers import Reg
+from ssi_bridge.module.xn1ssi import Xn1Ssi
+
+from .conftest import ScriptedReader
+
+NODE = 5
+
+
+#: TPDO COB-IDs of a 3-slot station (000 Table 15): images 1-3, positions of slots 1+2, 3
+ROUTED = {0x185: 1, 0x285: 2, 0x385: 3, 0x1E5: 9, 0x2E5: 10}
+
+
+def _assert_routed(client: BridgeClient) -> None:
+    assert client.network is not None and client.node is not None
+    for cob_id, pdo_no in ROUTED.items():
+        handlers = client.network.subscribers.get(cob_id, [])
+        assert len(handlers) == 1, f"0x{cob_id:03X} has {len(handlers)} handlers"
+        assert handlers[0] != client.node.tpdo[pdo_no].on_message, "PdoMap still subscribed"
+
+
+def test_routes_cover_the_mapped_tpdos() -> None:
+    routes = TpdoRoutes(NODE, 3, lambda *a: None, lambda *a: None)
+    assert routes.pdo_numbers == ROUTED
+
+
+def test_one_handler_per_tpdo_after_connect_and_reconfigure(channel: str) -> None:
+    readers = [ScriptedReader(1000), ScriptedReader(2000), ScriptedReader(3000)]
+    config = BusConfig(channel=channel, node_id=NODE)
+    gateway = XnGateway(config, NODE, [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
+    client = BridgeClient(config, NODE, 3, sdo_timeout=0.3, handshake_timeout=0.5)
+    gateway.start()
+    try:
+        client.connect()
+        _assert_routed(client)
+        client.configure()
+        _assert_routed(client)
+        for value in (10, 20):
+            for r in readers:
+                r.value += value
+            client.sync()
+            assert client.wait_cycle(1.0), "cycle incomplete"
+            for slot, module in enumerate(gateway.modules, start=1):
+                sample = client.latest(slot)
+                assert sample is not None
+                assert sample.position == module.read_register(Reg.REG_SSI_POS)
+                assert sample.process_input == module.process_input()
+        assert client.latest(1).counter == client.latest(3).counter  # type: ignore[union-attr]
+    finally:
+        client.close()
+        gateway.stop()
+
+
+def test_frame_listener_counts_and_forwards() -> None:
+    seen: list[tuple[int, bytes]] = []
+
+    class Network:
+        def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
+            seen.append((can_id, bytes(data)))
+
+    counters = ClientCounters()
+    listener = FrameListener(Network(), counters)  # type: ignore[arg-type]
+    assert isinstance(listener, MessageListener)
+    listener(can.Message(arbitration_id=0x185, is_extended_id=False, data=b"\x01"))
+    listener(can.Message(is_error_frame=True))
+    assert counters.frames == 2 and counters.can_errors == 1
+    assert seen == [(0x185, b"\x01")], "the error frame must not be dispatched"
