@@ -121,6 +121,19 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """Receive one frame, as python-can's ``BusABC.recv``; None when ``timeout`` passed.
+
+        While neither bus filters and no received frame is to be dropped, ``BusABC.recv`` is
+        just the inner bus's receive step (a frame, or None after ``timeout``), so that step
+        is taken directly: this is the path of every frame the receive thread reads. (The
+        step skips python-can's level-9 "Received" trace of the ``can.bus`` logger.)
+        """
+        if (self._inner_steps and not self.drop_received and self._filters is None
+                and self._inner.filters is None):
+            return self._inner._recv_internal(timeout)[0]
+        return super().recv(timeout)
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inner = self._inner
         if self._inner_steps:

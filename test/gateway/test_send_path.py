@@ -103,6 +103,22 @@ def test_lossy_bus_keeps_the_inner_filters(channel: str) -> None:
         lossy.shutdown()
 
 
+def test_lossy_bus_keeps_its_own_filters(channel: str) -> None:
+    lossy = LossyBus(can.Bus(interface="virtual", channel=channel))
+    tx = can.Bus(interface="virtual", channel=channel)
+    try:
+        tx.send(can.Message(arbitration_id=0x185, is_extended_id=False, data=b"\x01"))
+        assert lossy.recv(1.0).arbitration_id == 0x185  # type: ignore[union-attr]
+        lossy.set_filters([{"can_id": 0x181, "can_mask": 0x7FF}])
+        for can_id in (0x182, 0x181):
+            tx.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=b"\x07"))
+        assert lossy.recv(1.0).arbitration_id == 0x181  # type: ignore[union-attr]
+        assert lossy.recv(0.02) is None
+    finally:
+        tx.shutdown()
+        lossy.shutdown()
+
+
 def test_lossy_bus_drops_received_frames_on_the_step_path(channel: str) -> None:
     lossy = LossyBus(can.Bus(interface="virtual", channel=channel), 1.0, drop_received=True)
     tx = can.Bus(interface="virtual", channel=channel)
