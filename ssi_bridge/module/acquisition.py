@@ -61,7 +61,7 @@ def extract(readout: LineReadout, para: Para1) -> Acquired:
                          invalid_msb=para.invalid_bits_msb, gray=para.ssi_code_gray,
                          max_bits=XN_MAX_FRAME_BITS)
     ok = para.dis_err_ssi or check_readout(readout, zero_test=True) is MasterStatus.OK
-    return Acquired(frame=frame, value=value, gray=bin_to_gray(value), ok=ok)
+    return Acquired(frame, value, bin_to_gray(value), ok)  # positional: built every cycle
 
 
 def ssi_status(frame: int, mask: int) -> tuple[int, bool]:
