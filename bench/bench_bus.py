@@ -8,10 +8,12 @@
 * CPU per cycle (``cycle_cpu_us``, 1 and 8 slots): ``time.process_time()`` (all threads of
   the process: client, gateway, bus) of ``sync()`` -> ``wait_cycle()`` back to back, with
   real encoders on SSI lines behind the modules as the ROS node wires them; the goal is a
-  share of the 1 ms period small enough to leave the node room (<= 250 / 800 us).
+  share of the 1 ms period small enough to leave the node room (<= 250 / 500 us).
 
 Prints one JSON object per line and appends them to bench/results/latest.jsonl; never fails.
-``--cpu`` runs only the CPU-per-cycle part.
+``--cpu`` runs only the CPU-per-cycle part; ``--cpu --runs N`` repeats it N times (a fresh
+station each time) and reports the median of the N means, the runs in the note: the box is
+shared and one run can be off by 1.5x.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ CYCLE_HZ = 1000.0
 CYCLE_SECONDS = 2.0
 CPU_CYCLES = 2000
 #: CPU budget per SYNC cycle (us) for 1 and 8 slots, the 1 kHz node's share for the bus
-CPU_GOAL_US = {1: 250.0, 8: 800.0}
+CPU_GOAL_US = {1: 250.0, 8: 500.0}
 
 
 def _emit(records: list[dict], metric: str, value: float, unit: str,
@@ -125,8 +127,22 @@ def pdo_cycle(records: list[dict]) -> None:
     _emit(records, "bus_pdo_cycle_8_slots_missed_fraction", missed / n, "fraction")
 
 
-def cycle_cpu(records: list[dict], slots: int) -> None:
+def cycle_cpu(records: list[dict], slots: int, runs: int = 1) -> None:
     """CPU time per sync -> all TPDOs received, gateway + client + modules in one process."""
+    results = [_cycle_cpu_run(slots, f"bench-cpu-{slots}-{run}") for run in range(runs)]
+    results.sort(key=lambda r: r[0])
+    mean_us, p50_us, p99_us, incomplete = results[len(results) // 2]
+    runs_note = (f"median of {runs} runs ({', '.join(f'{r[0]:.0f}' for r in results)} us), "
+                 if runs > 1 else "")
+    note = (f"process CPU per sync -> all TPDOs received, {slots} slot(s), {CPU_CYCLES} "
+            f"cycles back to back; {runs_note}p50 {p50_us:.0f} us, p99 {p99_us:.0f} us, "
+            f"{incomplete} incomplete; baseline = goal; lower is better")
+    _emit(records, f"bus_cycle_cpu_us_{slots}_slot{'s' if slots > 1 else ''}", mean_us, "us",
+          CPU_GOAL_US[slots], note)
+
+
+def _cycle_cpu_run(slots: int, channel: str) -> tuple[float, float, float, int]:
+    """One measurement: (mean, p50, p99 in us, incomplete cycles)."""
     from ssi_bridge.client.master import BridgeClient
     from ssi_bridge.encoder.families import make_encoder
     from ssi_bridge.encoder.motion import Sine
@@ -135,7 +151,7 @@ def cycle_cpu(records: list[dict], slots: int) -> None:
     from ssi_bridge.line.line import LineConfig, SsiLine
     from ssi_bridge.module.xn1ssi import Xn1Ssi
 
-    config = BusConfig(channel=f"bench-cpu-{slots}", node_id=NODE_ID)
+    config = BusConfig(channel=channel, node_id=NODE_ID)
     modules = [Xn1Ssi(SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0 + s)),
                               LineConfig(check_cable_table=False)), slot=s)
                for s in range(1, slots + 1)]
@@ -156,19 +172,16 @@ def cycle_cpu(records: list[dict], slots: int) -> None:
                 per_cycle.append(clock() - c0)
             total = clock() - t0
     per_cycle.sort()
-    mean_us = total / CPU_CYCLES * 1e6
-    note = (f"process CPU per sync -> all TPDOs received, {slots} slot(s), {CPU_CYCLES} "
-            f"cycles back to back; p50 {per_cycle[len(per_cycle) // 2] * 1e6:.0f} us, "
-            f"p99 {per_cycle[int(len(per_cycle) * 0.99)] * 1e6:.0f} us, {incomplete} "
-            f"incomplete; baseline = goal; lower is better")
-    _emit(records, f"bus_cycle_cpu_us_{slots}_slot{'s' if slots > 1 else ''}", mean_us, "us",
-          CPU_GOAL_US[slots], note)
+    return (total / CPU_CYCLES * 1e6, per_cycle[len(per_cycle) // 2] * 1e6,
+            per_cycle[int(len(per_cycle) * 0.99)] * 1e6, incomplete)
 
 
 def main() -> None:
     logging.basicConfig(level=logging.ERROR)
     records: list[dict] = []
-    cpu_only = sys.argv[1:] == ["--cpu"]
+    args = sys.argv[1:]
+    cpu_only = "--cpu" in args
+    runs = int(args[args.index("--runs") + 1]) if "--runs" in args else 1
     try:
         if not cpu_only:
             baseline = bare_sdo_us()
@@ -176,7 +189,7 @@ def main() -> None:
             bridge_us(records, baseline)
             pdo_cycle(records)
         for slots in (1, 8):
-            cycle_cpu(records, slots)
+            cycle_cpu(records, slots, runs)
     except Exception as err:  # a benchmark reports, it never fails the run
         print(json.dumps({"metric": "bus_benchmark_error", "value": 0, "unit": "",
                           "error": repr(err)}), flush=True)
