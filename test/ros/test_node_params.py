@@ -94,3 +94,29 @@ def test_duplicate_slots_are_refused_at_start(start_node):
     node = start_node({"joints": ["a", "b"], "a.slot": 2, "b.slot": 2})
     assert node.proc.wait(30) == 1, node.log()
     assert "share a module slot" in node.log(), node.log()
+
+
+def test_publish_rate_change_takes_effect_at_once(running, probe):
+    import time
+
+    from sensor_msgs.msg import JointState
+
+    node = running({"publish_rate": 100.0})
+    msgs = probe.subscribe(JointState, node.topic("joint_states"))
+    v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=20.0)
+    res = probe.call(SetParameters, node.topic("~/set_parameters"),
+                     SetParameters.Request(parameters=[Parameter(name="publish_rate", value=v)]))
+    assert res.results[0].successful, res.results[0].reason
+    time.sleep(0.3)
+    start, t0 = len(msgs), time.monotonic()
+    time.sleep(2.0)
+    rate = (len(msgs) - start) / (time.monotonic() - t0)
+    assert abs(rate - 20.0) <= 2.0, f"{rate:.1f} Hz after setting publish_rate to 20"
+
+
+def test_read_only_parameters_cannot_change_at_run_time(running, probe):
+    node = running()
+    v = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=5)
+    res = probe.call(SetParameters, node.topic("~/set_parameters"),
+                     SetParameters.Request(parameters=[Parameter(name="bus.node_id", value=v)]))
+    assert not res.results[0].successful and "read-only" in res.results[0].reason.lower()
