@@ -195,20 +195,22 @@ class PdoEngine:
     # -- data ---------------------------------------------------------------------------------
     def on_sync(self) -> None:
         """Send the TPDOs due after this SYNC's module cycle, as one batch in PDO order."""
-        count = self._sync_count = self._sync_count % 240 + 1
+        count = self._sync_count = self._sync_count % SYNC_TYPE_MAX + 1
         frames: list[tuple[int, bytes]] = []
-        for pdo in self._active:
-            trans = pdo.trans_type
-            if trans <= SYNC_TYPE_MAX:
-                if trans == 0 or count % trans == 0:
-                    frames.append((pdo.cob_id, pdo.read()))
-            elif trans >= 254:
-                data = pdo.read()
-                if data != pdo.last:
-                    pdo.last = data
-                    frames.append((pdo.cob_id, data))
-        if frames:
-            self._send(frames)
+        try:
+            for pdo in self._active:
+                trans = pdo.trans_type
+                if trans <= SYNC_TYPE_MAX:
+                    if trans == 0 or count % trans == 0:
+                        frames.append((pdo.cob_id, pdo.read()))
+                elif trans >= 254:
+                    data = pdo.read()
+                    if data != pdo.last:
+                        pdo.last = data
+                        frames.append((pdo.cob_id, data))
+        finally:  # a reader that raises still lets the TPDOs before it go, as frame by frame
+            if frames:
+                self._send(frames)
 
     def apply_pending(self) -> None:
         """Write the data of synchronous RPDOs received since the last SYNC."""
