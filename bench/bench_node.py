@@ -207,7 +207,9 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
     }
 
 
-def node_cmd(n_joints: int, domain_id: int, work: Path) -> list[str]:
+def node_cmd(n_joints: int, domain_id: int, work: Path,
+             extra: dict | None = None) -> list[str]:
+    """The installed node with ``n_joints`` simulated encoders at RATE_HZ (+ ``extra`` params)."""
     import yaml
 
     names = [f"j{i + 1}" for i in range(n_joints)]
@@ -216,7 +218,8 @@ def node_cmd(n_joints: int, domain_id: int, work: Path) -> list[str]:
                     "storage_path": str(work / f"bank{n_joints}" / "retentive.json")}
     for i, name in enumerate(names):
         params[f"{name}.slot"] = i + 1
-    pfile = work / f"params{n_joints}.yaml"
+    params.update(extra or {})
+    pfile = work / f"params{n_joints}{'_x' if extra else ''}.yaml"
     pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     return [str(NODE_EXE), "--ros-args", "--params-file", str(pfile),
             "-r", f"__ns:={NODE_NS}"]

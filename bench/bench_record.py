@@ -117,9 +117,31 @@ def bench_replay(tmp: Path) -> None:
         rclpy.try_shutdown()
 
 
+def bench_node_recording(tmp: Path) -> None:
+    """The node's CPU at 1 kHz (1 encoder) with recording on vs off, measured in one run.
+
+    Uses bench_node.py's harness (installed node + subscriber process); the recording also
+    builds ~/status every cycle, which is part of what recording costs.
+    """
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_node as bn
+
+    domain_id = bn._domain_id()
+    env = bn._env(domain_id)
+    topic = f"{bn.NODE_NS}/joint_states"
+    off = bn.measure("rec_off", bn.node_cmd(1, domain_id, tmp), topic, env, tmp)
+    on = bn.measure("rec_on", bn.node_cmd(1, domain_id, tmp, {
+        "record.enabled": True, "record.root": str(tmp / "sessions")}), topic, env, tmp)
+    emit("node_recording_cpu_s_per_s", on["cpu_s_per_s"], "s/s", off["cpu_s_per_s"],
+         "node process CPU per second at 1 kHz with recording on; baseline: recording off, "
+         "same run; lower is better")
+    emit("node_recording_rate_hz", on["rate_hz"], "Hz", off["rate_hz"],
+         "joint_states received per second with recording on; baseline: off; higher is better")
+
+
 def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_record_") as tmp:
-        for bench in (bench_write, bench_replay):
+        for bench in (bench_write, bench_replay, bench_node_recording):
             try:
                 bench(Path(tmp))
             except Exception as err:  # a benchmark reports, it never fails the run
