@@ -97,12 +97,16 @@ class SlotTable:
         except KeyError:
             raise KeyError(f"slot {slot} not configured (1..{self.slots})") from None
 
-    def on_sync(self) -> float:
-        """Record a SYNC about to be sent; return its time."""
+    def on_sync(self, at: float | None = None) -> float:
+        """Record a SYNC about to be sent (or, with ``at``, one observed then); return its time.
+
+        ``at`` is a ``time.monotonic()`` instant: a listen-only master stamps the cycle with
+        the time the SYNC of another master was on the wire, not with when it handled it.
+        """
         with self.cond:
             self.sync_seq += 1
             self._due = 2 * self.slots
-            self.sync_time = self.last_sync_monotonic = time.monotonic()
+            self.sync_time = self.last_sync_monotonic = time.monotonic() if at is None else at
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
             return self.sync_time

@@ -1,0 +1,243 @@
+"""ListenOnlyClient: a master that only watches the bus another master (or a log) drives.
+
+For debugging a station that a PLC drives, or a recorded CAN log replayed onto a bus, the
+bridge must read what is on the wire without touching it: no NMT, no SDO, no SYNC, no RPDO.
+The listener assumes the PDO layout the bridge's own master configures (``docs/canopen.md``,
+000 Table 15): TPDO s = process input image of slot s (0x2000:s), TPDO 9.. = 0x6820 of slot
+pairs, SYNC on 0x080. It fills the same :class:`~ssi_bridge.client.samples.SlotTable` as
+:class:`~ssi_bridge.client.master.BridgeClient`, so ``latest(slot)`` gives the same
+:class:`~ssi_bridge.client.samples.ChannelSample`, stamped with the observed SYNC's time.
+
+Each observed SYNC opens a cycle; it is reported once through :meth:`next_cycle`, as
+complete when every slot's image and position arrived, or as incomplete when the next SYNC
+comes first. Times: a frame's python-can timestamp (``time.time()`` base, the time it was on
+the wire; a replayed log carries its own) is moved into the ``time.monotonic()`` base of
+``ChannelSample.sync_time`` by subtracting its age when it is handled.
+
+Liveness: the gateway counts as alive while a heartbeat (0x700 + id) or one of its TPDOs
+was seen within ``heartbeat_timeout``. Every operation that would send is refused with
+:data:`LISTEN_ONLY`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import can
+
+from ssi_bridge.client.receive import TpdoRoutes
+from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
+from ssi_bridge.exceptions import BusError
+from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.dictionary import MAX_SLOTS
+
+logger = logging.getLogger(__name__)
+
+#: why every sending operation is refused
+LISTEN_ONLY = "listen-only: another master drives this bus"
+#: CiA 301 COB-IDs the listener watches besides the TPDOs
+SYNC_COB_ID = 0x080
+EMCY_COB_BASE = 0x080
+HEARTBEAT_COB_BASE = 0x700
+#: observed cycles kept for :meth:`ListenOnlyClient.next_cycle` (older ones are dropped)
+KEEP_CYCLES = 256
+
+
+@dataclass(frozen=True)
+class ObservedCycle:
+    """One SYNC seen on the bus and whether every configured slot answered it."""
+
+    #: running number of the SYNC (1 = first observed)
+    seq: int
+    #: time.monotonic() instant the SYNC was on the wire (s): the latch time
+    sync_time: float
+    #: True when every slot's image and position arrived before the next SYNC
+    complete: bool
+
+
+class ListenOnlyClient(can.Listener):
+    """Passive master for a station of ``slots`` XN-1SSI modules behind gateway ``node_id``.
+
+    :param bus: a :class:`BusConfig` (the listener opens its own bus) or an open bus it takes
+        over (and shuts down on :meth:`close`)
+    :param node_id: the gateway's node id
+    :param slots: number of modules (1-8)
+    :param heartbeat_timeout: the gateway is silent after this long without its heartbeat
+        or a TPDO (s)
+    """
+
+    def __init__(self, bus: BusConfig | can.BusABC, node_id: int, slots: int, *,
+                 heartbeat_timeout: float = 0.2) -> None:
+        if not 1 <= slots <= MAX_SLOTS:
+            raise ValueError(f"slots {slots} outside 1-{MAX_SLOTS}")
+        self._source: BusConfig | can.BusABC | None = bus
+        self.node_id = node_id
+        self.slots = slots
+        self.heartbeat_timeout = heartbeat_timeout
+        self.counters = ClientCounters()
+        self.table = SlotTable(slots)
+        #: NMT state of the last heartbeat seen, None before the first
+        self.nmt_state: int | None = None
+        self._bus: can.BusABC | None = None
+        self._notifier: can.Notifier | None = None
+        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions).routes
+        self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
+        self._emcy_id = EMCY_COB_BASE + node_id
+        self._last_seen = -float("inf")
+        self._open: tuple[int, float] | None = None  # (seq, time) of a cycle not yet reported
+        self._cycles: deque[ObservedCycle] = deque(maxlen=KEEP_CYCLES)
+        self._cycles_cond = threading.Condition()
+
+    # -- life cycle -------------------------------------------------------------------------
+    def connect(self) -> None:
+        """Open the bus and start listening (sends nothing)."""
+        if self._bus is not None:
+            return
+        if isinstance(self._source, BusConfig):
+            self._bus = open_bus(self._source)
+        elif self._source is None:
+            raise BusError("this listener's bus was handed over and already shut down")
+        else:
+            self._bus, self._source = self._source, None
+        self._notifier = can.Notifier(self._bus, [self], timeout=0.05)
+        logger.info("listening to gateway node %d (%d slot(s)) without driving the bus",
+                    self.node_id, self.slots)
+
+    def close(self) -> None:
+        """Stop listening and shut the bus down; wakes :meth:`next_cycle` waiters."""
+        notifier, self._notifier = self._notifier, None
+        if notifier is not None:
+            notifier.stop()
+        bus, self._bus = self._bus, None
+        if bus is not None:
+            bus.shutdown()
+        with self._cycles_cond:
+            self._cycles_cond.notify_all()
+
+    def __enter__(self) -> ListenOnlyClient:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def network(self) -> can.BusABC | None:
+        """The bus while listening (None when closed), as ``BridgeClient.network`` is."""
+        return self._bus
+
+    # -- observed data ----------------------------------------------------------------------
+    def latest(self, slot: int) -> ChannelSample | None:
+        """The newest sample of ``slot`` (None before the first complete one)."""
+        return self.table.latest(slot)
+
+    def wait_cycle(self, timeout: float) -> bool:
+        """True once every slot's image and position arrived since the last observed SYNC."""
+        return self.table.wait_cycle(timeout)
+
+    def next_cycle(self, timeout: float) -> ObservedCycle | None:
+        """The oldest observed cycle not yet returned; None after ``timeout`` s without one."""
+        with self._cycles_cond:
+            if not self._cycles_cond.wait_for(lambda: self._cycles or self._bus is None,
+                                              timeout):
+                return None
+            return self._cycles.popleft() if self._cycles else None
+
+    @property
+    def gateway_alive(self) -> bool:
+        """True while a heartbeat or TPDO of the gateway was seen within the timeout."""
+        return (self._bus is not None
+                and time.monotonic() - self._last_seen <= self.heartbeat_timeout)
+
+    # -- refused: a listener never sends -----------------------------------------------------
+    def _refuse(self, what: str) -> BusError:
+        return BusError(f"{what} refused: {LISTEN_ONLY}")
+
+    def sync(self) -> float:
+        """Refused: the other master produces the SYNC."""
+        raise self._refuse("SYNC")
+
+    def configure(self) -> None:
+        """Refused: the other master configured the gateway."""
+        raise self._refuse("gateway configuration")
+
+    def read_register(self, slot: int, addr: int) -> int:
+        """Refused: the register handshake writes the process output image."""
+        raise self._refuse(f"slot {slot} register 0x{addr:02X} read handshake")
+
+    def write_register(self, slot: int, addr: int, value: int) -> None:
+        """Refused: the register handshake writes the process output image."""
+        raise self._refuse(f"slot {slot} register 0x{addr:02X} write handshake")
+
+    def set_control(self, slot: int, **bits: bool) -> None:
+        """Refused: control bits are part of the process output image."""
+        raise self._refuse(f"slot {slot} control bits")
+
+    def edit_output(self, slot: int, edit: object) -> None:
+        """Refused: the process output belongs to the other master."""
+        raise self._refuse(f"slot {slot} process output")
+
+    def read_object(self, index: int, subindex: int = 0) -> int | bytes | str:
+        """Refused: an SDO request is a frame on the bus."""
+        raise self._refuse(f"SDO upload of 0x{index:04X}:{subindex:02X}")
+
+    def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
+        """Refused: an SDO request is a frame on the bus."""
+        raise self._refuse(f"SDO download of 0x{index:04X}:{subindex:02X}")
+
+    # -- notifier thread ----------------------------------------------------------------------
+    def on_message_received(self, msg: can.Message) -> None:
+        """Dispatch one frame (notifier thread): SYNC, TPDOs, heartbeat, EMCY."""
+        counters = self.counters
+        counters.frames += 1
+        if msg.is_error_frame:
+            counters.can_errors += 1
+            return
+        if msg.is_remote_frame or msg.is_extended_id:
+            return
+        can_id = msg.arbitration_id
+        if can_id == SYNC_COB_ID:
+            self._on_sync(msg.timestamp)
+            return
+        handler = self._routes.get(can_id)
+        if handler is not None:
+            self._last_seen = time.monotonic()
+            handler(can_id, msg.data, msg.timestamp)
+            if self._open is not None and self.table.cycle_complete():
+                self._report(*self._open, True)
+            return
+        if can_id == self._heartbeat_id and msg.dlc >= 1:
+            self._last_seen = time.monotonic()
+            self.nmt_state = msg.data[0] & 0x7F
+        elif can_id == self._emcy_id:
+            counters.emergencies += 1
+
+    def on_error(self, exc: Exception) -> None:
+        """A receive error of the bus: counted, the listener keeps going."""
+        self.counters.can_errors += 1
+        logger.warning("listen-only receive error: %s", exc)
+
+    def _on_sync(self, timestamp: float) -> None:
+        if self._open is not None:
+            self._report(*self._open, False)
+        now = time.monotonic()
+        at = now - (time.time() - timestamp) if timestamp else now
+        self.counters.syncs += 1
+        self._open = (self.table.sync_seq + 1, self.table.on_sync(at))
+
+    def _report(self, seq: int, sync_time: float, complete: bool) -> None:
+        self._open = None
+        with self._cycles_cond:
+            self._cycles.append(ObservedCycle(seq, sync_time, complete))
+            self._cycles_cond.notify_all()
+
+    def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
+        self.table.on_image(slot, data)
+
+    def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
+                      timestamp: float) -> None:
+        self.table.on_positions(slots, data)
