@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 from collections import deque
 from typing import Any
@@ -23,7 +24,9 @@ from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
+from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.client.player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
@@ -34,6 +37,7 @@ from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
+from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
@@ -55,6 +59,12 @@ class SsiBridgeNode(Node):
         super().__init__("ssi_bridge", **kwargs)
         logbridge.install(self.get_logger())
         self.settings: NodeSettings = declare_parameters(self)
+        if self.settings.replay_can_log:
+            # the log is played onto a channel of this process only; the sniffer of a
+            # re-recording and the diagnostics' hardware_id name that channel
+            self.settings = dataclasses.replace(
+                self.settings, bus_interface="virtual",
+                bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
         s = self.settings
         self._t0 = time.monotonic()
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
@@ -70,11 +80,19 @@ class SsiBridgeNode(Node):
             self.gateway.start()
             self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
         n_slots = max(j.slot for j in s.joints)
-        self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
-        self.client.connect()
-        for joint in s.joints:
-            self._configure_para1(joint)
-            self.client.edit_output(joint.slot, idle_read)
+        self.player: CanLogPlayer | None = None
+        self.client: BridgeClient | ListenOnlyClient
+        if s.listen_only:
+            self.client = ListenOnlyClient(self.bus_config, s.node_id, n_slots)
+            self.client.connect()
+            if s.replay_can_log:
+                self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
+        else:
+            self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
+            self.client.connect()
+            for joint in s.joints:
+                self._configure_para1(joint)
+                self.client.edit_output(joint.slot, idle_read)
         self.scales = {j.name: self._scale(j) for j in s.joints}
         self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
                          for j in s.joints}
@@ -93,7 +111,14 @@ class SsiBridgeNode(Node):
 
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._diag_group = MutuallyExclusiveCallbackGroup()
-        self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
+        self.cycle: CycleThread | ObservedCycleThread
+        if isinstance(self.client, ListenOnlyClient):
+            self.cycle = ObservedCycleThread(
+                self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
+                ended=self.player.finished if self.player is not None else None,
+                on_end=self._on_replay_end)
+        else:
+            self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
         self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
@@ -108,10 +133,15 @@ class SsiBridgeNode(Node):
                 self.get_logger().error(self.recorder.error)
         self._cycle_started = time.monotonic()
         self.cycle.start()
+        if self.player is not None:
+            self.player.start()
+        mode = ("simulated station" if s.simulation else
+                f"replay of {s.replay_can_log}" if s.replay_can_log else
+                "listen-only" if s.listen_only else "real station")
         self.get_logger().info(
             f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
-            f"({'simulated station' if s.simulation else 'real station'}); publishing "
+            f"({mode}); publishing "
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
@@ -184,6 +214,42 @@ class SsiBridgeNode(Node):
         t_sync = self.client.sync()
         self.client.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
         self._cycle_times.append(t_sync)
+        self._publish_cycle(t_sync)
+
+    def _on_observed(self, cycle: ObservedCycle) -> None:
+        """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
+        if not self.context.ok():
+            return
+        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
+        try:
+            self._publish_cycle(cycle.sync_time)
+        except RCLError:
+            if self.context.ok():
+                raise
+
+    def _on_quiet(self) -> None:
+        """Listen-only: a period without SYNC counts as a stale cycle for every joint."""
+        for counters in self.counters.values():
+            counters.stale_cycles += 1
+            counters.consecutive_stale += 1
+        levels = self._levels()
+        if self._last_levels and levels != self._last_levels:
+            self.publish_diagnostics()
+        self._last_levels = levels
+
+    def _on_replay_end(self) -> None:
+        """The replayed log is over: say so; exit (0) if ``replay.exit_at_end``."""
+        assert self.player is not None
+        how = f"stopped: {self.player.error}" if self.player.error else "ended"
+        self.get_logger().info(
+            f"replay of {self.player.path} {how} after {self.player.frames} frames"
+            + ("; exiting (replay.exit_at_end)" if self.settings.replay_exit_at_end else
+               "; still running, diagnostics go STALE"))
+        if self.settings.replay_exit_at_end:
+            self.context.try_shutdown()
+
+    def _publish_cycle(self, t_sync: float) -> None:
+        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (monotonic)."""
         stamp_ns = self._stamp_ns(t_sync)
         stamp = time_msg(stamp_ns)
         js = JointState()
@@ -329,6 +395,8 @@ class SsiBridgeNode(Node):
         """Stop recording, stop the bus side; safe to call twice."""
         logbridge.uninstall()
         self.cycle.stop()
+        if self.player is not None:
+            self.player.stop()
         self.recorder.stop()
         self.client.close()
         if self.gateway is not None:

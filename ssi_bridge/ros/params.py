@@ -77,6 +77,17 @@ class NodeSettings:
     record_path: str = ""
     record_compression: str = "zstd"
     record_can_log: bool = False
+    #: observe another master's traffic (or a replayed log) instead of driving the bus
+    bus_listen_only: bool = False
+    #: a CAN log (python-can format) to replay on a private virtual channel; implies listen-only
+    replay_can_log: str = ""
+    replay_rate: float = 1.0
+    replay_exit_at_end: bool = False
+
+    @property
+    def listen_only(self) -> bool:
+        """True when the node only observes the bus (``bus.listen_only`` or a replay)."""
+        return self.bus_listen_only or bool(self.replay_can_log)
 
 
 def _describe(description: str, *, read_only: bool = False,
@@ -113,6 +124,20 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "bus.bitrate": (500_000, _describe(
         "CAN bit rate in bit/s (CiA 301 rates; ignored by the virtual interface)",
         read_only=True, int_range=(10_000, 1_000_000))),
+    "bus.listen_only": (False, _describe(
+        "Only observe the bus another master drives: no NMT, SDO, SYNC or RPDO; one cycle is "
+        "published per observed SYNC; register services refuse. Needs simulation:=false",
+        read_only=True)),
+    "replay.can_log": ("", _describe(
+        "Run on a recorded CAN log (e.g. <bag>/can_0.log) instead of a bus: it is played onto "
+        "a private virtual channel and observed listen-only. Needs simulation:=false",
+        read_only=True)),
+    "replay.rate": (1.0, _describe(
+        "Speed factor of the log replay (2.0 = twice as fast); stamps keep the logged spacing",
+        read_only=True, float_range=(0.01, 100.0))),
+    "replay.exit_at_end": (False, _describe(
+        "Exit 0 when the replayed log ends (default: log it and keep running, diagnostics "
+        "go STALE)", read_only=True)),
     "bus.node_id": (1, _describe("CANopen node id of the XN-GW-CANOPEN gateway",
                                  read_only=True, int_range=(1, 127))),
     "storage_path": ("", _describe(
@@ -219,6 +244,10 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
     if values["record.compression"] not in ("zstd", "lz4", "none"):
         raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
+    for flag in ("bus.listen_only", "replay.can_log"):
+        if values[flag] and values["simulation"]:
+            raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
+                              "this node to drive its bus")
     return NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
@@ -228,4 +257,6 @@ def declare_parameters(node: Node) -> NodeSettings:
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
-        record_can_log=values["record.can_log"])
+        record_can_log=values["record.can_log"], bus_listen_only=values["bus.listen_only"],
+        replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
+        replay_exit_at_end=values["replay.exit_at_end"])

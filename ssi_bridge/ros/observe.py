@@ -1,0 +1,80 @@
+"""The listen-only node's cycle: one published cycle per SYNC another master (or a log) sent.
+
+In listen-only mode (``bus.listen_only`` or ``replay.can_log``) the node must not produce
+SYNC, so :class:`~ssi_bridge.ros.cycle.CycleThread` is replaced by this thread: it takes each
+cycle the :class:`~ssi_bridge.client.listener.ListenOnlyClient` observed and hands it to the
+node. Each ``period`` without a SYNC counts as a quiet cycle (the joints go STALE after
+``stale_cycles`` of them, as when the real cycle got no TPDO). When a replayed log has ended
+and the bus is quiet, ``on_end`` runs once.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
+
+logger = logging.getLogger(__name__)
+
+
+class ObservedCycleThread:
+    """Call ``step(cycle)`` per observed SYNC, ``quiet()`` per silent period, until stopped.
+
+    :param client: the listener whose cycles are taken
+    :param period: seconds without a SYNC that count as one quiet cycle (1 / publish_rate);
+        may be changed at run time
+    :param step: called with each observed cycle, in order
+    :param quiet: called once per silent ``period``
+    :param ended: set when the traffic source has no more frames (a log replay), or None
+    :param on_end: called once after ``ended`` is set and the last cycle was handled
+    """
+
+    def __init__(self, client: ListenOnlyClient, period: float,
+                 step: Callable[[ObservedCycle], None], quiet: Callable[[], None], *,
+                 ended: threading.Event | None = None,
+                 on_end: Callable[[], None] | None = None) -> None:
+        if not period > 0:
+            raise ValueError(f"cycle period {period} s must be > 0")
+        self.period = period
+        self._client = client
+        self._step = step
+        self._quiet = quiet
+        self._ended = ended
+        self._on_end = on_end
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="ssi_observe", daemon=True)
+        #: cycles handed to ``step`` and silent periods seen
+        self.cycles = 0
+        self.quiet_periods = 0
+
+    def start(self) -> None:
+        """Start the thread (once)."""
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Ask the thread to end and wait for the running step to finish."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        end_reported = False
+        while not self._stop.is_set():
+            cycle = self._client.next_cycle(self.period)
+            if self._stop.is_set():
+                return
+            try:
+                if cycle is not None:
+                    self.cycles += 1
+                    self._step(cycle)
+                    continue
+                self.quiet_periods += 1
+                self._quiet()
+                if (not end_reported and self._ended is not None and self._ended.is_set()
+                        and self._on_end is not None):
+                    end_reported = True
+                    self._on_end()
+            except Exception:  # noqa: BLE001 - the loop must outlive one bad cycle
+                logger.exception("observed cycle failed; continuing with the next one")

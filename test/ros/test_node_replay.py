@@ -1,0 +1,111 @@
+"""Log replay: a session's CAN log, recorded from a simulated node, drives a second node.
+
+Both nodes are the installed executable in their own process on real DDS; the second runs
+with ``simulation: false`` and ``replay.can_log`` and must publish what the first one did.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+from ssi_bridge_msgs.srv import InjectFault, ReadRegister
+
+#: GENERIC default encoder: 13 bits per revolution, 12 bits of revolutions (REG_SSI_POS scale)
+STEPS, TURNS = 8192, 4096
+SPEED = 0.25  # rev/s
+STALE = 3
+
+
+def _counts(position: float) -> int:
+    return round(position * STEPS / (2 * math.pi))
+
+
+@pytest.fixture
+def recorded_log(running, probe, tmp_path: Path) -> tuple[Path, set[int]]:
+    """A ~2-3 s session with can_log from a simulated node; its log and published counts."""
+    root = tmp_path / "rec"
+    node = running({"record.enabled": True, "record.can_log": True, "record.root": str(root),
+                    "record.path": "session", "joint1.motion.kind": "constant",
+                    "joint1.motion.velocity": SPEED})
+    seen = probe.subscribe(JointState, node.topic("joint_states"))
+    probe.wait_for(lambda: len(seen) >= 200, 20.0, "200 simulated joint_states", node)
+    assert node.stop() == 0, node.log()[-3000:]
+    log = root / "session" / "can_0.log"
+    assert log.is_file() and log.stat().st_size > 0, f"no CAN log in {sorted(root.rglob('*'))}"
+    return log, {_counts(m.position[0]) for _, m in seen}
+
+
+def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node, probe) -> None:
+    log, simulated = recorded_log
+    node = start_node({"simulation": False, "replay.can_log": str(log),
+                       "joint1.steps_per_rev": STEPS, "joint1.revolutions": TURNS,
+                       "bus.node_id": 1})
+    msgs = probe.subscribe(JointState, node.topic("joint_states"))
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    probe.wait_for(lambda: len(msgs) >= 30, 20.0, "replayed joint_states", node)
+
+    read = probe.call(ReadRegister, node.topic("~/read_register"),
+                      ReadRegister.Request(address=0))
+    assert not read.success
+    assert "listen-only: another master drives this bus" in read.message, read.message
+    fault = probe.call(InjectFault, node.topic("~/inject_fault"),
+                       InjectFault.Request(kind=1, joint="joint1"))
+    assert not fault.success and "simulation" in fault.message, fault.message
+
+    probe.wait_for(lambda: "ended after" in node.log(), 20.0, "the end of the replay", node)
+    n_at_end = len(msgs)
+
+    def joint_stale() -> bool:
+        for _, arr in diags[-5:]:
+            for st in arr.status:
+                level = st.level[0] if isinstance(st.level, bytes) else st.level
+                if st.name == "ssi_bridge: joint1" and level == STALE:
+                    return True
+        return False
+
+    probe.wait_for(joint_stale, 10.0, "joint1 diagnostics STALE after the log ended", node)
+    assert node.proc.poll() is None, "the node must keep running after the log ended"
+    assert len(msgs) - n_at_end <= 2, "no joint_states without observed SYNCs"
+
+    replayed = [m for _, m in msgs]
+    counts = [_counts(m.position[0]) for m in replayed]
+    # every replayed position was published by the simulated node (same REG_SSI_POS, scale)
+    inside = [c for c in counts if min(simulated) <= c <= max(simulated)]
+    missing = [c for c in inside if c not in simulated]
+    assert len(replayed) >= 150, f"only {len(replayed)} replayed cycles"
+    assert len(inside) >= 50 and len(missing) <= 2, (len(inside), missing[:10])
+    # at the logged rate (100 Hz), stamped with the logged SYNC spacing
+    stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in replayed]
+    spacing = statistics.median(b - a for a, b in zip(stamps, stamps[1:]))
+    assert spacing == pytest.approx(0.01, abs=0.001), spacing
+    velocities = [m.velocity[0] for m in replayed[10:] if math.isfinite(m.velocity[0])]
+    assert velocities, "no velocity estimate"
+    assert statistics.median(velocities) == pytest.approx(2 * math.pi * SPEED, rel=0.03)
+    assert node.stop() == 0
+
+
+def test_replay_exits_at_the_end_when_asked(recorded_log, start_node) -> None:
+    log, _ = recorded_log
+    node = start_node({"simulation": False, "replay.can_log": str(log), "replay.rate": 4.0,
+                       "replay.exit_at_end": True})
+    assert node.proc.wait(30) == 0, node.log()[-3000:]
+    assert "exiting (replay.exit_at_end)" in node.log()
+
+
+@pytest.mark.parametrize("flag, value", [("bus.listen_only", True),
+                                         ("replay.can_log", "/nowhere/can_0.log")])
+def test_listen_only_needs_real_mode(start_node, flag: str, value: object) -> None:
+    node = start_node({flag: value})
+    assert node.proc.wait(30) == 1
+    assert f"{flag} needs simulation:=false" in node.log(), node.log()[-2000:]
+
+
+def test_replay_of_a_missing_log_is_refused(start_node, tmp_path: Path) -> None:
+    node = start_node({"simulation": False, "replay.can_log": str(tmp_path / "none.log")})
+    assert node.proc.wait(30) == 1
+    assert "does not exist" in node.log(), node.log()[-2000:]
