@@ -11,6 +11,7 @@ import statistics
 from pathlib import Path
 
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault, ReadRegister
@@ -89,12 +90,19 @@ def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node,
     assert node.stop() == 0
 
 
-def test_replay_exits_at_the_end_when_asked(recorded_log, start_node) -> None:
+def test_replay_exits_at_the_end_when_asked_and_records_again(recorded_log, start_node,
+                                                              tmp_path: Path) -> None:
     log, _ = recorded_log
+    root = tmp_path / "again"
     node = start_node({"simulation": False, "replay.can_log": str(log), "replay.rate": 4.0,
-                       "replay.exit_at_end": True})
+                       "replay.exit_at_end": True, "record.enabled": True,
+                       "record.root": str(root), "record.path": "replayed"})
     assert node.proc.wait(30) == 0, node.log()[-3000:]
     assert "exiting (replay.exit_at_end)" in node.log()
+    info = yaml.safe_load((root / "replayed" / "metadata.yaml").read_text())
+    counts = {t["topic_metadata"]["name"]: t["message_count"]
+              for t in info["rosbag2_bagfile_information"]["topics_with_message_count"]}
+    assert counts.get("/joint_states", 0) >= 150, counts
 
 
 @pytest.mark.parametrize("flag, value", [("bus.listen_only", True),
