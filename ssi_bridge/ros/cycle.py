@@ -16,7 +16,28 @@ from collections.abc import Callable
 logger = logging.getLogger(__name__)
 
 
-class CycleThread:
+class LoopThread:
+    """A daemon thread running ``_run`` until :meth:`stop`; the loops of the node share it."""
+
+    def __init__(self, name: str) -> None:
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        """Start the thread (once)."""
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Ask the thread to end and wait for the running step to finish."""
+        self._stop.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+
+class CycleThread(LoopThread):
     """Call ``step()`` every ``period`` seconds on an absolute schedule until stopped.
 
     A step that ends less than half a period late runs the next cycle at once; one that
@@ -28,24 +49,13 @@ class CycleThread:
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not period > 0:
             raise ValueError(f"cycle period {period} s must be > 0")
+        super().__init__(name)
         self.period = period
         self._step = step
         self._clock = clock
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         #: cycles run and cycles skipped because a step overran its slot
         self.cycles = 0
         self.missed = 0
-
-    def start(self) -> None:
-        """Start the thread (once)."""
-        self._thread.start()
-
-    def stop(self, timeout: float = 2.0) -> None:
-        """Ask the thread to end and wait for the running step to finish."""
-        self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout)
 
     def _run(self) -> None:
         deadline = self._clock()

@@ -15,11 +15,12 @@ import threading
 from collections.abc import Callable
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
+from ssi_bridge.ros.cycle import LoopThread
 
 logger = logging.getLogger(__name__)
 
 
-class ObservedCycleThread:
+class ObservedCycleThread(LoopThread):
     """Call ``step(cycle)`` per observed SYNC, ``quiet()`` per silent period, until stopped.
 
     :param client: the listener whose cycles are taken
@@ -37,27 +38,16 @@ class ObservedCycleThread:
                  on_end: Callable[[], None] | None = None) -> None:
         if not period > 0:
             raise ValueError(f"cycle period {period} s must be > 0")
+        super().__init__("ssi_observe")
         self.period = period
         self._client = client
         self._step = step
         self._quiet = quiet
         self._ended = ended
         self._on_end = on_end
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="ssi_observe", daemon=True)
         #: cycles handed to ``step`` and silent periods seen
         self.cycles = 0
         self.quiet_periods = 0
-
-    def start(self) -> None:
-        """Start the thread (once)."""
-        self._thread.start()
-
-    def stop(self, timeout: float = 2.0) -> None:
-        """Ask the thread to end and wait for the running step to finish."""
-        self._stop.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout)
 
     def _run(self) -> None:
         end_reported = False
