@@ -32,7 +32,7 @@ import can
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.exceptions import BusError
-from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.bus import BusConfig, take_bus
 from ssi_bridge.gateway.dictionary import MAX_SLOTS
 
 logger = logging.getLogger(__name__)
@@ -97,12 +97,9 @@ class ListenOnlyClient(can.Listener):
         """Open the bus and start listening (sends nothing)."""
         if self._bus is not None:
             return
-        if isinstance(self._source, BusConfig):
-            self._bus = open_bus(self._source)
-        elif self._source is None:
-            raise BusError("this listener's bus was handed over and already shut down")
-        else:
-            self._bus, self._source = self._source, None
+        self._bus = take_bus(self._source, "this listener")
+        if not isinstance(self._source, BusConfig):
+            self._source = None  # a handed-over bus is taken once
         self._notifier = can.Notifier(self._bus, [self], timeout=0.05)
         logger.info("listening to gateway node %d (%d slot(s)) without driving the bus",
                     self.node_id, self.slots)

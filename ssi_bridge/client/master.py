@@ -35,7 +35,7 @@ from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
 from ssi_bridge.gateway.bus import (
-    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, open_bus,
+    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus,
 )
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
@@ -96,12 +96,9 @@ class BridgeClient:
         """Open the bus and configure the gateway (raises GatewayUnavailable / SdoAbortError)."""
         if self.network is not None:
             return
-        if isinstance(self._source, BusConfig):
-            inner = open_bus(self._source)
-        elif self._source is None:
-            raise BusError("this client's bus was handed over and already shut down")
-        else:
-            inner, self._source = self._source, None
+        inner = take_bus(self._source, "this client")
+        if not isinstance(self._source, BusConfig):
+            self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
         self.network.listeners[:] = [FrameListener(self.network, self.counters)]

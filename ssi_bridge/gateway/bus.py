@@ -70,6 +70,19 @@ def open_bus(config: BusConfig) -> can.BusABC:
     return bus
 
 
+def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
+    """The bus a gateway or master runs on: a new one for a config, or the one handed over.
+
+    A handed-over bus belongs to its taker, which shuts it down when it stops; so it can be
+    taken once. ``owner`` ("this gateway", ...) names the taker in the error.
+    """
+    if isinstance(source, BusConfig):
+        return open_bus(source)
+    if source is None:
+        raise BusError(f"{owner}'s bus was handed over and already shut down")
+    return source
+
+
 class LossyBus(can.BusABC):
     """A bus wrapper that drops frames at ``loss_rate`` (seeded) and can be muted.
 

@@ -33,7 +33,7 @@ from canopen.sdo import SdoAbortedError, SdoServer
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.aborts import SdoAbort
 from ssi_bridge.gateway.bus import (
-    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, open_bus,
+    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus,
 )
 from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
@@ -124,12 +124,9 @@ class XnGateway:
         """Open the bus, join the network and boot (boot-up message, PRE-OPERATIONAL)."""
         if self.network is not None:
             return
-        if isinstance(self._source, BusConfig):
-            inner = open_bus(self._source)
-        elif self._source is None:
-            raise BusError("this gateway's bus was handed over and already shut down")
-        else:
-            inner, self._source = self._source, None
+        inner = take_bus(self._source, "this gateway")
+        if not isinstance(self._source, BusConfig):
+            self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
