@@ -104,6 +104,10 @@ def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
 
 
 # -- measurement --------------------------------------------------------------------------------
+#: the CPU the pinned case keeps the whole node on (the last one of this machine)
+PIN_CPU = max(os.sched_getaffinity(0))
+
+
 def _domain_id() -> int:
     return random.Random(os.getpid() * 104729 + time.time_ns()).randint(1, 100)
 
@@ -235,10 +239,10 @@ def emit(records: list[dict], rec: dict) -> None:
     print(json.dumps(rec), flush=True)
 
 
-def report(records: list[dict], n_joints: int, node: dict, bare: dict) -> None:
+def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: str = "") -> None:
     for key, note in NOTES.items():
         value, base = node[key], bare[key]
-        rec: dict = {"metric": f"node_{n_joints}enc_{key}", "value": round(value, 3),
+        rec: dict = {"metric": f"node_{n_joints}enc{label}_{key}", "value": round(value, 3),
                      "unit": UNITS[key], "baseline": round(base, 3)}
         if base:
             rec["ratio"] = round(value / base, 3)
@@ -246,8 +250,9 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict) -> None:
             op, goal = GOALS[key]
             rec["goal"] = f"ratio {op} {goal}"
             rec["goal_met"] = bool(rec["ratio"] >= goal if op == ">=" else rec["ratio"] <= goal)
-        rec["note"] = (f"{note}; {n_joints} encoder(s) at {RATE_HZ:g} Hz, baseline = bare rclpy "
-                       f"timer publisher of a {n_joints}-joint JointState, same subscriber")
+        pinned = ", node pinned to one CPU (cpu_affinity)" if label else ""
+        rec["note"] = (f"{note}; {n_joints} encoder(s) at {RATE_HZ:g} Hz{pinned}, baseline = bare "
+                       f"rclpy timer publisher of a {n_joints}-joint JointState, same subscriber")
         emit(records, rec)
 
 
@@ -264,6 +269,10 @@ def run(records: list[dict]) -> None:
                                f"{NODE_NS}/joint_states", env, work)
                 bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work)
                 report(records, n, node, bare)
+                if n == max(CASES):
+                    pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
+                        "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work)
+                    report(records, n, pinned, bare, "_pinned")
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
                                "note": traceback.format_exc(limit=3)[-800:]})

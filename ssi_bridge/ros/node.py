@@ -52,6 +52,19 @@ ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 ENCODER_CONFIG = 0x5801
 
 
+def pin_process(cpus: tuple[int, ...]) -> None:
+    """Pin every thread of this process (DDS, bus notifiers, cycle) to ``cpus``.
+
+    ``sched_setaffinity(0)`` moves only the calling thread on Linux; threads started later
+    inherit from their creator, so the existing ones are moved one by one.
+    """
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except (ProcessLookupError, PermissionError):
+            pass  # a thread that just ended
+
+
 class SsiBridgeNode(Node):
     """Bridge of one XN-GW-CANOPEN station's XN-1SSI channels to ROS 2."""
 
@@ -131,6 +144,9 @@ class SsiBridgeNode(Node):
                 # the bridge still runs; the bus diagnostics show the error until fixed
                 self.recorder.error = f"record.enabled: {err}"
                 self.get_logger().error(self.recorder.error)
+        if s.cpu_affinity:
+            pin_process(s.cpu_affinity)
+            self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
         self._cycle_started = time.monotonic()
         self.cycle.start()
         if self.player is not None:

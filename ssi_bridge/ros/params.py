@@ -7,6 +7,7 @@ Values are gathered into frozen settings dataclasses that the rest of the node r
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -77,6 +78,7 @@ class NodeSettings:
     record_path: str = ""
     record_compression: str = "zstd"
     record_can_log: bool = False
+    cpu_affinity: tuple[int, ...] = ()
     #: observe another master's traffic (or a replayed log) instead of driving the bus
     bus_listen_only: bool = False
     #: a CAN log (python-can format) to replay on a private virtual channel; implies listen-only
@@ -140,6 +142,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "go STALE)", read_only=True)),
     "bus.node_id": (1, _describe("CANopen node id of the XN-GW-CANOPEN gateway",
                                  read_only=True, int_range=(1, 127))),
+    "cpu_affinity": ([-1], _describe(
+        "CPUs the whole node process runs on (e.g. [1]); [-1]: no pinning. Keeping the "
+        "simulated station, the bus threads and the cycle on one core saves the cross-core "
+        "hand-offs of every cycle (docs/node.md, Performance)", read_only=True)),
     "storage_path": ("", _describe(
         "File holding the retentive registers of the simulated modules (000: REG_PARA1, "
         "limits, offset, mask); empty: keep them in memory only", read_only=True)),
@@ -208,8 +214,20 @@ CODES = ("", "binary", "gray")
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
     descriptor.name = name
     if isinstance(default, list):
-        descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
+        descriptor.type = (ParameterType.PARAMETER_INTEGER_ARRAY if default and
+                           isinstance(default[0], int) else ParameterType.PARAMETER_STRING_ARRAY)
     return node.declare_parameter(name, default, descriptor).value
+
+
+def _cpus(values: list[int]) -> tuple[int, ...]:
+    """The CPUs of ``cpu_affinity`` ([-1]: none), checked against the machine's."""
+    cpus = tuple(int(c) for c in values if int(c) != -1)
+    available = sorted(os.sched_getaffinity(0))
+    bad = [c for c in cpus if c not in available]
+    if bad:
+        raise ConfigError(f"cpu_affinity {list(cpus)}: CPU(s) {bad} not available; this "
+                          f"process may use {available}")
+    return cpus
 
 
 def declare_parameters(node: Node) -> NodeSettings:
@@ -258,5 +276,6 @@ def declare_parameters(node: Node) -> NodeSettings:
         record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
         record_can_log=values["record.can_log"], bus_listen_only=values["bus.listen_only"],
+        cpu_affinity=_cpus(values["cpu_affinity"]),
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"])

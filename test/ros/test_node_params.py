@@ -120,3 +120,15 @@ def test_read_only_parameters_cannot_change_at_run_time(running, probe):
     res = probe.call(SetParameters, node.topic("~/set_parameters"),
                      SetParameters.Request(parameters=[Parameter(name="bus.node_id", value=v)]))
     assert not res.results[0].successful and "read-only" in res.results[0].reason.lower()
+
+
+def test_cpu_affinity_pins_every_thread_of_the_node(running):
+    import os
+
+    cpu = max(os.sched_getaffinity(0))
+    node = running({"cpu_affinity": [cpu]})
+    pid = node.proc.pid
+    allowed = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        allowed.add(frozenset(os.sched_getaffinity(int(tid))))
+    assert allowed == {frozenset({cpu})}, f"threads allowed on {allowed}"
