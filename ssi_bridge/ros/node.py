@@ -83,6 +83,12 @@ class SsiBridgeNode(Node):
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
+        self._open_bus_side(s)
+        self._create_ros_side(s)
+        self._start(s)
+
+    def _open_bus_side(self, s: NodeSettings) -> None:
+        """The simulated station (if any), the master or listener, and per-joint state."""
         self.station: SimStation | None = None
         self.gateway: XnGateway | None = None
         self.faults: FaultInjector | None = None
@@ -115,6 +121,8 @@ class SsiBridgeNode(Node):
         self._cycle_started = time.monotonic()
         self._last_levels: tuple[int, ...] = ()
 
+    def _create_ros_side(self, s: NodeSettings) -> None:
+        """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
         self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
         self.status_pub = self.create_publisher(Status, "~/status", 10)
         self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -137,6 +145,9 @@ class SsiBridgeNode(Node):
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _start(self, s: NodeSettings) -> None:
+        """Start-up recording, CPU pinning, then the cycle (and a log replay) begins."""
         if s.record_enabled:
             try:
                 self.recorder.start(s.record_path)
