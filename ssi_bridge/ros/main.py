@@ -50,8 +50,11 @@ def main(args: list[str] | None = None) -> int:
             if not rclpy.ok():
                 return 0
             raise
-        executor = MultiThreadedExecutor(num_threads=4)
+        executor: MultiThreadedExecutor | None = None
         try:
+            if not rclpy.ok():
+                return 0  # a stop signal arrived while the node was being built
+            executor = MultiThreadedExecutor(num_threads=4)
             executor.add_node(node)
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
@@ -60,7 +63,8 @@ def main(args: list[str] | None = None) -> int:
             if rclpy.ok():
                 raise  # a real fault, not a shutdown racing the start of the executor
         finally:
-            executor.shutdown(timeout_sec=1.0)
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
     finally:
         if node is not None:
             node.shutdown()

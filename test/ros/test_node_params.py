@@ -132,3 +132,20 @@ def test_cpu_affinity_pins_every_thread_of_the_node(running):
     for tid in os.listdir(f"/proc/{pid}/task"):
         allowed.add(frozenset(os.sched_getaffinity(int(tid))))
     assert allowed == {frozenset({cpu})}, f"threads allowed on {allowed}"
+
+
+def test_sigterm_while_the_node_is_still_starting_exits_zero(start_node, tmp_path: Path):
+    # the signal lands while __init__ finishes (just after the start-up recording opened),
+    # before the executor exists: rclpy has shut the context down, the node must still exit 0
+    import time
+
+    for attempt in range(3):
+        node = start_node({"record.enabled": True, "record.root": str(tmp_path / f"r{attempt}")})
+        deadline = time.monotonic() + 30
+        while "recording to" not in node.log():
+            assert node.proc.poll() is None, node.log()
+            assert time.monotonic() < deadline, node.log()
+            time.sleep(0.001)
+        node.proc.send_signal(signal.SIGTERM)
+        assert node.proc.wait(20) == 0, node.log()[-3000:]
+        assert "Traceback" not in node.log()
