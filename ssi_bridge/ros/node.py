@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import threading
 import time
 from collections import deque
 from typing import Any
@@ -146,6 +147,15 @@ class SsiBridgeNode(Node):
         self.handlers.register(self._service_group)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
+    def _start_player_when_heard(self, timeout: float) -> None:
+        """Start the log replay once joint_states has a subscriber (or ``timeout`` passed)."""
+        deadline = time.monotonic() + timeout
+        while (self.joint_pub.get_subscription_count() == 0 and time.monotonic() < deadline
+               and self.context.ok()):
+            time.sleep(0.02)
+        if self.context.ok() and self.player is not None:
+            self.player.start()
+
     def _start(self, s: NodeSettings) -> None:
         """Start-up recording, CPU pinning, then the cycle (and a log replay) begins."""
         if s.record_enabled:
@@ -161,7 +171,11 @@ class SsiBridgeNode(Node):
         self._cycle_started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
-            self.player.start()
+            if s.replay_wait_for_subscribers > 0:
+                threading.Thread(target=self._start_player_when_heard,
+                                 args=(s.replay_wait_for_subscribers,), daemon=True).start()
+            else:
+                self.player.start()
         mode = ("simulated station" if s.simulation else
                 f"replay of {s.replay_can_log}" if s.replay_can_log else
                 "listen-only" if s.listen_only else "real station")

@@ -85,6 +85,7 @@ class NodeSettings:
     replay_can_log: str = ""
     replay_rate: float = 1.0
     replay_exit_at_end: bool = False
+    replay_wait_for_subscribers: float = 0.0
 
     @property
     def listen_only(self) -> bool:
@@ -137,6 +138,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "replay.rate": (1.0, _describe(
         "Speed factor of the log replay (2.0 = twice as fast); stamps keep the logged spacing",
         read_only=True, float_range=(0.01, 100.0))),
+    "replay.wait_for_subscribers": (0.0, _describe(
+        "Seconds the log replay waits for a joint_states subscriber before it starts "
+        "(0: start at once), so a consumer started with the node misses nothing",
+        read_only=True, float_range=(0.0, 300.0))),
     "replay.exit_at_end": (False, _describe(
         "Exit 0 when the replayed log ends (default: log it and keep running, diagnostics "
         "go STALE)", read_only=True)),
@@ -278,4 +283,5 @@ def declare_parameters(node: Node) -> NodeSettings:
         record_can_log=values["record.can_log"], bus_listen_only=values["bus.listen_only"],
         cpu_affinity=_cpus(values["cpu_affinity"]),
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
-        replay_exit_at_end=values["replay.exit_at_end"])
+        replay_exit_at_end=values["replay.exit_at_end"],
+        replay_wait_for_subscribers=values["replay.wait_for_subscribers"])

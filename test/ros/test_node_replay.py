@@ -43,9 +43,10 @@ def recorded_log(running, probe, tmp_path: Path) -> tuple[Path, set[int]]:
 
 def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node, probe) -> None:
     log, simulated = recorded_log
+    # the replay waits for this test's subscriber: a 2 s log must not end before discovery
     node = start_node({"simulation": False, "replay.can_log": str(log),
                        "joint1.steps_per_rev": STEPS, "joint1.revolutions": TURNS,
-                       "bus.node_id": 1})
+                       "bus.node_id": 1, "replay.wait_for_subscribers": 15.0})
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     probe.wait_for(lambda: len(msgs) >= 30, 20.0, "replayed joint_states", node)
