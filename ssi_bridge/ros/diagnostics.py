@@ -16,7 +16,7 @@ achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
@@ -38,7 +38,6 @@ class ChannelCounters:
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0
-    extra: dict[str, str] = field(default_factory=dict)
 
     @property
     def last_input(self) -> ProcessInput | None:
@@ -95,7 +94,6 @@ def channel_status(joint: str, hardware_id: str, counters: ChannelCounters, stal
     }
     if inp is not None:
         values.update({name: str(value) for name, value in inp.bits().items()})
-    values.update(counters.extra)
     return DiagnosticStatus(
         level=level, name=f"ssi_bridge: {joint}", message=message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])
