@@ -21,12 +21,20 @@ from ssi_bridge.gateway.bus import BusConfig, open_bus
 logger = logging.getLogger(__name__)
 
 
-class _Counter(can.Listener):
-    def __init__(self) -> None:
+class _Tee(can.Listener):
+    """Counts frames and hands them to the log writer; the notifier's stop() leaves the
+    writer open, so frames still queued can be drained into it afterwards."""
+
+    def __init__(self, writer: can.Listener) -> None:
+        self.writer = writer
         self.frames = 0
 
     def on_message_received(self, msg: can.Message) -> None:
+        self.writer.on_message_received(msg)
         self.frames += 1
+
+    def stop(self) -> None:
+        pass  # the sniffer closes the writer itself, after draining
 
 
 class CanSniffer:
@@ -40,19 +48,25 @@ class CanSniffer:
         except (OSError, ValueError) as err:
             self._bus.shutdown()
             raise BusError(f"cannot write CAN log {self.path}: {err}") from err
-        self._count = _Counter()
-        self._notifier = can.Notifier(self._bus, [self._writer, self._count], timeout=0.1)
+        self._tee = _Tee(self._writer)
+        self._notifier = can.Notifier(self._bus, [self._tee], timeout=0.1)
         logger.info("logging CAN traffic of %s:%s to %s", config.interface, config.channel,
                     self.path)
 
     @property
     def frames(self) -> int:
         """Frames logged so far."""
-        return self._count.frames
+        return self._tee.frames
 
     def stop(self) -> int:
-        """Stop listening, close the file and the bus; returns the frames logged."""
+        """Stop listening, close the file and the bus; returns the frames logged.
+
+        Frames already received but not yet taken by the notifier thread are drained and
+        logged too: everything on the bus before ``stop()`` ends up in the file.
+        """
         self._notifier.stop()
+        while (msg := self._bus.recv(0)) is not None:
+            self._tee.on_message_received(msg)
         self._writer.stop()
         self._bus.shutdown()
         return self.frames

@@ -30,3 +30,20 @@ def test_sniffer_logs_every_frame_and_the_log_reads_back(tmp_path: Path):
     frames = list(can.LogReader(str(tmp_path / "can_0.log")))
     assert [(f.arbitration_id, bytes(f.data)) for f in frames] == [
         (0x080, b""), (0x181, bytes(range(8)))]
+
+
+def test_frames_sent_just_before_stop_are_logged(tmp_path: Path):
+    # nothing waits for the notifier thread here: stop() itself must drain what was received
+    for attempt in range(5):
+        path = tmp_path / f"burst{attempt}.log"
+        sniffer = CanSniffer(BusConfig(channel=f"sniffer_burst{attempt}"), path)
+        sender = can.Bus(interface="virtual", channel=f"sniffer_burst{attempt}")
+        try:
+            for i in range(50):
+                sender.send(can.Message(arbitration_id=0x180 + i % 8, data=bytes([i]),
+                                        is_extended_id=False))
+        finally:
+            sender.shutdown()
+            logged = sniffer.stop()
+        assert logged == 50
+        assert [bytes(f.data)[0] for f in can.LogReader(str(path))] == list(range(50))
