@@ -37,9 +37,10 @@ def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture
-def ros(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Context, dict[str, str]]]:
+def ros(monkeypatch: pytest.MonkeyPatch,
+        ros_domain: int) -> Iterator[tuple[Context, dict[str, str]]]:
     """An rclpy context on a test-unique domain, and the matching subprocess environment."""
-    domain = str(150 + (os.getpid() + time.monotonic_ns()) % 80)
+    domain = str(ros_domain)
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     context = Context()

@@ -8,7 +8,6 @@ when the test ends, pass or fail, and its log is attached to a failure message.
 from __future__ import annotations
 
 import os
-import random
 import signal
 import subprocess
 import time
@@ -22,11 +21,6 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[2]
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
-
-
-def _free_domain() -> int:
-    """A domain id for this test: random, away from the default 0."""
-    return random.Random(os.getpid() * 7919 + time.monotonic_ns()).randint(1, 100)
 
 
 @dataclass
@@ -76,9 +70,9 @@ def dds_env(domain_id: int) -> dict[str, str]:
 
 
 @pytest.fixture
-def domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
+def domain_id(monkeypatch: pytest.MonkeyPatch, ros_domain: int) -> int:
     """A test-unique ROS_DOMAIN_ID, also set for this process's rclpy context."""
-    dom = _free_domain()
+    dom = ros_domain
     monkeypatch.setenv("ROS_DOMAIN_ID", str(dom))
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return dom
