@@ -28,6 +28,7 @@ import canopen
 
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
+from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import FrameListener, TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
@@ -37,6 +38,7 @@ from ssi_bridge.exceptions import (
 from ssi_bridge.gateway.bus import (
     NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus,
 )
+from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
 )
@@ -81,6 +83,8 @@ class BridgeClient:
         self.assist_after = assist_after
         self.counters = ClientCounters()
         self.table = SlotTable(slots)
+        #: bus load from frame timestamps (for the bus diagnostics)
+        self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
@@ -101,13 +105,14 @@ class BridgeClient:
             self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        self.network.listeners[:] = [FrameListener(self.network, self.counters)]
+        self.network.listeners[:] = [FrameListener(self.network, self.counters, self.load)]
+        self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
         self.network.add_node(self.node)
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
-        self.node.nmt.add_heartbeat_callback(self._liveness.on_heartbeat)
+        self.network.subscribe(0x700 + self.node_id, self._liveness.on_heartbeat_frame)
         self.node.emcy.add_callback(self._on_emcy)
         self._routes.attach(self.network)
         try:
@@ -146,7 +151,7 @@ class BridgeClient:
                 self.node.nmt.state = "OPERATIONAL"
             finally:
                 self._liveness.configuring = False
-            self._liveness.last_heartbeat = time.monotonic()
+            self._liveness.last_heartbeat = wire_now()
             self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))
@@ -155,18 +160,25 @@ class BridgeClient:
 
     # -- cyclic data ------------------------------------------------------------------------
     def sync(self) -> float:
-        """Send one SYNC (one module cycle); return its ``time.monotonic()`` send time."""
+        """Send one SYNC (one module cycle); return its wire time (``gateway/timebase``).
+
+        On a simulated wire that is the instant the SYNC's last bit was on the wire, where
+        the modules latch (the frame's own timestamp); on a real interface the instant it was
+        handed to the driver. One clock, no conversion.
+        """
         if self.network is None:
             raise BusError("client not connected")
-        t = self.table.on_sync()
+        seq_time = self.table.on_sync()
         try:
             with self._send_lock:
-                self.network.send_message(SYNC_COB_ID, b"")
+                frame = self.network.send_message(SYNC_COB_ID, b"")
         except can.CanError as err:
             self.counters.can_errors += 1
             raise BusError(f"could not send SYNC: {err}") from err
         self.counters.syncs += 1
-        return t
+        if frame is not None and frame.timestamp:
+            return self.table.set_sync_time(frame.timestamp)
+        return seq_time
 
     def latest(self, slot: int) -> ChannelSample | None:
         """The newest sample of ``slot`` (None before the first complete one)."""
@@ -264,7 +276,7 @@ class BridgeClient:
             image = self.table.next_input(slot, min(left, self.assist_after))
             if image is not None:
                 return image
-            if time.monotonic() - self.table.last_sync_monotonic >= self.assist_after:
+            if wire_now() - self.table.last_sync_time >= self.assist_after:
                 self.sync()
         return None
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import struct
 import threading
-import time
 from dataclasses import dataclass, field
 
+from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.module.images import ProcessInput
 
 #: two Integer32 positions in one encoder default PDO (000 Table 15, object 0x6820)
@@ -30,7 +30,7 @@ class ChannelSample:
     position: int
     #: the 8-byte process input image (000 "Process input")
     process_input: bytes
-    #: time.monotonic() of the SYNC that produced this sample (s)
+    #: wire time (``gateway/timebase``) of the SYNC that produced this sample (s)
     sync_time: float
     #: number of process input images received for this slot
     counter: int
@@ -84,7 +84,7 @@ class SlotTable:
         self.cond = threading.Condition()
         self.sync_seq = 0
         self.sync_time = 0.0
-        self.last_sync_monotonic = 0.0
+        self.last_sync_time = 0.0
         self._slots = {s: _Slot() for s in range(1, slots + 1)}
         self._times: dict[int, float] = {}
         self._due = 2 * slots
@@ -100,16 +100,23 @@ class SlotTable:
     def on_sync(self, at: float | None = None) -> float:
         """Record a SYNC about to be sent (or, with ``at``, one observed then); return its time.
 
-        ``at`` is a ``time.monotonic()`` instant: a listen-only master stamps the cycle with
-        the time the SYNC of another master was on the wire, not with when it handled it.
+        ``at`` is a wire time: a listen-only master stamps the cycle with the time the SYNC
+        of another master was on the wire (its frame timestamp), not with when it handled it.
         """
         with self.cond:
             self.sync_seq += 1
             self._due = 2 * self.slots
-            self.sync_time = self.last_sync_monotonic = time.monotonic() if at is None else at
+            self.sync_time = self.last_sync_time = wire_now() if at is None else at
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
             return self.sync_time
+
+    def set_sync_time(self, at: float) -> float:
+        """The current SYNC's wire time, once the wire has given it (its end of frame)."""
+        with self.cond:
+            self.sync_time = self.last_sync_time = at
+            self._times[self.sync_seq] = at
+            return at
 
     def on_image(self, slot: int, data: bytes) -> _Slot:
         """Store a received process input image; return the slot's state."""

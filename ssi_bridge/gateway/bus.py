@@ -12,7 +12,8 @@ from __future__ import annotations
 import logging
 import random
 import threading
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from copy import deepcopy
 from dataclasses import dataclass
 from typing import Any
@@ -21,12 +22,16 @@ import can
 import canopen
 
 from ssi_bridge.exceptions import BusError, ConfigError
+from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.wire import frame_bits
 
 logger = logging.getLogger(__name__)
 
 #: bit rates a CANopen device must support or may support (CiA 301 / CiA 102), bit/s
 #: receive-thread wake-up period (s): bounds how long stopping a canopen Network takes
 NOTIFIER_CYCLE = 0.05
+#: python-can interfaces that are simulated wires: they get :class:`WireBus` (frame timing)
+SIMULATED_INTERFACES = ("virtual", "udp_multicast")
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
 
@@ -56,9 +61,15 @@ class BusConfig:
 
 
 def open_bus(config: BusConfig) -> can.BusABC:
-    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it."""
+    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
+
+    A simulated interface (:data:`SIMULATED_INTERFACES`) comes wrapped in :class:`WireBus`, so
+    its frames take their real time on the wire at ``config.bitrate``.
+    """
     kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
-    if config.interface != "virtual":
+    if config.interface == "virtual":
+        kwargs["preserve_timestamps"] = True  # receivers see the WireBus end-of-frame time
+    elif config.interface != "udp_multicast":
         kwargs["bitrate"] = config.bitrate
     try:
         bus = can.Bus(**kwargs)
@@ -67,7 +78,108 @@ def open_bus(config: BusConfig) -> can.BusABC:
             f"cannot open CAN bus {config.interface}:{config.channel} "
             f"at {config.bitrate} bit/s: {err}") from err
     logger.debug("opened %s:%s", config.interface, config.channel)
+    if config.interface in SIMULATED_INTERFACES:
+        return WireBus(bus, wire_for(config))
     return bus
+
+
+class Wire:
+    """The time line of one simulated CAN wire: busy until the end of the last frame on it.
+
+    Shared by every :class:`WireBus` of one channel in a process (the gateway's and the
+    master's), so their frames never overlap; frames from another process (udp_multicast)
+    are learnt when they arrive (their timestamp is their end on the wire).
+    """
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.lock = threading.Lock()
+        #: wire time (s) at which the last frame known to this process ends
+        self.busy_until = 0.0
+
+    def claim(self, bits: int, ready: float) -> float:
+        """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
+        with self.lock:
+            start = ready if ready > self.busy_until else self.busy_until
+            end = start + bits / self.bitrate
+            self.busy_until = end
+            return end
+
+    def observe(self, end: float) -> None:
+        """A frame of another process ended at ``end``: the wire was busy until then."""
+        if end > self.busy_until:
+            with self.lock:
+                if end > self.busy_until:
+                    self.busy_until = end
+
+
+_wires: dict[tuple[str, str, int], Wire] = {}
+_wires_lock = threading.Lock()
+
+
+def wire_for(config: BusConfig) -> Wire:
+    """The process's :class:`Wire` of ``config``'s interface, channel and bit rate."""
+    key = (config.interface, str(config.channel), config.bitrate)
+    with _wires_lock:
+        wire = _wires.get(key)
+        if wire is None:
+            wire = _wires[key] = Wire(config.bitrate)
+        return wire
+
+
+class WireBus(can.BusABC):
+    """A simulated bus whose frames take their real time on the wire (CAN 2.0A at the bit rate).
+
+    ``send`` puts the frame on the :class:`Wire` after whatever is on it (SOF to IFS with its
+    actual stuff bits, ``gateway/wire.py``), stamps it with its end and hands it to the
+    receivers only then (sleeping, not spinning: Python sleeps ~0.05-0.1 ms late, which does
+    not add up over a burst because every frame's end is computed, not measured).
+    :meth:`send_batch` sends frames that are ready together in arbitration order (lowest
+    identifier first), as CAN arbitration would. Frames two nodes make ready within the same
+    bit time are sent in the order they were handed over (first come), not arbitrated.
+    Received frames extend the wire's busy time (frames of other processes).
+    """
+
+    def __init__(self, inner: can.BusABC, wire: Wire) -> None:
+        self._inner = inner
+        self.wire = wire
+        self._inner_steps = type(inner).recv is can.BusABC.recv
+        super().__init__(channel=getattr(inner, "channel_info", "wire"))
+        self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send one frame; returns when its last bit is on the wire."""
+        self.send_batch([msg], timeout)
+
+    def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> None:
+        """Send frames ready at the same instant, lowest identifier first."""
+        ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
+        ready = wire_now()
+        claim = self.wire.claim
+        for msg in ordered:
+            msg.timestamp = claim(frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
+                                             msg.dlc), ready)
+        for msg in ordered:
+            wait = msg.timestamp - wire_now()
+            if wait > 0:
+                time.sleep(wait)
+            self._inner.send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._inner_steps:
+            msg, filtered = self._inner._recv_internal(timeout)
+            if msg is not None and not filtered and not self._inner._matches_filters(msg):
+                return None, False
+        else:
+            msg = self._inner.recv(timeout)
+        if msg is not None and msg.timestamp:
+            self.wire.observe(msg.timestamp)
+        return msg, False
+
+    def shutdown(self) -> None:
+        """Shut the wrapped bus down too."""
+        super().shutdown()
+        self._inner.shutdown()
 
 
 def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
@@ -102,6 +214,10 @@ class LossyBus(can.BusABC):
         self.muted = False
         #: frames dropped so far (sent + received)
         self.dropped = 0
+        #: newest timestamp of a frame this side has handled, and the wire time at which a
+        #: receive last found nothing waiting: what the receive path has seen of the wire
+        self.rx_latest = 0.0
+        self.rx_idle_at = 0.0
         # an inner bus with python-can's own recv() loop is read one receive step at a time
         # (its _recv_internal plus its filters): this wrapper's recv() is that same loop
         self._inner_steps = type(inner).recv is can.BusABC.recv
@@ -134,6 +250,19 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
+    def send_batch(self, msgs: Sequence[can.Message]) -> None:
+        """Send frames ready together (the wire orders them) minus those muted or dropped."""
+        if self.muted:
+            return
+        if self._loss_rate > 0.0:
+            msgs = [m for m in msgs if not self._drop()]
+        batch = getattr(self._inner, "send_batch", None)
+        if batch is not None:
+            batch(msgs)
+        else:
+            for msg in msgs:
+                self._inner.send(msg)
+
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """Receive one frame, as python-can's ``BusABC.recv``; None when ``timeout`` passed.
 
@@ -144,8 +273,18 @@ class LossyBus(can.BusABC):
         """
         if (self._inner_steps and not self.drop_received and self._filters is None
                 and self._inner.filters is None):
-            return self._inner._recv_internal(timeout)[0]
-        return super().recv(timeout)
+            msg = self._inner._recv_internal(timeout)[0]
+        else:
+            msg = super().recv(timeout)
+        if msg is None:
+            self.rx_idle_at = wire_now()
+        elif msg.timestamp > self.rx_latest:
+            self.rx_latest = msg.timestamp
+        return msg
+
+    def seen_until(self) -> float:
+        """Wire time up to which every frame that arrived has been handled by this side."""
+        return max(self.rx_latest, self.rx_idle_at)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inner = self._inner
@@ -235,14 +374,21 @@ class BridgeNetwork(canopen.Network):
     the same lock and the same check of the receive thread.
     """
 
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        """Send one frame (raises ``can.CanError``, RuntimeError when not connected)."""
+    #: called with every frame :meth:`send_message` sent (the master's bus load)
+    on_sent: Callable[[can.Message], None] | None = None
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> WireMessage:
+        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
+        connected). On a simulated wire its ``timestamp`` is then its end on the wire."""
         if not self.bus:
             raise RuntimeError("Not connected to CAN bus")
         frame = WireMessage.frame(can_id, data, remote)
         with self.send_lock:
             self.bus.send(frame)
         self.check()
+        if self.on_sent is not None:
+            self.on_sent(frame)
+        return frame
 
     def send_messages(self, frames: Sequence[tuple[int, bytes]]) -> list[tuple[int, can.CanError]]:
         """Send data frames back to back under one lock; return those that failed.
@@ -256,12 +402,19 @@ class BridgeNetwork(canopen.Network):
         if not bus:
             raise RuntimeError("Not connected to CAN bus")
         failed: list[tuple[int, can.CanError]] = []
-        send, frame = bus.send, WireMessage.frame
+        frame = WireMessage.frame
+        batch = getattr(bus, "send_batch", None)
         with self.send_lock:
-            for can_id, data in frames:
+            if batch is not None:
                 try:
-                    send(frame(can_id, data))
+                    batch([frame(can_id, data) for can_id, data in frames])
                 except can.CanError as err:
-                    failed.append((can_id, err))
+                    failed = [(frames[0][0], err)]
+            else:
+                for can_id, data in frames:
+                    try:
+                        bus.send(frame(can_id, data))
+                    except can.CanError as err:
+                        failed.append((can_id, err))
         self.check()
         return failed

@@ -31,6 +31,8 @@ from ssi_bridge.client.player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.gateway.timebase import ModelClock, to_ros_ns, wire_now
+from ssi_bridge.gateway import wire
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import validate_para1
 from ssi_bridge.ros import logbridge
@@ -80,13 +82,32 @@ class SsiBridgeNode(Node):
                 self.settings, bus_interface="virtual",
                 bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
         s = self.settings
-        self._t0 = time.monotonic()
+        #: the simulated station's clock: wire time since the node started (gateway/timebase)
+        self.model_clock = ModelClock()
+        self._last_stamp_ns = 0
+        #: header stamps moved forward because the clock stepped back (NTP step)
+        self.clock_steps = 0
+        self._waiting_for_clock = False
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
+        self._check_wire(s)
         self._open_bus_side(s)
         self._create_ros_side(s)
         self._start(s)
+
+    def _check_wire(self, s: NodeSettings) -> None:
+        """Warn when publish_rate's SYNC cycles do not fit the wire at bus.bitrate (wire.py)."""
+        slots = max(j.slot for j in s.joints)
+        self.cycle_wire_s = wire.cycle_seconds(slots, s.bus_bitrate)
+        if s.listen_only or wire.fits(slots, s.bus_bitrate, s.publish_rate):
+            return
+        self.get_logger().warning(
+            f"publish_rate {s.publish_rate:g} Hz does not fit the CAN wire: one cycle of "
+            f"{slots} slot(s) (SYNC + TPDOs) takes up to {self.cycle_wire_s * 1e3:.3f} ms at "
+            f"{s.bus_bitrate} bit/s, plus {wire.SDO_RESERVE_FRAMES} frames reserved for register "
+            f"traffic; the highest rate that fits is "
+            f"{wire.max_cycle_rate(slots, s.bus_bitrate):g} Hz (docs/canopen.md)")
 
     def _open_bus_side(self, s: NodeSettings) -> None:
         """The simulated station (if any), the master or listener, and per-joint state."""
@@ -96,7 +117,7 @@ class SsiBridgeNode(Node):
         if s.simulation:
             self.station = SimStation(s)
             self.gateway = XnGateway(self.bus_config, s.node_id, self.station.modules,
-                                     clock=self.sim_time)
+                                     clock=self.model_clock)
             self.gateway.start()
             self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
         n_slots = max(j.slot for j in s.joints)
@@ -119,7 +140,7 @@ class SsiBridgeNode(Node):
         self.counters = {j.name: ChannelCounters() for j in s.joints}
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
-        self._cycle_started = time.monotonic()
+        self._cycle_started = wire_now()
         self._last_levels: tuple[int, ...] = ()
 
     def _create_ros_side(self, s: NodeSettings) -> None:
@@ -168,7 +189,7 @@ class SsiBridgeNode(Node):
         if s.cpu_affinity:
             pin_process(s.cpu_affinity)
             self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
-        self._cycle_started = time.monotonic()
+        self._cycle_started = wire_now()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -206,12 +227,45 @@ class SsiBridgeNode(Node):
     # -- time ------------------------------------------------------------------------------
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
-        return time.monotonic() - self._t0
+        return self.model_clock()
 
-    def _stamp_ns(self, monotonic_t: float) -> int:
-        """ROS time (ns) of a past ``time.monotonic()`` instant."""
-        now_ns = self.get_clock().now().nanoseconds
-        return now_ns - int((time.monotonic() - monotonic_t) * 1e9)
+    def _stamp_ns(self, wire_t: float) -> int | None:
+        """ROS time (ns) of wire time ``wire_t``: strictly after the last stamp; None = wait.
+
+        ROS system time is wire time (``gateway/timebase.to_ros_ns``, no clock is read).
+        With ``use_sim_time`` the offset sim - wire is taken from one bracketed pair of
+        reads (a pair a thread switch split is read again); before the first ``/clock``
+        there is no time to stamp with: nothing is published and the node says so once.
+        A stamp at or before the last one (the clock stepped back) becomes last + 1 ns and
+        is counted (bus diagnostics ``clock_steps``).
+        """
+        stamp = to_ros_ns(wire_t)
+        clock = self.get_clock()
+        if clock.ros_time_is_active:
+            for _ in range(5):
+                before = wire_now()
+                sim_ns = clock.now().nanoseconds
+                after = wire_now()
+                if after - before < 1e-4:
+                    break
+            if sim_ns <= 0:
+                if not self._waiting_for_clock:
+                    self._waiting_for_clock = True
+                    self.get_logger().warning(
+                        "use_sim_time is true and no /clock has arrived: waiting for /clock, "
+                        "nothing is published until it does")
+                return None
+            if self._waiting_for_clock:
+                self._waiting_for_clock = False
+                self.get_logger().info("/clock arrived: publishing")
+            stamp += sim_ns - to_ros_ns(0.5 * (before + after))
+            if stamp <= 0:
+                return None
+        if stamp <= self._last_stamp_ns:
+            self.clock_steps += 1
+            stamp = self._last_stamp_ns + 1
+        self._last_stamp_ns = stamp
+        return stamp
 
     def _scale(self, joint: JointSettings, para1: int | None = None) -> JointScale:
         """Counts -> units for the joint's current REG_PARA1.
@@ -253,7 +307,8 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()
-        self.client.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
+        # the TPDOs need their wire time: wait for them up to 90 % of the period
+        self.client.wait_cycle(min(0.9 / self.settings.publish_rate, 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
@@ -261,7 +316,7 @@ class SsiBridgeNode(Node):
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
         if not self.context.ok():
             return
-        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
+        self._cycle_times.append(wire_now())  # the achieved rate is the observed one
         try:
             self._publish_cycle(cycle.sync_time)
         except RCLError:
@@ -292,6 +347,8 @@ class SsiBridgeNode(Node):
     def _publish_cycle(self, t_sync: float) -> None:
         """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (monotonic)."""
         stamp_ns = self._stamp_ns(t_sync)
+        if stamp_ns is None:
+            return
         stamp = time_msg(stamp_ns)
         js = JointState()
         js.header.stamp = stamp
@@ -368,7 +425,7 @@ class SsiBridgeNode(Node):
     # -- diagnostics -----------------------------------------------------------------------
     def achieved_rate(self) -> float:
         """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
-        now = time.monotonic()
+        now = wire_now()
         window = min(max(self.settings.diagnostics_period, 1.0), now - self._cycle_started)
         if window <= 0:
             return 0.0
@@ -395,6 +452,10 @@ class SsiBridgeNode(Node):
                                       s.stale_cycles, self.positions[joint.name]))
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
+        counters["clock_steps"] = self.clock_steps
+        meter = getattr(self.client, "load", None)
+        if meter is not None:
+            counters.update(meter.figures())
         out.append(bus_status(
             "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,

@@ -15,6 +15,7 @@ from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile
 
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
+from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros.units import to_int32
 from ssi_bridge_msgs.msg import Event
@@ -159,7 +160,7 @@ class BridgeServices:
                 client.write_register(slot, Reg.REG_OFFSET, offset)
                 after = client.read_register(slot, Reg.REG_SSI_POS)
             finally:
-                estimator.reset(after=time.monotonic(), hold=True)
+                estimator.reset(after=wire_now(), hold=True)
             response.offset = to_int32(offset)
             response.position = scale.position(after)
             return (f"REG_OFFSET <- {to_int32(offset)}; position now {response.position:.6f} "
@@ -175,7 +176,7 @@ class BridgeServices:
             try:
                 self.node.client.write_register(self._slot(joint), Reg.REG_SF, value)
             finally:
-                estimator.reset(after=time.monotonic() + 0.05, hold=True)
+                estimator.reset(after=wire_now() + 0.05, hold=True)
             which = "LD20: retentive registers incl. REG_PARA1" if request.include_parameters \
                 else "LD48: retentive registers except REG_PARA1"
             return f"{which} restored to defaults"

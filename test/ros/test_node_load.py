@@ -1,0 +1,94 @@
+"""The node at 1 kHz beside two CPU-burning processes (one per core): no false fault.
+
+Issue 10: on a loaded 2-core machine the bridge reported wire breaks (ERR_SSI, EMCY 0x7000)
+that did not happen, stamps that went backwards and a silent gateway that was only a stalled
+process. With one time base (docs/node.md "Time") none of that may happen: 0 ERR_SSI / EMCY,
+0 non-increasing stamps, 0 "gateway silent", and every velocity sample within the bound of
+docs/node.md. Selectable with ``-m load``; part of ``make test``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+REPO = Path(__file__).resolve().parents[2]
+RUN_S = float(os.environ.get("SSI_BRIDGE_LOAD_SECONDS", "60"))
+RATE = 1000.0
+#: the shipped station's shoulder: AFM60 sine, 0.25 rev at 0.2 Hz, 32768 steps per turn
+AMP = 2 * math.pi * 0.25
+W = 2 * math.pi * 0.2
+STEP = 2 * math.pi / 32768
+#: carriage: TTK70 at 0.01 m/s; REG_SSI_POS counts of its measuring step (m)
+CARRIAGE_V = 0.01
+
+
+def _burners(n: int) -> list[subprocess.Popen]:
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"],
+                             start_new_session=True) for _ in range(n)]
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    for p in procs:
+        if p.poll() is None:
+            os.kill(p.pid, signal.SIGKILL)
+        p.wait(5)
+
+
+@pytest.mark.load
+@pytest.mark.integration
+def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe):
+    burners = _burners(2)
+    try:
+        node = running({"publish_rate": RATE, "bus.bitrate": 1_000_000,
+                        "diagnostics_period": 0.5},
+                       params_file=REPO / "config" / "ssi_bridge.yaml")
+        msgs = probe.subscribe(JointState, node.topic("joint_states"), qos=1000)
+        diags = probe.subscribe(DiagnosticArray, "/diagnostics", qos=100)
+        time.sleep(RUN_S)
+        n_msgs = len(msgs)
+        log = node.log()
+    finally:
+        _stop(burners)
+    got = [m for _, m in msgs[:n_msgs]]
+    assert len(got) > RUN_S * 100, f"only {len(got)} joint_states in {RUN_S} s"
+    stamps = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+                       for m in got], dtype=np.int64)
+    inversions = int(np.sum(np.diff(stamps) <= 0))
+    assert inversions == 0, f"{inversions} non-increasing header stamps"
+    assert "silent" not in log, log[-3000:]
+    assert "EMCY" not in log, log[-3000:]
+    for _, arr in diags:
+        for st in arr.status:
+            values = {kv.key: kv.value for kv in st.values}
+            assert values.get("error_cycles", "0") == "0", f"{st.name}: {st.message} {values}"
+            assert values.get("emergencies", "0") == "0", f"{st.name}: {st.message} {values}"
+            assert "silent" not in st.message, st.message
+    t = (stamps - stamps[0]) * 1e-9
+    p = np.array([m.position[0] for m in got])
+    v = np.array([m.velocity[0] for m in got])
+    vc = np.array([m.velocity[1] for m in got])
+    assert not np.any(np.isnan(v)) and not np.any(np.isnan(vc)), "NaN velocity: ERR_SSI"
+    basis = np.column_stack([np.sin(W * t), np.cos(W * t), np.ones_like(t)])
+    (a, b, _c), *_ = np.linalg.lstsq(basis, p, rcond=None)
+    truth = W * (a * np.cos(W * t) - b * np.sin(W * t))
+    # docs/node.md "Velocity": |error| <= a_max * span + 1 count / span (+ the stamp
+    # resolution, 1 us on each end of the window); span from the stamps themselves
+    k = 4
+    span = t[k:] - t[:-k]
+    bound = AMP * W * W * span + STEP / span + abs(AMP * W) * 2e-6 / span
+    err = np.abs(v[k:] - truth[k:])
+    bad = int(np.sum(err > bound))
+    worst = int(np.argmax(err - bound))
+    assert bad == 0, (f"{bad} of {len(err)} shoulder velocities outside the bound; worst "
+                      f"{err[worst]:.4f} > {bound[worst]:.4f} rad/s (span {span[worst]:.4f} s)")
