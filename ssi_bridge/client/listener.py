@@ -239,8 +239,8 @@ class ListenOnlyClient(can.Listener):
             self._cycles_cond.notify_all()
 
     def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        self.table.on_image(slot, data)
+        self.table.on_image(slot, data, timestamp)
 
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
-        self.table.on_positions(slots, data)
+        self.table.on_positions(slots, data, timestamp)

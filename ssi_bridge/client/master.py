@@ -315,10 +315,10 @@ class BridgeClient:
     # TPDOs arrive raw on their COB-IDs (client/receive.py), not through canopen's PdoMaps
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
-        self.table.on_positions(slots, data)
+        self.table.on_positions(slots, data, timestamp)
 
     def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        st = self.table.on_image(slot, data)
+        st = self.table.on_image(slot, data, timestamp)
         if st.pulse_seq is None:  # re-checked under the lock; set_control arms it there
             return
         with self.table.cond:

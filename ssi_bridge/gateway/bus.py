@@ -32,6 +32,8 @@ logger = logging.getLogger(__name__)
 NOTIFIER_CYCLE = 0.05
 #: python-can interfaces that are simulated wires: they get :class:`WireBus` (frame timing)
 SIMULATED_INTERFACES = ("virtual", "udp_multicast")
+#: CiA 301 SYNC COB-ID (the wire remembers the newest SYNC for the synchronous window)
+SYNC_COB_ID = 0x080
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
 
@@ -96,6 +98,8 @@ class Wire:
         self.lock = threading.Lock()
         #: wire time (s) at which the last frame known to this process ends
         self.busy_until = 0.0
+        #: end (s) of the newest SYNC (COB-ID 0x080) put on this wire in this process
+        self.last_sync = 0.0
 
     def claim(self, bits: int, ready: float) -> float:
         """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
@@ -105,8 +109,33 @@ class Wire:
             self.busy_until = end
             return end
 
-    def observe(self, end: float) -> None:
+    def claim_all(self, frames: Sequence[can.Message], ready: float,
+                  answering: float | None = None) -> bool:
+        """Stamp ``frames`` back to back from ``ready`` with their ends; all or nothing.
+
+        ``answering`` is the wire time of the SYNC these frames answer: when a newer SYNC is
+        already on the wire they are not sent (False). A CANopen device sends synchronous
+        TPDOs inside the cycle of their SYNC (CiA 301 synchronous window), so a master can
+        tell which SYNC a TPDO belongs to by its order on the wire.
+        """
+        with self.lock:
+            if answering is not None and self.last_sync > answering:
+                return False
+            at = ready if ready > self.busy_until else self.busy_until
+            rate = self.bitrate
+            for msg in frames:
+                at += frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
+                                 msg.dlc) / rate
+                msg.timestamp = at
+                if msg.arbitration_id == SYNC_COB_ID:
+                    self.last_sync = at
+            self.busy_until = at
+            return True
+
+    def observe(self, end: float, sync: bool = False) -> None:
         """A frame of another process ended at ``end``: the wire was busy until then."""
+        if sync and end > self.last_sync:
+            self.last_sync = end
         if end > self.busy_until:
             with self.lock:
                 if end > self.busy_until:
@@ -149,21 +178,24 @@ class WireBus(can.BusABC):
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send one frame; returns when its last bit is on the wire."""
-        self.send_batch([msg], timeout)
+        self.send_batch([msg], timeout=timeout)
 
-    def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> None:
-        """Send frames ready at the same instant, lowest identifier first."""
+    def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None,
+                   timeout: float | None = None) -> bool:
+        """Send frames ready at the same instant, lowest identifier first.
+
+        ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
+        the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
+        """
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
-        ready = wire_now()
-        claim = self.wire.claim
-        for msg in ordered:
-            msg.timestamp = claim(frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
-                                             msg.dlc), ready)
+        if not self.wire.claim_all(ordered, wire_now(), answering):
+            return False
         for msg in ordered:
             wait = msg.timestamp - wire_now()
             if wait > 0:
                 time.sleep(wait)
             self._inner.send(msg, timeout)
+        return True
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if self._inner_steps:
@@ -173,7 +205,7 @@ class WireBus(can.BusABC):
         else:
             msg = self._inner.recv(timeout)
         if msg is not None and msg.timestamp:
-            self.wire.observe(msg.timestamp)
+            self.wire.observe(msg.timestamp, msg.arbitration_id == SYNC_COB_ID)
         return msg, False
 
     def shutdown(self) -> None:
@@ -250,18 +282,18 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
-    def send_batch(self, msgs: Sequence[can.Message]) -> None:
+    def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None) -> bool:
         """Send frames ready together (the wire orders them) minus those muted or dropped."""
         if self.muted:
-            return
+            return True
         if self._loss_rate > 0.0:
             msgs = [m for m in msgs if not self._drop()]
         batch = getattr(self._inner, "send_batch", None)
         if batch is not None:
-            batch(msgs)
-        else:
-            for msg in msgs:
-                self._inner.send(msg)
+            return batch(msgs, answering)
+        for msg in msgs:
+            self._inner.send(msg)
+        return True
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """Receive one frame, as python-can's ``BusABC.recv``; None when ``timeout`` passed.
@@ -376,6 +408,8 @@ class BridgeNetwork(canopen.Network):
 
     #: called with every frame :meth:`send_message` sent (the master's bus load)
     on_sent: Callable[[can.Message], None] | None = None
+    #: TPDO bursts not sent because a newer SYNC was already on the wire
+    window_missed = 0
 
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> WireMessage:
         """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
@@ -390,7 +424,8 @@ class BridgeNetwork(canopen.Network):
             self.on_sent(frame)
         return frame
 
-    def send_messages(self, frames: Sequence[tuple[int, bytes]]) -> list[tuple[int, can.CanError]]:
+    def send_messages(self, frames: Sequence[tuple[int, bytes]], answering: float | None = None
+                      ) -> list[tuple[int, can.CanError]]:
         """Send data frames back to back under one lock; return those that failed.
 
         The same frames as :meth:`send_message` for each, in order, with nothing of another
@@ -407,7 +442,8 @@ class BridgeNetwork(canopen.Network):
         with self.send_lock:
             if batch is not None:
                 try:
-                    batch([frame(can_id, data) for can_id, data in frames])
+                    if not batch([frame(can_id, data) for can_id, data in frames], answering):
+                        self.window_missed += 1
                 except can.CanError as err:
                     failed = [(frames[0][0], err)]
             else:

@@ -117,6 +117,7 @@ class XnGateway:
         self.bus: LossyBus | None = None
         self.network: BridgeNetwork | None = None
         self._sync_cob: int | None = None
+        self._answering: float | None = None  # wire time of the SYNC being answered
         #: SYNC cycles run so far
         self.cycles = 0
 
@@ -224,7 +225,7 @@ class XnGateway:
         """Send one SYNC cycle's TPDOs (a frame the bus refuses is logged, the rest go)."""
         if self.network is None:
             return
-        for cob_id, err in self.network.send_messages(frames):
+        for cob_id, err in self.network.send_messages(frames, self._answering):
             logger.warning("gateway could not send 0x%03X: %s", cob_id, err)
 
     def _send_emcy(self, code: int, register: int, data: bytes) -> None:
@@ -270,4 +271,9 @@ class XnGateway:
             self.cycles += 1
             self.emergencies.update([m.diag for m in self.modules], may_send=True)
             if operational:
-                self.pdo.on_sync()
+                # synchronous TPDOs answer this SYNC only: not once a newer one is on the wire
+                self._answering = timestamp or None
+                try:
+                    self.pdo.on_sync()
+                finally:
+                    self._answering = None

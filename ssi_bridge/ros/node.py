@@ -87,6 +87,8 @@ class SsiBridgeNode(Node):
         self._last_stamp_ns = 0
         #: header stamps moved forward because the clock stepped back (NTP step)
         self.clock_steps = 0
+        #: cycles not published because a joint's TPDOs of that SYNC were missing
+        self.incomplete_cycles = 0
         self._waiting_for_clock = False
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
@@ -345,7 +347,7 @@ class SsiBridgeNode(Node):
             self.context.try_shutdown()
 
     def _publish_cycle(self, t_sync: float) -> None:
-        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (monotonic)."""
+        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time)."""
         stamp_ns = self._stamp_ns(t_sync)
         if stamp_ns is None:
             return
@@ -356,29 +358,38 @@ class SsiBridgeNode(Node):
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
         status = Status(header=js.header) if want_status else None
+        transient = False
         for joint in self.settings.joints:
-            self._update_joint(joint, t_sync, js, status)
+            fresh = self._update_joint(joint, t_sync, js, status)
+            c = self.counters[joint.name]
+            if not fresh and c.consecutive_stale < self.settings.stale_cycles:
+                transient = True
         if not js.name:
             return
-        if not self.publish_safe(self.joint_pub, js):
+        if transient:
+            # a joint missed this SYNC but is not (yet) STALE: its value is an older latch
+            # than this stamp, so the cycle is not published (a STALE joint's last value is)
+            self.incomplete_cycles += 1
+        elif self.publish_safe(self.joint_pub, js):
+            self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
+            if status is not None and self.publish_safe(self.status_pub, status):
+                self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
+        else:
             return
-        self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
-        if status is not None and self.publish_safe(self.status_pub, status):
-            self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
         levels = self._levels()
         if self._last_levels and levels != self._last_levels:
             self.publish_diagnostics()
         self._last_levels = levels
 
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
-                      status: Status | None) -> None:
+                      status: Status | None) -> bool:
         name = joint.name
         counters = self.counters[name]
         sample = self.client.latest(joint.slot)
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
-            return
+            return False
         fresh = sample.sync_time >= t_sync
         if fresh:
             counters.samples += 1
@@ -411,6 +422,7 @@ class SsiBridgeNode(Node):
         if status is not None:
             inp = ProcessInput.decode(image)
             status.channels.append(channel_msg(name, joint.slot, sample, inp, counters))
+        return fresh
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
@@ -453,6 +465,11 @@ class SsiBridgeNode(Node):
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         counters["clock_steps"] = self.clock_steps
+        counters["incomplete_cycles"] = self.incomplete_cycles
+        counters["late_frames"] = self.client.table.late_frames
+        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        if self.gateway is not None and self.gateway.network is not None:
+            counters["station_window_missed"] = self.gateway.network.window_missed
         meter = getattr(self.client, "load", None)
         if meter is not None:
             counters.update(meter.figures())
@@ -467,8 +484,11 @@ class SsiBridgeNode(Node):
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
         if not self.context.ok():
             return
+        now = self.get_clock().now()
+        if now.nanoseconds <= 0:
+            return  # use_sim_time before the first /clock: no time to stamp with
         msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = now.to_msg()
         msg.status = self._statuses()
         if not self.publish_safe(self.diag_pub, msg):
             return
