@@ -5,6 +5,9 @@ default in-process ``virtual`` interface every bus sees the frames the others se
 real wire). :class:`LossyBus` wraps any bus to drop a seeded fraction of frames ("CAN frame
 loss" fault) or to go quiet entirely ("gateway silent"). :class:`BridgeNetwork` is the
 canopen ``Network`` both sides use; its frames are cheap to deep-copy (:class:`WireMessage`).
+On a simulated interface (``virtual``, ``udp_multicast``) :func:`open_bus` returns a
+:class:`WireBus`: frames take their real time on the wire at the bit rate, one at a time, and
+carry their end-of-frame wire time (``gateway/wire.py``, ``gateway/timebase.py``).
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ class BusConfig:
     interface: str = "virtual"
     #: python-can channel (virtual: any string; every bus on the same string is one wire)
     channel: str = "ssi_bridge"
-    #: bit rate in bit/s, one of :data:`CIA_BITRATES` (ignored by the virtual interface)
+    #: bit rate in bit/s, one of :data:`CIA_BITRATES` (the simulated wire times frames at it)
     bitrate: int = 500_000
     #: CANopen node id of the XN-GW-CANOPEN (1-127)
     node_id: int = 1

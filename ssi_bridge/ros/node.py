@@ -27,6 +27,7 @@ from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
@@ -309,8 +310,10 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()
-        # the TPDOs need their wire time: wait for them up to 90 % of the period
-        self.client.wait_cycle(min(0.9 / self.settings.publish_rate, 0.05))
+        # the TPDOs need their wire time and a starved station its turn: wait for them up to
+        # 90 % of the period, at least 20 ms (a late cycle skips SYNC slots, counted in
+        # cycles_missed, instead of sending SYNCs nobody can answer), at most 50 ms
+        self.client.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
@@ -358,18 +361,24 @@ class SsiBridgeNode(Node):
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
         status = Status(header=js.header) if want_status else None
-        transient = False
-        for joint in self.settings.joints:
-            fresh = self._update_joint(joint, t_sync, js, status)
-            c = self.counters[joint.name]
-            if not fresh and c.consecutive_stale < self.settings.stale_cycles:
-                transient = True
-        if not js.name:
-            return
+        # a joint without a sample latched at this SYNC holds an older latch than this stamp:
+        # while it is not (yet) STALE the cycle is not published and no estimate takes it in
+        # (so a velocity window is always the published samples); a STALE joint is left out
+        # of joint_states (its diagnostics say STALE) and the others are published
+        samples = [(joint, self.client.latest(joint.slot)) for joint in self.settings.joints]
+        limit = self.settings.stale_cycles
+        transient = any(
+            (sample is None or sample.sync_time < t_sync)
+            and self.counters[joint.name].consecutive_stale + 1 < limit
+            for joint, sample in samples)
+        for joint, sample in samples:
+            self._update_joint(joint, t_sync, js, status, sample, publish=not transient)
         if transient:
             # a joint missed this SYNC but is not (yet) STALE: its value is an older latch
             # than this stamp, so the cycle is not published (a STALE joint's last value is)
             self.incomplete_cycles += 1
+        elif not js.name:
+            return
         elif self.publish_safe(self.joint_pub, js):
             self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
             if status is not None and self.publish_safe(self.status_pub, status):
@@ -382,10 +391,11 @@ class SsiBridgeNode(Node):
         self._last_levels = levels
 
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
-                      status: Status | None) -> bool:
+                      status: Status | None, sample: ChannelSample | None,
+                      publish: bool = True) -> bool:
+        """Count the joint's sample of this cycle; with ``publish``, add it to ``js``."""
         name = joint.name
         counters = self.counters[name]
-        sample = self.client.latest(joint.slot)
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
@@ -403,6 +413,8 @@ class SsiBridgeNode(Node):
         sts = image[7]
         if sts & ERRORS:
             counters.error_cycles += 1
+        if not publish or not fresh:
+            return fresh  # not published: not latched at this cycle's SYNC
         scale = self.scales[name]
         position = scale.position(sample.position)
         estimator = self.velocity[name]

@@ -125,7 +125,8 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "bus.channel": ("ssi_bridge", _describe(
         "python-can channel (virtual: any name; socketcan: can0, ...)", read_only=True)),
     "bus.bitrate": (500_000, _describe(
-        "CAN bit rate in bit/s (CiA 301 rates; ignored by the virtual interface)",
+        "CAN bit rate in bit/s (CiA 301 rates; the simulated wire (virtual, udp_multicast) "
+        "times every frame at it)",
         read_only=True, int_range=(10_000, 1_000_000))),
     "bus.listen_only": (False, _describe(
         "Only observe the bus another master drives: no NMT, SDO, SYNC or RPDO; one cycle is "

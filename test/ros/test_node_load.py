@@ -74,11 +74,13 @@ def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe):
             assert values.get("error_cycles", "0") == "0", f"{st.name}: {st.message} {values}"
             assert values.get("emergencies", "0") == "0", f"{st.name}: {st.message} {values}"
             assert "silent" not in st.message, st.message
-    t = (stamps - stamps[0]) * 1e-9
-    p = np.array([m.position[0] for m in got])
-    v = np.array([m.velocity[0] for m in got])
-    vc = np.array([m.velocity[1] for m in got])
-    assert not np.any(np.isnan(v)) and not np.any(np.isnan(vc)), "NaN velocity: ERR_SSI"
+    assert not any(math.isnan(x) for m in got for x in m.velocity), "NaN velocity: ERR_SSI"
+    # a STALE joint is left out of a message (docs/node.md): take the shoulder's samples
+    sh = [(s, m) for s, m in zip(stamps, got) if "shoulder" in m.name]
+    assert len(sh) > 0.9 * len(got), f"shoulder in only {len(sh)} of {len(got)} messages"
+    t = (np.array([s for s, _ in sh]) - stamps[0]) * 1e-9
+    p = np.array([m.position[m.name.index("shoulder")] for _, m in sh])
+    v = np.array([m.velocity[m.name.index("shoulder")] for _, m in sh])
     basis = np.column_stack([np.sin(W * t), np.cos(W * t), np.ones_like(t)])
     (a, b, _c), *_ = np.linalg.lstsq(basis, p, rcond=None)
     truth = W * (a * np.cos(W * t) - b * np.sin(W * t))
@@ -89,6 +91,8 @@ def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe):
     bound = AMP * W * W * span + STEP / span + abs(AMP * W) * 2e-6 / span
     err = np.abs(v[k:] - truth[k:])
     bad = int(np.sum(err > bound))
+    if os.environ.get("SSI_BRIDGE_LOAD_DUMP"):
+        np.savez(os.environ["SSI_BRIDGE_LOAD_DUMP"], t=t, p=p, v=v, truth=truth, stamps=stamps)
     worst = int(np.argmax(err - bound))
     assert bad == 0, (f"{bad} of {len(err)} shoulder velocities outside the bound; worst "
                       f"{err[worst]:.4f} > {bound[worst]:.4f} rad/s (span {span[worst]:.4f} s)")
