@@ -50,3 +50,16 @@ def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_n
         sec = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
         assert 999 < sec < sim_s + 2, sec
     assert node.log().count("waiting for /clock") == 1
+
+
+@pytest.mark.integration
+def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running, probe):
+    from ssi_bridge.gateway import wire
+
+    joints = [f"axis{i}" for i in range(1, 5)]
+    node = running({"joints": joints, "publish_rate": 1000.0, "bus.bitrate": 500_000})
+    best = wire.max_cycle_rate(4, 500_000)
+    assert f"the highest rate that fits is {best:g} Hz" in node.log(), node.log()[-2000:]
+    assert f"publish_rate 1000 Hz does not fit the CAN wire" in node.log()
+    quiet = running({"joints": ["a"], "publish_rate": 100.0, "bus.bitrate": 500_000})
+    assert "does not fit the CAN wire" not in quiet.log()
