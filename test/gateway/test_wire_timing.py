@@ -109,3 +109,41 @@ def test_latch_is_the_sync_frames_time_however_late_the_thread_runs():
     assert gateway._acquisition_time(1000.25) == pytest.approx(0.25, abs=1e-9)
     time.sleep(0.01)  # the thread runs late: the latch does not move
     assert gateway._acquisition_time(1000.25) == pytest.approx(0.25, abs=1e-9)
+
+
+def test_udp_multicast_frames_arrive_after_their_wire_time_in_the_same_time_base():
+    # between processes (or hosts) a frame carries the receiver's kernel receive time, in the
+    # same CLOCK_REALTIME base as the sender's wire time: it is never before the frame's end
+    import os
+    import socket
+
+    channel = "239.74.163.2"
+    port = 43000 + os.getpid() % 2000
+    config = BusConfig(interface="udp_multicast", channel=channel, bitrate=125_000)
+    try:
+        a = can.Bus(interface="udp_multicast", channel=channel, port=port)
+        b = can.Bus(interface="udp_multicast", channel=channel, port=port)
+    except (OSError, can.CanError, ImportError) as err:
+        pytest.skip(f"no multicast on this host: {err}")
+    from ssi_bridge.gateway.bus import Wire, WireBus
+
+    sender, receiver = WireBus(a, Wire(config.bitrate)), WireBus(b, Wire(config.bitrate))
+    try:
+        msg = can.Message(arbitration_id=0x181, data=bytes(range(8)), is_extended_id=False)
+        sender.send(msg)
+        end = msg.timestamp
+        got = None
+        deadline = time.monotonic() + 5.0
+        while got is None and time.monotonic() < deadline:
+            got = receiver.recv(0.5)
+            if got is not None and got.arbitration_id != 0x181:
+                got = None
+        assert got is not None, "frame not received over udp_multicast"
+        assert got.timestamp >= end - 1e-6  # arrived after its last bit was on the wire
+        assert bytes(got.data) == bytes(range(8))
+        assert receiver.wire.busy_until >= got.timestamp  # the receiver learnt the wire's use
+    except socket.error as err:  # pragma: no cover - host without multicast routing
+        pytest.skip(f"no multicast on this host: {err}")
+    finally:
+        sender.shutdown()
+        receiver.shutdown()
