@@ -13,6 +13,7 @@ carry their end-of-frame wire time (``gateway/wire.py``, ``gateway/timebase.py``
 from __future__ import annotations
 
 import logging
+import math
 import random
 import threading
 import time
@@ -103,6 +104,9 @@ class Wire:
         self.busy_until = 0.0
         #: end (s) of the newest SYNC (COB-ID 0x080) put on this wire in this process
         self.last_sync = 0.0
+        # frames on the wire not yet handed to the receivers (id -> end): a sender thread
+        # that stalls after its frame ended delays the frame, not the wire's time line
+        self._pending: dict[int, float] = {}
 
     def claim(self, bits: int, ready: float) -> float:
         """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
@@ -130,10 +134,25 @@ class Wire:
                 at += frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
                                  msg.dlc) / rate
                 msg.timestamp = at
+                self._pending[id(msg)] = at
                 if msg.arbitration_id == SYNC_COB_ID:
                     self.last_sync = at
             self.busy_until = at
             return True
+
+    def delivered(self, msg: can.Message) -> None:
+        """``msg`` (claimed here) has been handed to the receivers, or never will be."""
+        with self.lock:
+            self._pending.pop(id(msg), None)
+
+    def undelivered_since(self) -> float:
+        """End of the oldest frame claimed in this process and not yet handed over (inf: none).
+
+        A receiver has seen the wire only up to just before it: a frame with that time stamp
+        may still arrive (its sender's thread did not get to hand it over yet).
+        """
+        with self.lock:
+            return min(self._pending.values(), default=math.inf)
 
     def observe(self, end: float, sync: bool = False) -> None:
         """A frame of another process ended at ``end``: the wire was busy until then."""
@@ -193,11 +212,19 @@ class WireBus(can.BusABC):
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
         if not self.wire.claim_all(ordered, wire_now(), answering):
             return False
-        for msg in ordered:
-            wait = msg.timestamp - wire_now()
-            if wait > 0:
-                time.sleep(wait)
-            self._inner.send(msg, timeout)
+        delivered = self.wire.delivered
+        try:
+            for msg in ordered:
+                wait = msg.timestamp - wire_now()
+                if wait > 0:
+                    time.sleep(wait)
+                if self._is_shutdown:
+                    return False  # shut down while the frame was on the wire: nobody gets it
+                self._inner.send(msg, timeout)
+                delivered(msg)
+        finally:
+            for msg in ordered:
+                delivered(msg)
         return True
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
@@ -318,8 +345,16 @@ class LossyBus(can.BusABC):
         return msg
 
     def seen_until(self) -> float:
-        """Wire time up to which every frame that arrived has been handled by this side."""
-        return max(self.rx_latest, self.rx_idle_at)
+        """Wire time up to which every frame on the wire has been handled by this side.
+
+        Never past a frame of this process that is on the wire but not handed over yet
+        (:meth:`Wire.undelivered_since`): its sender's thread may be the one stalled.
+        """
+        seen = max(self.rx_latest, self.rx_idle_at)
+        wire = getattr(self._inner, "wire", None)
+        if wire is not None:
+            seen = min(seen, wire.undelivered_since())
+        return seen
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inner = self._inner
