@@ -42,7 +42,9 @@ from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
-from ssi_bridge.ros.station import ChildStation, InProcessStation, start_station
+from ssi_bridge.ros.station import (
+    ChildStation, InProcessStation, start_station, with_station_bus,
+)
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
@@ -79,6 +81,9 @@ class SsiBridgeNode(Node):
             self.settings = dataclasses.replace(
                 self.settings, bus_interface="virtual",
                 bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
+        if self.settings.simulation:
+            # the node and its simulated station meet on this bus (ros/station.py)
+            self.settings = with_station_bus(self.settings)
         s = self.settings
         self._t0 = time.monotonic()
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
@@ -101,7 +106,6 @@ class SsiBridgeNode(Node):
         self.encoders = {j.name: joint_encoder(j) for j in s.joints} if s.simulation else {}
         if s.simulation:
             self.station = start_station(s)
-            self.bus_config = self.station.bus
         n_slots = max(j.slot for j in s.joints)
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient

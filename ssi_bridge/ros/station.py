@@ -15,6 +15,7 @@ own check of its parent process. ROS-free.
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import logging
 import os
 import signal
@@ -42,11 +43,21 @@ PR_SET_PDEATHSIG = 1
 _LIBC = ctypes.CDLL(None, use_errno=True)
 
 
+def with_station_bus(s: NodeSettings) -> NodeSettings:
+    """``s`` with the bus the node shares with its simulated station.
+
+    udp_multicast: the user's udp_multicast channel, else a group and port of their own
+    derived from ``bus.channel`` on loopback; virtual: the bus as configured. The node's
+    client, CAN log sniffer and diagnostics all use the result.
+    """
+    if s.simulation_transport == "udp_multicast" and s.bus_interface != "udp_multicast":
+        return dataclasses.replace(s, bus_interface="udp_multicast",
+                                   bus_channel=derive_channel(s.bus_channel))
+    return s
+
+
 def station_bus(s: NodeSettings) -> BusConfig:
-    """The bus between the node and its simulated station for ``s.simulation_transport``."""
-    if s.simulation_transport == "udp_multicast":
-        return BusConfig(interface="udp_multicast", channel=derive_channel(s.bus_channel),
-                         bitrate=s.bus_bitrate, node_id=s.node_id)
+    """The bus config of ``s`` (after :func:`with_station_bus`)."""
     return BusConfig(interface=s.bus_interface, channel=s.bus_channel, bitrate=s.bus_bitrate,
                      node_id=s.node_id)
 

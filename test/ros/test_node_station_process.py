@@ -27,6 +27,8 @@ from .conftest import REPO, dds_env
 STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
 REG_LOWER_LIMIT = 48
 PERIOD = 0.5
+#: the station as a child process of the node
+CHILD = {"simulation.transport": "udp_multicast"}
 
 
 def _children(pid: int) -> list[int]:
@@ -72,7 +74,7 @@ def _bus_status(diags):
 
 
 def test_kill_9_of_the_node_leaves_no_station_behind(running):
-    node = running()
+    node = running(CHILD)
     station = _station_of(node)
     assert not _gone(station)
     os.kill(node.proc.pid, signal.SIGKILL)
@@ -82,14 +84,14 @@ def test_kill_9_of_the_node_leaves_no_station_behind(running):
 
 
 def test_a_clean_stop_of_the_node_stops_the_station(running):
-    node = running()
+    node = running(CHILD)
     station = _station_of(node)
     assert node.stop() == 0
     _wait(lambda: _gone(station), 10.0, "station process to end with the node")
 
 
 def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running, probe):
-    node = running({"diagnostics_period": PERIOD})
+    node = running({"diagnostics_period": PERIOD, **CHILD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     joints = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: (st := _bus_status(diags)) is not None
@@ -104,11 +106,43 @@ def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running,
     assert node.proc.poll() is None
 
 
+def test_faults_reach_the_child_station_over_the_bus(running, probe):
+    node = running({"diagnostics_period": PERIOD, **CHILD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+
+    def level(name):
+        for _, arr in reversed(diags):
+            for st in arr.status:
+                if st.name == name:
+                    return st.level
+        return None
+    K = InjectFault.Request
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK, 10.0,
+                   "joint1 OK", node)
+    res = probe.call(InjectFault, node.topic("~/inject_fault"),
+                     K(kind=K.DATA_WIRE_BREAK, duration=1.0))
+    assert res.success and "for 1 s" in res.message, res.message
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.ERROR,
+                   2 * PERIOD + 2, "joint1 ERROR from the wire break", node)
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK,
+                   1.0 + 2 * PERIOD + 3, "joint1 OK once the station ended the fault", node)
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.GATEWAY_SILENT))
+    assert res.success, res.message
+    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.ERROR,
+                   2 * PERIOD + 2, "bus ERROR while the station is silent", node)
+    refused = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.ENCODER_ERROR))
+    assert not refused.success and "only CLEAR_ALL" in refused.message, refused.message
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.CLEAR_ALL))
+    assert res.success, res.message  # the silent station applied the clear, then answered
+    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.OK,
+                   3 * PERIOD + 3, "bus OK with the heartbeat back", node)
+
+
 def test_a_station_that_cannot_start_is_one_line_and_exit_1(start_node, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
     node = start_node({"storage_path": str(blocker / "sub" / "bank.json"),
-                       "simulation.start_timeout": 20.0})
+                       "simulation.start_timeout": 20.0, **CHILD})
     assert node.proc.wait(60) == 1, node.log()
     lines = [ln for ln in node.log().splitlines() if "cannot start" in ln]
     assert len(lines) == 1 and "simulated station" in lines[0] and "exited" in lines[0], \
