@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import can
 from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
+from can.interfaces.udp_multicast.utils import unpack_message
 
 from ssi_bridge.exceptions import ConfigError
 
@@ -105,7 +106,8 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
         iface = socket.inet_aton(endpoint.interface)
         send = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", hop_limit))
+            send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL,
+                            struct.pack("@I", hop_limit))
             send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
             send.bind((endpoint.interface, 0))
         except OSError as err:
@@ -163,7 +165,6 @@ class UdpCanBus(UdpMulticastBus):
         data, sender, timestamp = result
         if sender[:2] == self._multicast.own_address:
             return None, False  # our own frame looped back
-        from can.interfaces.udp_multicast.utils import unpack_message
         try:
             msg = unpack_message(data, replace={"timestamp": timestamp}, check=True)
         except Exception as err:  # noqa: BLE001 - a foreign datagram on the group

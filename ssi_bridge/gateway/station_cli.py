@@ -116,7 +116,10 @@ def main(argv: list[str] | None = None) -> int:
         signal.signal(sig, lambda *_: stop.set())
     args = _parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
-                        format="[%(levelname)s] [station] %(name)s: %(message)s")
+                        format="[%(levelname)s] %(name)s: %(message)s")
+    if args.log_level != "DEBUG":  # every SDO transfer and NMT step is an INFO there
+        for noisy in ("canopen", "can"):
+            logging.getLogger(noisy).setLevel(logging.WARNING)
     from ssi_bridge.gateway.station import Station  # after argparse: --help stays fast
     try:
         settings = station_settings(_values(args))

@@ -144,12 +144,18 @@ class ChildStation:
         assert self.proc is not None and self.proc.stderr is not None
         for raw in self.proc.stderr:
             line = raw.decode(errors="replace").rstrip()
-            if line:
-                self._stderr.append(line)
-                level = (logging.WARNING if "[WARNING]" in line else
-                         logging.ERROR if "[ERROR]" in line or "Traceback" in line else
-                         logging.INFO)
-                logger.log(level, "%s", line)
+            if not line:
+                continue
+            self._stderr.append(line)
+            level = logging.INFO
+            for name in ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"):
+                if line.startswith(f"[{name}] "):
+                    level, line = getattr(logging, name), line[len(name) + 3:]
+                    break
+            else:
+                if line.startswith("Traceback") or "Error" in line:
+                    level = logging.ERROR
+            logger.log(level, "station: %s", line)
 
     def _reap(self) -> None:
         """Wait for the child's end (stdout closes with it) and keep its exit code."""
