@@ -72,6 +72,12 @@ def open_bus(config: BusConfig) -> can.BusABC:
     A simulated interface (:data:`SIMULATED_INTERFACES`) comes wrapped in :class:`WireBus`, so
     its frames take their real time on the wire at ``config.bitrate``.
     """
+    if config.interface == "udp_multicast":  # our own-frame-free variant (gateway/multicast)
+        from ssi_bridge.gateway.multicast import open_udp_bus
+        try:
+            return WireBus(open_udp_bus(str(config.channel)), wire_for(config))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
     kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
     if config.interface == "virtual":
         kwargs["preserve_timestamps"] = True  # receivers see the WireBus end-of-frame time
