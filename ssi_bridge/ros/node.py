@@ -378,8 +378,8 @@ class SsiBridgeNode(Node):
         status = Status(header=js.header) if want_status else None
         # a joint without a sample latched at this SYNC holds an older latch than this stamp:
         # while it is not (yet) STALE the cycle is not published and no estimate takes it in
-        # (so a velocity window is always the published samples); a STALE joint is left out
-        # of joint_states (its diagnostics say STALE) and the others are published
+        # (so a velocity window is always the published samples); a STALE joint's last value
+        # is published with the others (its diagnostics say STALE), so joint_states goes on
         samples = [(joint, self.client.latest(joint.slot)) for joint in self.settings.joints]
         limit = self.settings.stale_cycles
         transient = any(
@@ -428,8 +428,8 @@ class SsiBridgeNode(Node):
         sts = image[7]
         if sts & ERRORS:
             counters.error_cycles += 1
-        if not publish or not fresh:
-            return fresh  # not published: not latched at this cycle's SYNC
+        if not publish:
+            return fresh  # the cycle is not published: a joint is not latched at its SYNC
         scale = self.scales[name]
         position = scale.position(sample.position)
         estimator = self.velocity[name]
