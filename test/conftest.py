@@ -5,7 +5,7 @@ from __future__ import annotations
 import fcntl
 import os
 import random
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -43,3 +43,47 @@ def ros_domain() -> Iterator[int]:
         yield dom
     finally:
         os.close(fd)
+
+
+@pytest.fixture
+def small_fs(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
+    """Factory: a tmpfs of ``size`` bytes mounted under tmp_path (root only), unmounted after.
+
+    A real file system that runs full (ENOSPC), for the write-error paths of the recorders.
+    """
+    import subprocess
+
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small file system needs root")
+    mounted: list[Path] = []
+
+    def _mount(size: int) -> Path:
+        point = tmp_path / f"small_fs{len(mounted)}"
+        point.mkdir()
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size},mode=0777", "tmpfs",
+                               str(point)], capture_output=True, text=True)
+        if done.returncode != 0:
+            pytest.skip(f"cannot mount a tmpfs: {done.stderr.strip()}")
+        mounted.append(point)
+        return point
+
+    _mount.fill = fill_up  # type: ignore[attr-defined]
+    yield _mount
+    for point in mounted:
+        subprocess.run(["umount", "-l", str(point)], check=False)
+
+
+def fill_up(directory: Path) -> Path:
+    """Write a filler file until ``directory``'s file system is full (ENOSPC)."""
+    filler = directory / "filler"
+    fd = os.open(filler, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        for block in (65536, 4096, 512, 1):
+            try:
+                while True:
+                    os.write(fd, b"\0" * block)
+            except OSError:
+                pass  # ENOSPC: go on with smaller blocks down to the last byte
+    finally:
+        os.close(fd)
+    return filler

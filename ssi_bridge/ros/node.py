@@ -15,6 +15,7 @@ import os
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -69,8 +70,10 @@ def pin_process(cpus: tuple[int, ...]) -> None:
 class SsiBridgeNode(Node):
     """Bridge of one XN-GW-CANOPEN station's XN-1SSI channels to ROS 2."""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, stop: Callable[[], None] | None = None, **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
+        #: ends the process's spin cleanly (main's stop request; without main: the context)
+        self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         self.settings: NodeSettings = declare_parameters(self)
         if self.settings.replay_can_log:
@@ -287,7 +290,7 @@ class SsiBridgeNode(Node):
             + ("; exiting (replay.exit_at_end)" if self.settings.replay_exit_at_end else
                "; still running, diagnostics go STALE"))
         if self.settings.replay_exit_at_end:
-            self.context.try_shutdown()
+            self._request_stop()
 
     def _publish_cycle(self, t_sync: float) -> None:
         """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (monotonic)."""
@@ -433,15 +436,23 @@ class SsiBridgeNode(Node):
         return SetParametersResult(successful=True)
 
     def shutdown(self) -> None:
-        """Stop recording, stop the bus side; safe to call twice."""
-        logbridge.uninstall()
-        self.cycle.stop()
+        """Stop recording, stop the bus side; safe to call twice.
+
+        Every step runs even if an earlier one fails (a recording on a full disk must not
+        leave the bus open); failures are logged on one line each.
+        """
+        steps: list[tuple[str, Callable[[], object]]] = [("cycle", self.cycle.stop)]
         if self.player is not None:
-            self.player.stop()
-        self.recorder.stop()
-        self.client.close()
+            steps.append(("log replay", self.player.stop))
+        steps += [("recording", self.recorder.stop), ("bus", self.client.close)]
         if self.gateway is not None:
-            self.gateway.stop()
+            steps.append(("simulated gateway", self.gateway.stop))
+        for what, step in steps:
+            try:
+                step()
+            except Exception as err:  # noqa: BLE001 - the remaining steps must still run
+                self.get_logger().error(f"stopping the {what} failed: {err}")
+        logbridge.uninstall()
 
 
 __all__ = ["SsiBridgeNode"]

@@ -88,10 +88,17 @@ class SessionRecorder:
             sniffer, self._sniffer = self._sniffer, None
         if sniffer is not None:
             frames = sniffer.stop()
-            self._node.get_logger().info(f"CAN log closed: {sniffer.path} ({frames} frames)")
+            self._node.get_logger().info(
+                f"CAN log closed: {sniffer.path} ({frames} frames"
+                + (f"; stopped early: {sniffer.error})" if sniffer.error else ")"))
         if bag is None:
             return None
-        summary = bag.close()
+        try:
+            summary = bag.close()
+        except (RecordingError, OSError) as err:
+            self.error = f"recording stopped: {err}"
+            self._node.get_logger().error(self.error)
+            raise RecordingError(self.error) from err
         self._node.get_logger().info(
             f"recording closed: {summary.directory} ({summary.message_count} messages)")
         return Path(summary.directory), summary.message_count
@@ -133,11 +140,17 @@ class SessionRecorder:
         config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                            bitrate=s.bus_bitrate, node_id=s.node_id)
         try:
-            self._sniffer = CanSniffer(config, bag_dir / "can_0.log")
+            self._sniffer = CanSniffer(config, bag_dir / "can_0.log",
+                                       on_error=self._on_can_log_error)
         except BusError as err:
             # the bag still records; the reason shows on the bus diagnostics
             self.error = f"CAN log not written: {err}"
             self._node.get_logger().error(self.error)
+
+    def _on_can_log_error(self, reason: str) -> None:
+        """The CAN log hit a write error (sniffer thread): ERROR on the bus diagnostics at once
+        (the node checks :attr:`error` every cycle); the bag goes on recording."""
+        self.error = reason
 
     def on_start(self, request: Any, response: Any) -> Any:
         """~/start_recording."""
