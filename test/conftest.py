@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import os
 import random
+import signal
+import subprocess
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -14,6 +18,49 @@ import pytest
 #: users). Claims are flock()ed files, so parallel test runs on one machine never share one.
 DOMAIN_IDS = range(1, 233)
 CLAIMS = Path(os.environ.get("TMPDIR", "/tmp")) / "ssi_bridge_test_domains"
+#: prctl(2) option: the signal a child gets when the thread that started it ends
+PR_SET_PDEATHSIG = 1
+_prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
+
+
+def die_with_parent() -> None:
+    """``preexec_fn`` of every process a test starts: it dies with the test process.
+
+    PR_SET_PDEATHSIG sends SIGKILL to the child when the thread that forked it ends (pytest
+    starts children from its main thread), so a killed test run leaves no node behind. SIGINT
+    is set back to its default: a background job of a non-interactive shell starts with SIGINT
+    ignored, Python keeps it so, and a test that stops its child with SIGINT needs it handled.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() == 1:
+        os._exit(1)  # the parent died before prctl took effect
+
+
+@pytest.fixture
+def child_preexec() -> Callable[[], None]:
+    """The ``preexec_fn`` a test passes to Popen/run: see :func:`die_with_parent`."""
+    return die_with_parent
+
+
+@pytest.fixture(autouse=True)
+def _children_die_with_the_test(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every process a test starts (Popen, subprocess.run) gets :func:`die_with_parent` first,
+    before its own ``preexec_fn`` if it has one."""
+    original = subprocess.Popen.__init__
+
+    def init(self: subprocess.Popen, *args: Any, **kwargs: Any) -> None:
+        own = kwargs.get("preexec_fn")
+        if own is None or own is die_with_parent:
+            kwargs["preexec_fn"] = die_with_parent
+        else:
+            def both() -> None:
+                die_with_parent()
+                own()
+            kwargs["preexec_fn"] = both
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", init)
 
 
 def claim_domain() -> tuple[int, int]:
@@ -51,8 +98,6 @@ def small_fs(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
 
     A real file system that runs full (ENOSPC), for the write-error paths of the recorders.
     """
-    import subprocess
-
     if os.geteuid() != 0:
         pytest.skip("mounting a small file system needs root")
     mounted: list[Path] = []
