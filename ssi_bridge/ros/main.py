@@ -22,12 +22,15 @@ import signal
 import socket
 import sys
 import threading
+import time
 from collections.abc import Callable
 
 #: the stop signals a launch system or a terminal sends
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: longest reason printed for a start-up error (an echoed 1 MB value stays readable)
 MAX_REASON = 400
+#: seconds a stop waits for callbacks still running (a register handshake takes < 1 s)
+CALLBACK_DRAIN_S = 5.0
 
 
 def _stopped_while_importing(signum: int, _frame: object) -> None:
@@ -110,10 +113,34 @@ def _ignore(_signum: int, _frame: object) -> None:
     """The Python side of a stop signal: nothing (the watcher thread acts on it)."""
 
 
-def one_line(err: BaseException, limit: int = MAX_REASON) -> str:
+def one_line(err: object, limit: int = MAX_REASON) -> str:
     """``err`` as one line of at most ``limit`` characters (rcl errors span several lines)."""
     text = " ".join(str(err).split()) or type(err).__name__
     return text if len(text) <= limit else text[: limit - 14] + f"... ({len(text)} chars)"
+
+
+def params_file_problem(argv: list[str]) -> str | None:
+    """Why a ``--params-file`` on the command line cannot be used, in one line, or None.
+
+    rcl would report it too, but over several lines (its own log line, then the error with
+    source positions); checked first, a missing or malformed file is one clear line.
+    """
+    import yaml
+
+    for flag, path in zip(argv, argv[1:]):
+        if flag != "--params-file":
+            continue
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = yaml.safe_load(f)
+        except OSError as err:
+            return f"params file {one_line(path, 200)}: {err.strerror or err}"
+        except yaml.YAMLError as err:
+            return f"params file {one_line(path, 200)} is not valid YAML: {one_line(err, 300)}"
+        if not isinstance(data, dict):
+            return (f"params file {one_line(path, 200)}: expected a mapping "
+                    "'<node name or /**>: {ros__parameters: {...}}'")
+    return None
 
 
 def _init(args: list[str] | None) -> str | None:
@@ -121,6 +148,9 @@ def _init(args: list[str] | None) -> str | None:
     line if the command line or a params file is bad."""
     from rclpy.signals import SignalHandlerOptions
 
+    problem = params_file_problem(sys.argv if args is None else args)
+    if problem is not None:
+        return problem
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as err:  # noqa: BLE001 - rcl reports a bad params file as RCLError
@@ -142,7 +172,26 @@ def _spin(node: Node, stops: StopRequests) -> None:
         if rclpy.ok() and not stops.requested:
             raise  # a real fault, not a shutdown racing a callback
     finally:
+        _wait_for_callbacks(executor, node)  # no new ones start: spin_once is not called again
         executor.shutdown(timeout_sec=1.0)
+
+
+def _wait_for_callbacks(executor: MultiThreadedExecutor, node: Node,
+                        timeout: float = CALLBACK_DRAIN_S) -> None:
+    """Let callbacks still running (a service call in its register handshake) finish before
+    the node closes the bus under them; their errors are logged, not left to Task.__del__.
+
+    Jazzy's ``Executor.shutdown`` does not wait for them (its wait is skipped once the
+    executor is marked shut down) and destroys the guard condition a finishing callback
+    wakes, so the executor's task list is read here, before it is shut down.
+    """
+    deadline = time.monotonic() + timeout
+    for task in list(getattr(executor, "_futures", ())):
+        while not task.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if task.done() and task.exception() is not None:
+            node.get_logger().warning(f"a callback failed while stopping: "
+                                      f"{one_line(task.exception())}")
 
 
 def main(args: list[str] | None = None) -> int:

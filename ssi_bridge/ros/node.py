@@ -39,7 +39,7 @@ from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
-from ssi_bridge.ros.observe import ObservedCycleThread
+from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
@@ -141,7 +141,8 @@ class SsiBridgeNode(Node):
             self.cycle = ObservedCycleThread(
                 self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
                 ended=self.player.finished if self.player is not None else None,
-                on_end=self._on_replay_end)
+                on_end=self._on_replay_end,
+                silent_warning=None if self.player is not None else SILENT_WARNING_S)
         else:
             self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
         self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
@@ -182,8 +183,9 @@ class SsiBridgeNode(Node):
         mode = ("simulated station" if s.simulation else
                 f"replay of {s.replay_can_log}" if s.replay_can_log else
                 "listen-only" if s.listen_only else "real station")
+        names = logbridge.clip(str(list(self.joints)), 200)  # echoed input: kept short
         self.get_logger().info(
-            f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
+            f"bridging {len(s.joints)} joint(s) {names} on "
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
             f"({mode}); publishing "
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
@@ -203,7 +205,8 @@ class SsiBridgeNode(Node):
         if reason:
             raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
         self.client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
-        self.get_logger().info(f"{joint.name}: REG_PARA1 0x{current:08X} -> 0x{joint.para1:08X} "
+        self.get_logger().info(f"{logbridge.clip(joint.name, 80)}: REG_PARA1 0x{current:08X} -> "
+                               f"0x{joint.para1:08X} "
                                f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
 
     # -- time ------------------------------------------------------------------------------

@@ -26,6 +26,11 @@ from ssi_bridge.ros.params import JointSettings, MotionSettings, NodeSettings
 logger = logging.getLogger(__name__)
 
 
+def _short(name: str, limit: int = 80) -> str:
+    """A configured name as echoed in a log line: at most ``limit`` characters."""
+    return name if len(name) <= limit else f"{name[:limit]}... ({len(name)} characters)"
+
+
 def make_motion(m: MotionSettings) -> MotionProfile:
     """The motion profile a joint's simulated shaft follows (rev or m over seconds)."""
     if m.kind == "still":
@@ -109,11 +114,11 @@ class SimStation:
             self.channels[joint.name] = SimChannel(joint, encoder, line, module)
             logger.info("slot %d: %s encoder (%d-bit %s frame) for joint %s", slot,
                         joint.family, encoder.frame_bits, encoder.config.code.name.lower(),
-                        joint.name)
+                        _short(joint.name))
             mismatch = para1_mismatch(encoder, joint.para1)
             if mismatch:
                 logger.warning("joint %s: REG_PARA1 0x%08X does not match the simulated %s "
-                               "encoder: %s", joint.name, joint.para1, joint.family, mismatch)
+                               "encoder: %s", _short(joint.name), joint.para1, joint.family, mismatch)
 
     @staticmethod
     def _store(storage_path: str, slot: int) -> RetentiveStore | MemoryStore:
