@@ -4,8 +4,9 @@ The recorder closes a chunk and flushes the file every half second, so everythin
 last flush is a sequence of complete MCAP records. Recovery reads records sequentially up to
 the first incomplete or corrupt one, then rewrites the file with the same schemas, channels
 and messages plus chunk indexes, message indexes, statistics and summary, and writes
-metadata.yaml. The original file is replaced only after the new one and metadata.yaml are complete; a write
-error (disk full) removes the partial files and leaves the bag as it was (RecordingError).
+metadata.yaml. The original file is replaced only after the new one and metadata.yaml are
+complete; a write error (disk full) removes the partial files and leaves the bag as it was
+(RecordingError).
 Documented command: ``ros2 run ssi_bridge replay --recover DIR``.
 """
 

@@ -223,6 +223,9 @@ def main(args: list[str] | None = None) -> int:
             _spin(node, stops)
     finally:
         if node is not None:
+            if stops.signum:
+                name = signal.Signals(stops.signum).name
+                node.get_logger().info(f"{name} received: closing the recording and the bus")
             node.shutdown()
             node.destroy_node()
         rclpy.try_shutdown()

@@ -118,7 +118,8 @@ class SimStation:
             mismatch = para1_mismatch(encoder, joint.para1)
             if mismatch:
                 logger.warning("joint %s: REG_PARA1 0x%08X does not match the simulated %s "
-                               "encoder: %s", _short(joint.name), joint.para1, joint.family, mismatch)
+                               "encoder: %s", _short(joint.name), joint.para1, joint.family,
+                               mismatch)
 
     @staticmethod
     def _store(storage_path: str, slot: int) -> RetentiveStore | MemoryStore:

@@ -76,6 +76,7 @@ def assert_clean_stop(node) -> None:
     assert "Traceback" not in log and "KeyboardInterrupt" not in log, log[-3000:]
     assert "Failed to publish log message to rosout" not in log, log[-3000:]
     assert "gateway node 1 stopped" in log, "the simulated gateway and its bus were closed"
+    assert "stopping the" not in log, "every shutdown step (cycle, recording, bus) succeeded"
 
 
 def test_double_sigint_10ms_apart_while_recording_exits_0_with_a_whole_bag(start_node,
@@ -188,8 +189,8 @@ spec = importlib.util.spec_from_file_location("test_root_conftest", sys.argv[1])
 conftest = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(conftest)
 with open(sys.argv[3], "wb") as log:
-    child = subprocess.Popen([sys.argv[2], "--ros-args", "-p", "bus.channel:=orphan_" + sys.argv[4]],
-                             stdout=log, stderr=subprocess.STDOUT,
+    cmd = [sys.argv[2], "--ros-args", "-p", "bus.channel:=orphan_" + sys.argv[4]]
+    child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
                              preexec_fn=conftest.die_with_parent)
 print(child.pid, flush=True)
 time.sleep(600)
