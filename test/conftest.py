@@ -23,40 +23,48 @@ PR_SET_PDEATHSIG = 1
 _prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
 
 
-def die_with_parent() -> None:
-    """``preexec_fn`` of every process a test starts: it dies with the test process.
+def dies_with_this_process() -> Callable[[], None]:
+    """A ``preexec_fn`` that makes the child die with the calling (test) process.
 
     PR_SET_PDEATHSIG sends SIGKILL to the child when the thread that forked it ends (pytest
     starts children from its main thread), so a killed test run leaves no node behind. SIGINT
     is set back to its default: a background job of a non-interactive shell starts with SIGINT
     ignored, Python keeps it so, and a test that stops its child with SIGINT needs it handled.
     """
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    if os.getppid() == 1:
-        os._exit(1)  # the parent died before prctl took effect
+    parent = os.getpid()
+
+    def preexec() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        if os.getppid() != parent:
+            os._exit(1)  # the parent died before prctl took effect
+
+    preexec.dies_with_parent = True  # type: ignore[attr-defined]
+    return preexec
 
 
 @pytest.fixture
 def child_preexec() -> Callable[[], None]:
-    """The ``preexec_fn`` a test passes to Popen/run: see :func:`die_with_parent`."""
-    return die_with_parent
+    """The ``preexec_fn`` a test passes to Popen/run: see :func:`dies_with_this_process`."""
+    return dies_with_this_process()
 
 
 @pytest.fixture(autouse=True)
 def _children_die_with_the_test(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every process a test starts (Popen, subprocess.run) gets :func:`die_with_parent` first,
-    before its own ``preexec_fn`` if it has one."""
+    """Every process a test starts (Popen, subprocess.run) dies with the test process: its
+    ``preexec_fn`` runs :func:`dies_with_this_process`'s first, then the test's own."""
     original = subprocess.Popen.__init__
 
     def init(self: subprocess.Popen, *args: Any, **kwargs: Any) -> None:
         own = kwargs.get("preexec_fn")
-        if own is None or own is die_with_parent:
-            kwargs["preexec_fn"] = die_with_parent
-        else:
+        if not getattr(own, "dies_with_parent", False):
+            first = dies_with_this_process()
+
             def both() -> None:
-                die_with_parent()
-                own()
+                first()
+                if own is not None:
+                    own()
+
             kwargs["preexec_fn"] = both
         original(self, *args, **kwargs)
 

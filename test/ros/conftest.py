@@ -101,6 +101,7 @@ def _then(first: Callable[[], None], second: Callable[[], None] | None) -> Calla
         first()
         second()
 
+    both.dies_with_parent = True  # type: ignore[attr-defined]
     return both
 
 

@@ -191,7 +191,7 @@ spec.loader.exec_module(conftest)
 with open(sys.argv[3], "wb") as log:
     cmd = [sys.argv[2], "--ros-args", "-p", "bus.channel:=orphan_" + sys.argv[4]]
     child = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                             preexec_fn=conftest.die_with_parent)
+                             preexec_fn=conftest.dies_with_this_process())
 print(child.pid, flush=True)
 time.sleep(600)
 """
