@@ -63,7 +63,7 @@ def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_no
     assert [p for p in parsed if p[0] != "INFO"] == [], log
     # logger names: the module is the logger, never repeated in brackets inside the message
     assert not [p for p in parsed if p[2].startswith("[")], log
-    assert any(name == "ssi_bridge.ros.station" for _, name, _ in parsed), log
+    assert any(name == "ssi_bridge.client.master" for _, name, _ in parsed), log
     assert "Failed to publish log message to rosout" not in log
     assert all(LINE.match(line) for line in log.splitlines() if line.strip()), log
 
