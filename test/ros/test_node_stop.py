@@ -107,7 +107,7 @@ def test_stop_signals_at_any_moment_of_start_up_and_shutdown(start_node, tmp_pat
                                                              signals: tuple[int, ...]):
     # the first signal lands at a different point of the start-up each time: during imports,
     # parameter declaration, station set-up, the recorder opening, the first cycles
-    markers = ("", "ssi_bridge.ros.station", "gateway node 1 up", "recording to", "bridging")
+    markers = ("", "gateway node 1 up", "gateway node 1 configured", "recording to", "bridging")
     for run, marker in enumerate(markers):
         root = tmp_path / f"r{run}"
         node = start_node({"record.enabled": True, "record.root": str(root),
