@@ -32,6 +32,7 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import random
@@ -140,6 +141,21 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+_prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
+PR_SET_PDEATHSIG = 1
+_BENCH_PID = os.getpid()
+
+
+def _die_with_parent() -> None:
+    """preexec_fn of every process started here: SIGKILLed when this benchmark dies (a killed
+    run leaves no publisher behind); SIGINT back to default (a background job of a
+    non-interactive shell starts with it ignored) so that _stop's SIGINT is handled."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != _BENCH_PID:
+        os._exit(1)  # the benchmark died before prctl took effect
+
+
 def _stop(proc: subprocess.Popen, timeout: float = 8.0) -> None:
     """SIGINT, then SIGKILL after ``timeout``; only this PID."""
     if proc.poll() is not None:
@@ -193,11 +209,13 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
         with open(sub_log, "wb") as log:
             sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out), str(ready)],
                                    stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True)
+                                   start_new_session=True,
+                                   preexec_fn=_die_with_parent)
         procs.append(sub)
         with open(pub_log, "wb") as log:
             pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True)
+                                   start_new_session=True,
+                                   preexec_fn=_die_with_parent)
         procs.append(pub)
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         while not ready.exists():

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import can
 
+from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.exceptions import BusError
@@ -88,6 +89,7 @@ class ListenOnlyClient(can.Listener):
         self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions).routes
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
+        self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         self._last_seen = -float("inf")
         self._newest = -float("inf")  # newest frame timestamp handled
         self._open: tuple[int, float] | None = None  # (seq, time) of a cycle not yet reported
@@ -219,6 +221,8 @@ class ListenOnlyClient(can.Listener):
             self.nmt_state = msg.data[0] & 0x7F
         elif can_id == self._emcy_id:
             counters.emergencies += 1
+            if msg.dlc >= 3:
+                self._emcy_log.on_emcy(msg.data[0] | msg.data[1] << 8, bytes(msg.data[3:8]))
 
     def on_error(self, exc: Exception) -> None:
         """A receive error of the bus: counted, the listener keeps going."""

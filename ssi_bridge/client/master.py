@@ -26,6 +26,7 @@ from collections.abc import Callable
 import can
 import canopen
 
+from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
 from ssi_bridge.client.load import BusLoad
@@ -82,6 +83,7 @@ class BridgeClient:
         self.transport = transport
         self.assist_after = assist_after
         self.counters = ClientCounters()
+        self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         self.table = SlotTable(slots)
         #: bus load from frame timestamps (for the bus diagnostics)
         self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
@@ -331,4 +333,4 @@ class BridgeClient:
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1
-        logger.info("gateway node %d EMCY %s data %s", self.node_id, error, error.data.hex())
+        self._emcy_log.on_emcy(error.code, bytes(error.data))

@@ -15,6 +15,7 @@ import os
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -41,7 +42,7 @@ from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
-from ssi_bridge.ros.observe import ObservedCycleThread
+from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
@@ -74,8 +75,10 @@ def pin_process(cpus: tuple[int, ...]) -> None:
 class SsiBridgeNode(Node):
     """Bridge of one XN-GW-CANOPEN station's XN-1SSI channels to ROS 2."""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, stop: Callable[[], None] | None = None, **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
+        #: ends the process's spin cleanly (main's stop request; without main: the context)
+        self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         self.settings: NodeSettings = declare_parameters(self)
         if self.settings.replay_can_log:
@@ -177,7 +180,8 @@ class SsiBridgeNode(Node):
             self.cycle = ObservedCycleThread(
                 self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
                 ended=self.player.finished if self.player is not None else None,
-                on_end=self._on_replay_end)
+                on_end=self._on_replay_end,
+                silent_warning=None if self.player is not None else SILENT_WARNING_S)
         else:
             self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
         self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
@@ -218,8 +222,9 @@ class SsiBridgeNode(Node):
         mode = ("simulated station" if s.simulation else
                 f"replay of {s.replay_can_log}" if s.replay_can_log else
                 "listen-only" if s.listen_only else "real station")
+        names = logbridge.clip(str(list(self.joints)), 200)  # echoed input: kept short
         self.get_logger().info(
-            f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
+            f"bridging {len(s.joints)} joint(s) {names} on "
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
             f"({mode}); publishing "
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
@@ -239,7 +244,8 @@ class SsiBridgeNode(Node):
         if reason:
             raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
         self.client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
-        self.get_logger().info(f"{joint.name}: REG_PARA1 0x{current:08X} -> 0x{joint.para1:08X} "
+        self.get_logger().info(f"{logbridge.clip(joint.name, 80)}: REG_PARA1 0x{current:08X} -> "
+                               f"0x{joint.para1:08X} "
                                f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
 
     # -- time ------------------------------------------------------------------------------
@@ -362,7 +368,7 @@ class SsiBridgeNode(Node):
             + ("; exiting (replay.exit_at_end)" if self.settings.replay_exit_at_end else
                "; still running, diagnostics go STALE"))
         if self.settings.replay_exit_at_end:
-            self.context.try_shutdown()
+            self._request_stop()
 
     def _publish_cycle(self, t_sync: float) -> None:
         """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time)."""
@@ -544,15 +550,23 @@ class SsiBridgeNode(Node):
         return SetParametersResult(successful=True)
 
     def shutdown(self) -> None:
-        """Stop recording, stop the bus side; safe to call twice."""
-        logbridge.uninstall()
-        self.cycle.stop()
+        """Stop recording, stop the bus side; safe to call twice.
+
+        Every step runs even if an earlier one fails (a recording on a full disk must not
+        leave the bus open); failures are logged on one line each.
+        """
+        steps: list[tuple[str, Callable[[], object]]] = [("cycle", self.cycle.stop)]
         if self.player is not None:
-            self.player.stop()
-        self.recorder.stop()
-        self.client.close()
+            steps.append(("log replay", self.player.stop))
+        steps += [("recording", self.recorder.stop), ("bus", self.client.close)]
         if self.station is not None:
-            self.station.stop()
+            steps.append(("simulated station", self.station.stop))
+        for what, step in steps:
+            try:
+                step()
+            except Exception as err:  # noqa: BLE001 - the remaining steps must still run
+                self.get_logger().error(f"stopping the {what} failed: {err}")
+        logbridge.uninstall()
 
 
 __all__ = ["SsiBridgeNode"]

@@ -216,12 +216,52 @@ def _cpus(values: list[int]) -> tuple[int, ...]:
     return cpus
 
 
+#: parameters rclpy itself declares or reads, never reported as unknown
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+RCLPY_PREFIXES = ("qos_overrides.",)
+#: longest echo of a configured value in a message
+ECHO = 80
+
+
+def _echo(value: Any) -> str:
+    """A configured value as text for a message, cut to :data:`ECHO` characters."""
+    text = repr(value)
+    return text if len(text) <= ECHO else f"{text[:ECHO]}... ({len(text)} characters)"
+
+
+def unknown_overrides(node: Node) -> list[str]:
+    """One line per parameter given (params file, ``-p``) that no declared parameter takes,
+    with the closest declared name: a typo such as ``publish_rte`` is otherwise silently
+    ignored."""
+    import difflib
+
+    declared = set(node.list_parameters([], 0).names)
+    given = getattr(node, "_parameter_overrides", {})
+    out = []
+    for name in sorted(given):
+        if name in declared or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
+            continue
+        close = difflib.get_close_matches(name, sorted(declared), n=1, cutoff=0.6)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        joint, _, key = name.partition(".")
+        if key in JOINT_PARAMETERS and f"{joint}.slot" not in declared:
+            hint = (f"; '{_echo(joint)[1:-1]}' is not in joints "
+                    f"{_echo(list(node.get_parameter('joints').value))}")
+        out.append(f"parameter '{_echo(name)[1:-1]}' is not a parameter of this node and is "
+                   f"ignored{hint}")
+    return out
+
+
 def declare_parameters(node: Node) -> NodeSettings:
     """Declare every parameter on ``node`` and return the validated settings."""
     values = {name: _declare(node, name, d, desc) for name, (d, desc) in NODE_PARAMETERS.items()}
+    if not values["joints"]:
+        # an empty YAML list has no element type, so ROS hands it over as "not set"
+        raise ConfigError("joints is empty: list at least one joint name, one per XN-1SSI "
+                          "channel (e.g. joints: [joint1])")
     names = [str(j) for j in values["joints"]]
-    if not names or len(set(names)) != len(names) or not all(names):
-        raise ConfigError(f"joints {names} must be non-empty, unique names")
+    if len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"joints {_echo(names)} must be non-empty, unique names")
     if len(names) > 8:
         raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")
     joints = []
@@ -255,6 +295,8 @@ def declare_parameters(node: Node) -> NodeSettings:
         if values[flag] and values["simulation"]:
             raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
                               "this node to drive its bus")
+    for line in unknown_overrides(node):
+        node.get_logger().warning(line)
     return NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],

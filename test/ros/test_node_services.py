@@ -61,7 +61,7 @@ def test_set_preset_refuses_bad_positions(running, probe, position, words):
 
 
 def test_reset_registers_ld48_keeps_para1_ld20_restores_it(running, probe):
-    node = running({"joint1.para1": 0x19020000})  # 250 kbit/s instead of the default 500
+    node = running({"joint1.para1": 0x19020000})  # 250 kbit/s, not the factory 500 kbit/s
     write = probe.call(WriteRegister, node.topic("~/write_register"),
                        WriteRegister.Request(address=REG_LOWER_LIMIT, value=77))
     assert write.success, write.message
