@@ -3,19 +3,29 @@
 Every handler answers within a bounded time (the client's handshake timeouts) and turns every
 failure into ``success: false`` with a message naming the joint, the register and the reason;
 no exception escapes into the executor. Each call is also recorded as an event.
+
+Requests are taken from DDS at once and served in arrival order by one worker thread
+(:class:`RequestQueue`); the executor sends each reply when the worker has filled it. Up to
+``MAX_QUEUED`` requests wait; one more is refused at once with "busy: N queued". So a burst
+of calls is never lost in a DDS history that overflows while a handshake runs.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
-from rclpy.qos import QoSProfile
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
-from ssi_bridge.module.registers import Reg, validate_para1
+from ssi_bridge.module.registers import Para1, Reg
 from ssi_bridge.ros.units import to_int32
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
@@ -26,12 +36,120 @@ from ssi_bridge_msgs.srv import (
 if TYPE_CHECKING:
     from ssi_bridge.ros.node import SsiBridgeNode
 
+logger = logging.getLogger(__name__)
+
 MAX_ADDRESS = 63
-#: services keep up to 100 pending requests (rclpy's default of 10 drops a burst of calls)
-SERVICE_QOS = QoSProfile(depth=100)
+#: KEEP_ALL: DDS keeps every request until the executor takes it (a KEEP_LAST history of
+#: depth N silently replaced the oldest of more than N waiting requests)
+SERVICE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                         reliability=ReliabilityPolicy.RELIABLE)
+#: requests waiting for the worker; one more is refused at once with "busy: N queued"
+MAX_QUEUED = 100
+#: fault kinds of ssi_bridge_msgs/srv/InjectFault that need a note on hidden effects
+ENCODER_ERROR = 3
 #: REG_SF signatures (000 "Resetting the register bank")
 SF_LD20 = 0x6C643230
 SF_LD48 = 0x6C643438
+
+
+class _Job:
+    """One request: run by the worker, replied once both the reply header and result exist."""
+
+    __slots__ = ("run", "response", "header", "done", "send")
+
+    def __init__(self, run: Callable[[], Any], response: Any) -> None:
+        self.run = run
+        self.response = response
+        self.header: Any = None
+        self.done = False
+        self.send: Callable[[Any, Any], None] | None = None
+
+
+class RequestQueue:
+    """Runs service requests in arrival order on one worker thread, replies when each is done.
+
+    rclpy hands a callback only (request, response) and sends the returned response itself;
+    the reply header reaches only ``Service.send_response``. So each service's
+    ``send_response`` is wrapped (:meth:`attach`): for a queued request it records the header
+    and the worker sends the reply when the handler has filled it (whichever comes second).
+    """
+
+    def __init__(self, limit: int = MAX_QUEUED, name: str = "ssi_services") -> None:
+        self.limit = limit
+        self._jobs: deque[_Job] = deque()
+        self._pending: dict[int, _Job] = {}
+        self._lock = threading.Condition()
+        self._stopped = False
+        self._thread = threading.Thread(target=self._work, name=name, daemon=True)
+        self._thread.start()
+
+    def __len__(self) -> int:
+        return len(self._jobs)
+
+    def attach(self, service: Any) -> None:
+        """Route ``service``'s replies through the queue (see the class docstring)."""
+        original = service.send_response
+
+        def send_response(response: Any, header: Any) -> None:
+            with self._lock:
+                job = self._pending.get(id(response))
+                if job is None or job.response is not response:
+                    job = None
+                else:
+                    job.header, job.send = header, original
+                    ready = job.done
+                    if ready:
+                        del self._pending[id(response)]
+            if job is None:
+                original(response, header)  # answered in the callback (e.g. busy)
+            elif ready:
+                original(response, header)
+
+        service.send_response = send_response
+
+    def submit(self, run: Callable[[], Any], response: Any) -> int | None:
+        """Queue ``run`` (it fills ``response``); None when ``limit`` requests already wait."""
+        with self._lock:
+            if len(self._jobs) >= self.limit or self._stopped:
+                return None
+            job = _Job(run, response)
+            self._jobs.append(job)
+            self._pending[id(response)] = job
+            self._lock.notify()
+            return len(self._jobs)
+
+    def stop(self) -> None:
+        """End the worker after the running request; waiting ones are not answered."""
+        with self._lock:
+            self._stopped = True
+            self._jobs.clear()
+            self._lock.notify()
+        if self._thread is not threading.current_thread():
+            self._thread.join(2.0)
+
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                while not self._jobs and not self._stopped:
+                    self._lock.wait()
+                if self._stopped:
+                    return
+                job = self._jobs[0]
+            try:
+                job.run()
+            except Exception:  # noqa: BLE001 - handlers answer themselves; keep serving
+                logger.exception("service handler failed")
+            with self._lock:
+                self._jobs.popleft()
+                job.done = True
+                send = job.send
+                if send is not None:
+                    del self._pending[id(job.response)]
+            if send is not None:
+                try:
+                    send(job.response, job.header)
+                except Exception as err:  # noqa: BLE001 - a client gone or shutdown
+                    logger.debug("reply not sent: %s", err)
 
 
 class BridgeServices:
@@ -41,10 +159,13 @@ class BridgeServices:
         self.node = node
         self.events = node.create_publisher(Event, "~/events", 50)
         node.recorder.offer(self.events.topic_name, self.events.qos_profile)
+        self.queue = RequestQueue()
+        self.busy_refusals = 0
+        self._busy_logged = 0.0
 
     def register(self, group: Any) -> None:
-        """Create every service of the contract in ``group`` (one at a time: a handshake
-        per slot is serialised anyway) with a deep request queue."""
+        """Create every service of the contract in ``group``; each request is queued for
+        the worker (one at a time: a handshake per slot is serialised anyway)."""
         node, rec = self.node, self.node.recorder
         for srv_type, name, handler in (
                 (ReadRegister, "~/read_register", self.read_register),
@@ -55,8 +176,39 @@ class BridgeServices:
                 (InjectFault, "~/inject_fault", self.inject_fault),
                 (StartRecording, "~/start_recording", rec.on_start),
                 (StopRecording, "~/stop_recording", rec.on_stop)):
-            node.create_service(srv_type, name, handler, callback_group=group,
-                                qos_profile=SERVICE_QOS)
+            service = node.create_service(srv_type, name, self._queued(name[2:], handler),
+                                          callback_group=group, qos_profile=SERVICE_QOS)
+            self.queue.attach(service)
+
+    def stop(self) -> None:
+        """Stop serving (node shutdown)."""
+        self.queue.stop()
+
+    def _queued(self, kind: str, handler: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
+        """The executor's callback: queue the request, or refuse it at once when busy."""
+        def callback(request: Any, response: Any) -> Any:
+            if self.queue.submit(lambda: handler(request, response), response) is None:
+                waiting = len(self.queue)
+                response.success = False
+                response.message = (f"{kind}: busy: {waiting} queued (at most "
+                                    f"{self.queue.limit} requests wait); call again later")
+                self.busy_refusals += 1
+                self._log_busy(kind, getattr(request, "joint", ""), response.message)
+            return response
+        return callback
+
+    def _log_busy(self, kind: str, joint: str, message: str) -> None:
+        """An event per refusal; a log line at most once a second (a burst would flood it)."""
+        now = self.node.get_clock().now()
+        ev = Event(kind=kind, joint=joint, request="(refused unread: busy)", success=False,
+                   message=message)
+        ev.header.stamp = Time(sec=now.nanoseconds // 10**9, nanosec=now.nanoseconds % 10**9)
+        self.node.publish_safe(self.events, ev)
+        self.node.recorder.record(self.events.topic_name, ev, now.nanoseconds)
+        if time.monotonic() - self._busy_logged >= 1.0:
+            self._busy_logged = time.monotonic()
+            self.node.get_logger().warning(
+                f"{message} ({self.busy_refusals} busy refusals since start)")
 
     # -- helpers ---------------------------------------------------------------------------
     def _joint(self, requested: str) -> str:
@@ -124,9 +276,8 @@ class BridgeServices:
         def body(joint: str) -> str:
             _check_address(request.address)
             if request.address == Reg.REG_PARA1:
-                reason = validate_para1(request.value)
-                if reason:
-                    raise ConfigError(f"REG_PARA1 0x{request.value:08X} refused: {reason}")
+                # the one REG_PARA1 path: module, <joint>.para1, scale and velocity together
+                return self.node.change_para1(joint, request.value, "~/write_register")
             self.node.client.write_register(self._slot(joint), request.address, request.value)
             return f"{_reg_name(request.address)} <- 0x{request.value:08X} accepted"
         return self._run("write_register", request, response, body,
@@ -169,16 +320,31 @@ class BridgeServices:
     def reset_registers(self, request: Any, response: Any) -> Any:
         """~/reset_registers: REG_SF = "LD20" (with parameters) or "LD48" (without)."""
         def body(joint: str) -> str:
-            value = SF_LD20 if request.include_parameters else SF_LD48
-            estimator = self.node.velocity[joint]
-            estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
-            try:
-                self.node.client.write_register(self._slot(joint), Reg.REG_SF, value)
-            finally:
-                estimator.reset(after=time.monotonic() + 0.05, hold=True)
-            which = "LD20: retentive registers incl. REG_PARA1" if request.include_parameters \
-                else "LD48: retentive registers except REG_PARA1"
-            return f"{which} restored to defaults"
+            node, slot = self.node, self._slot(joint)
+            if not request.include_parameters:
+                estimator = node.velocity[joint]
+                estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
+                try:
+                    node.client.write_register(slot, Reg.REG_SF, SF_LD48)
+                finally:
+                    estimator.reset(after=time.monotonic() + 0.05, hold=True)
+                return "LD48: retentive registers except REG_PARA1 restored to defaults"
+            # LD20 also restores REG_PARA1 (000 "Resetting the register bank"): the value the
+            # module now holds becomes <joint>.para1, the scale and the estimate's resolution
+            with node._para1_lock:
+                old = node.para1[joint]
+                node.para1_changing(joint)
+                value = old
+                try:
+                    node.client.write_register(slot, Reg.REG_SF, SF_LD20)
+                    value = node.client.read_register(slot, Reg.REG_PARA1)
+                finally:
+                    node.adopt_para1(joint, value, time.monotonic())
+            note = node.para1_note[joint]
+            return ("LD20: retentive registers incl. REG_PARA1 restored to defaults; REG_PARA1 "
+                    f"0x{old:08X} -> 0x{value:08X}, {joint}.para1, scale and velocity estimate "
+                    "follow" + (f"; WARNING: {note} (set {joint}.para1 to read it again)"
+                                if note else ""))
         return self._run("reset_registers", request, response, body,
                          f"include_parameters={request.include_parameters}")
 
@@ -201,21 +367,49 @@ class BridgeServices:
             if self.node.faults is None:
                 raise ConfigError("fault injection needs simulation:=true; this node drives "
                                   "real hardware")
-            return self.node.faults.inject(request.kind, joint, request.rate, request.duration)
+            message = self.node.faults.inject(request.kind, joint, request.rate,
+                                              request.duration)
+            if request.kind == ENCODER_ERROR:
+                hidden = self._hidden_encoder_error(joint)
+                if hidden:
+                    message += f"; nothing will show: {hidden}"
+            return message
         return self._run("inject_fault", request, response, body,
                          f"kind={request.kind} rate={request.rate} duration={request.duration}")
 
-    def apply_para1(self, joint: str, value: int) -> str | None:
-        """Write a new REG_PARA1 for a parameter change; the reason when refused."""
-        reason = validate_para1(value)
-        if reason:
-            return f"{joint}.para1 0x{value:08X} refused (would raise ERR_PARA): {reason}"
-        try:
-            self.node.client.write_register(self._slot(joint), Reg.REG_PARA1, value)
-        except SsiBridgeError as err:
-            return f"{joint}.para1 0x{value:08X} not written: {err}"
-        self.log_event("set_parameters", joint, f"para1=0x{value:08X}", True, "REG_PARA1 written")
-        return None
+    def _hidden_encoder_error(self, joint: str) -> str:
+        """Why an ENCODER_ERROR on ``joint`` reaches no diagnostics, or "" when it shows.
+
+        The error bits travel in the frame after the position (004 §2.3); the XN-1SSI reports
+        them only as SSI_DIAG, and only for a frame bit REG_SSI_MASK selects with EN_Dx_RMSx
+        and EN_Dx_DS (000 Table 3; bit 0 = the last bit clocked).
+        """
+        station = self.node.station
+        if station is None or joint not in station.channels:
+            return ""
+        cfg = station.channels[joint].encoder.config
+        if cfg.error_output is not ErrorOutput.FLAGS or cfg.frame_format is not FrameFormat.PLAIN:
+            return ""  # the position itself changes (error value / all ones): it shows
+        para = Para1.decode(self.node.para1[joint])
+        last = len(cfg.special_bits) - 1
+        shift = para.ssi_frame_len - cfg.frame_bits  # extra clocks read 0s after the frame
+        bits = {last - i + shift: b for i, b in enumerate(cfg.special_bits)
+                if b in ERROR_BITS and 0 <= last - i + shift < para.ssi_frame_len}
+        if not bits:
+            return ""  # no error bit in this layout: faults.py's own note says so
+        mask = self.node.client.read_register(self._slot(joint), Reg.REG_SSI_MASK)
+        for x in range(4):
+            byte = (mask >> (8 * x)) & 0xFF
+            if byte & 0xC0 == 0xC0 and (byte & 0x1F) in bits:
+                return ""
+        listed = ", ".join(f"{b.name} = frame bit {i}" for i, b in sorted(bits.items()))
+        first = min(bits)
+        dropped = (f"; INVALID_BITS_LSB = {para.invalid_bits_lsb} of REG_PARA1 keeps them out of "
+                   "REG_SSI_POS" if para.invalid_bits_lsb > first else "")
+        return (f"the {cfg.name} error bit(s) ({listed}, counted from the last clock) are "
+                f"mapped by no REG_SSI_MASK byte (now 0x{mask:08X}; SSI_DIAG needs EN_Dx_RMSx + "
+                f"EN_Dx_DS + SSI_FRAME_BIT_SELx, 000 Table 3){dropped}; write REG_SSI_MASK "
+                f"(51) = 0x{0xC0 | first:02X} to see it as SSI_DIAG (WARN)")
 
 
 def _check_address(address: int) -> None:

@@ -9,12 +9,13 @@ through the bus, except for fault injection, which acts here like a hand on the 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any
 from pathlib import Path
 
 from ssi_bridge.encoder.encoder import SsiEncoder
-from ssi_bridge.encoder.families import make_encoder
+from ssi_bridge.encoder.families import family_config, make_encoder
 from ssi_bridge.encoder.motion import ConstantVelocity, MotionProfile, Sine, Still
 from ssi_bridge.encoder.codes import Code
 from ssi_bridge.line.line import LineConfig, SsiLine
@@ -62,6 +63,18 @@ def count_factor(encoder: SsiEncoder, para1: int) -> float:
     p = Para1.decode(para1)
     lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
     return 2.0 ** (p.ssi_frame_len - cfg.frame_bits + lsb - p.invalid_bits_lsb)
+
+
+def spec_max_speed(family: str) -> float:
+    """The highest speed (rad/s) a family's manual specifies, 0 where it states none.
+
+    Only the TR encoders give one in these manuals: the overspeed limit, at most 6000 1/min
+    (001 §5.4.2); SICK's 004 states no speeds for its families.
+    """
+    if not family.upper().startswith("TR"):
+        return 0.0
+    cfg = family_config(family)
+    return 0.0 if cfg.linear else cfg.overspeed_rpm / 60.0 * 2.0 * math.pi
 
 
 def para1_mismatch(encoder: SsiEncoder, para1: int) -> str | None:
