@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 import threading
 import time
 from collections import deque
@@ -188,6 +189,9 @@ class SsiBridgeNode(Node):
         if s.cpu_affinity:
             pin_process(s.cpu_affinity)
             self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
+        # Python hands the GIL to a waiting thread only every switch interval (5 ms by
+        # default): a service burst's CPU-bound handlers would hold the cycle that long
+        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
         self._cycle_started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
@@ -461,6 +465,7 @@ class SsiBridgeNode(Node):
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
         out.append(bus_status(
             status_name(fqn, "bus"),
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",

@@ -198,13 +198,8 @@ class BridgeServices:
         return callback
 
     def _log_busy(self, kind: str, joint: str, message: str) -> None:
-        """An event per refusal; a log line at most once a second (a burst would flood it)."""
-        now = self.node.get_clock().now()
-        ev = Event(kind=kind, joint=joint, request="(refused unread: busy)", success=False,
-                   message=message)
-        ev.header.stamp = Time(sec=now.nanoseconds // 10**9, nanosec=now.nanoseconds % 10**9)
-        self.node.publish_safe(self.events, ev)
-        self.node.recorder.record(self.events.topic_name, ev, now.nanoseconds)
+        """A log line at most once a second with the count (an event per refusal would cost
+        the cycle the CPU a burst already takes); the bus diagnostics count them too."""
         if time.monotonic() - self._busy_logged >= 1.0:
             self._busy_logged = time.monotonic()
             self.node.get_logger().warning(
@@ -229,7 +224,9 @@ class BridgeServices:
         self.node.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity
-        if success:
+        if success and kind == "read_register":
+            self.node.get_logger().debug(text)  # a read changes nothing: the event suffices
+        elif success:
             self.node.get_logger().info(text)
         else:
             self.node.get_logger().warning(text)
