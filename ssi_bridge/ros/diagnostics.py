@@ -18,7 +18,8 @@ achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 
 A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
 has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
-so a load hiccup of a few cycles neither raises nor flaps it.
+so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
+better level held CLEAR_AFTER_S.
 """
 
 from __future__ import annotations
@@ -94,6 +95,8 @@ RATIO_WINDOW_S = 0.5
 #: stale ratio (stale cycles / cycles in the window) at or above which a joint is WARN / ERROR
 STALE_RATIO_WARN = 0.10
 STALE_RATIO_ERROR = 0.50
+#: the ratio counts only over at least this many cycles (a start-up window of 3 says little)
+MIN_WINDOW_CYCLES = 10
 #: a worse level is published once it held this long; a better one once it held this long
 RAISE_AFTER_S = 0.1
 CLEAR_AFTER_S = 1.0
@@ -120,9 +123,12 @@ class ChannelHealth:
         self._cycles: deque[tuple[float, bool, bool]] = deque()
         self.stale_in_window = 0
         self.jumps_in_window = 0
-        #: (since, lowest raw level) while the raw level is above / (since, highest) below
-        self._above: tuple[float, int] | None = None
-        self._below: tuple[float, int] | None = None
+        #: the raw level once a rise held RAISE_AFTER_S (falls at once)
+        self._confirmed = STALE
+        #: (since, lowest raw level) while the raw level is above ``_confirmed``
+        self._up: tuple[float, int] | None = None
+        #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
+        self._history: deque[tuple[float, int]] = deque()
         self.level = STALE
         self.message = "no sample received yet"
         self._messages: dict[int, str] = {STALE: self.message}
@@ -146,7 +152,7 @@ class ChannelHealth:
             self.jumps_in_window -= was_jump
         raw, message = channel_level(sts, consecutive_stale, stale_limit)
         ratio = self.stale_in_window / len(cycles)
-        if raw != STALE:
+        if raw != STALE and len(cycles) >= MIN_WINDOW_CYCLES:
             if ratio >= STALE_RATIO_ERROR and raw < ERROR:
                 raw, message = ERROR, self._ratio_text(ratio, len(cycles))
             elif ratio >= STALE_RATIO_WARN and raw < WARN:
@@ -163,27 +169,35 @@ class ChannelHealth:
                 f"{STALE_RATIO_WARN:.0%}, ERROR from {STALE_RATIO_ERROR:.0%})")
 
     def _debounce(self, now: float, raw: int) -> int:
-        """Rise to the lowest level seen while above for RAISE_AFTER_S; fall to the highest
-        seen while below for CLEAR_AFTER_S; any return to the published level restarts."""
-        level = self.level
-        if raw > level:
-            self._below = None
-            if self._above is None:
-                self._above = (now, raw)
-            elif raw < self._above[1]:
-                self._above = (self._above[0], raw)
-            if now - self._above[0] >= self.raise_after_s:
-                self.level, self._above = self._above[1], None
-        elif raw < level:
-            self._above = None
-            if self._below is None:
-                self._below = (now, raw)
-            elif raw > self._below[1]:
-                self._below = (self._below[0], raw)
-            if now - self._below[0] >= self.clear_after_s:
-                self.level, self._below = self._below[1], None
+        """Two stages. ``confirmed`` follows the raw level down at once but up only when the
+        worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
+        follows ``confirmed`` up at once and down to the worst confirmed level of the last
+        CLEAR_AFTER_S, so it falls only when the better level held that long."""
+        confirmed = self._confirmed
+        if raw < confirmed:
+            confirmed, self._up = raw, None
+        elif raw > confirmed:
+            if self._up is None:
+                self._up = (now, raw)
+            elif raw < self._up[1]:
+                self._up = (self._up[0], raw)
+            if now - self._up[0] >= self.raise_after_s:
+                confirmed, self._up = self._up[1], None
         else:
-            self._above = self._below = None
+            self._up = None
+        history = self._history
+        if confirmed != self._confirmed or not history:
+            history.append((now, confirmed))
+        self._confirmed = confirmed
+        horizon = now - self.clear_after_s
+        while len(history) > 1 and history[1][0] <= horizon:
+            history.popleft()  # history[0] stays the level in force at the horizon
+        if confirmed > self.level:
+            self.level = confirmed
+        elif confirmed < self.level and history[0][0] <= horizon:
+            worst = max(level for _t, level in history)
+            if worst < self.level:
+                self.level = worst
         self.message = self._messages.get(self.level, self.message)
         return self.level
 
