@@ -95,7 +95,8 @@ RATIO_WINDOW_S = 0.5
 #: stale ratio (stale cycles / cycles in the window) at or above which a joint is WARN / ERROR
 STALE_RATIO_WARN = 0.10
 STALE_RATIO_ERROR = 0.50
-#: the ratio counts only over at least this many cycles (a start-up window of 3 says little)
+#: the ratio counts only over at least this many cycles, and from 2 windows after the first
+#: sample on (the cycles of the start-up say little about the link)
 MIN_WINDOW_CYCLES = 10
 #: a worse level is published once it held this long; a better one once it held this long
 RAISE_AFTER_S = 0.1
@@ -125,6 +126,10 @@ class ChannelHealth:
         self.jumps_in_window = 0
         #: the raw level once a rise held RAISE_AFTER_S (falls at once)
         self._confirmed = STALE
+        #: time of the first sample (the stale ratio counts from two windows after it)
+        self._first_t: float | None = None
+        #: a sample has been seen (before it, STALE "no sample received yet" is no condition)
+        self._sampled = False
         #: (since, lowest raw level) while the raw level is above ``_confirmed``
         self._up: tuple[float, int] | None = None
         #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
@@ -152,7 +157,10 @@ class ChannelHealth:
             self.jumps_in_window -= was_jump
         raw, message = channel_level(sts, consecutive_stale, stale_limit)
         ratio = self.stale_in_window / len(cycles)
-        if raw != STALE and len(cycles) >= MIN_WINDOW_CYCLES:
+        if self._first_t is None and sts is not None:
+            self._first_t = now
+        settled = self._first_t is not None and now - self._first_t >= 2 * self.window_s
+        if raw != STALE and settled and len(cycles) >= MIN_WINDOW_CYCLES:
             if ratio >= STALE_RATIO_ERROR and raw < ERROR:
                 raw, message = ERROR, self._ratio_text(ratio, len(cycles))
             elif ratio >= STALE_RATIO_WARN and raw < WARN:
@@ -173,6 +181,15 @@ class ChannelHealth:
         worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
         follows ``confirmed`` up at once and down to the worst confirmed level of the last
         CLEAR_AFTER_S, so it falls only when the better level held that long."""
+        if not self._sampled:
+            if raw == STALE:
+                return self.level  # still no sample: nothing to debounce yet
+            # the first sample: "no sample yet" is no condition to hold on to
+            self._sampled = True
+            self._confirmed = self.level = raw
+            self._history.append((now, raw))
+            self.message = self._messages[raw]
+            return raw
         confirmed = self._confirmed
         if raw < confirmed:
             confirmed, self._up = raw, None

@@ -25,12 +25,13 @@ def _run(health, t, cycles, stale=lambda k: False, sts=0, jump=lambda k: False, 
     return t, levels
 
 
-def test_healthy_channel_goes_ok_after_the_clear_time():
+def test_stale_until_the_first_sample_then_ok_at_once():
     h = ChannelHealth()
     assert h.level == STALE and "no sample" in h.message
-    t, levels = _run(h, 0.0, 150)
-    assert levels[50] == STALE, "not OK before the better level held 1 s"
-    assert levels[-1] == OK and h.message == "reading"
+    assert h.observe(0.01, stale=True, implausible=False, sts=None, consecutive_stale=1,
+                     stale_limit=5) == STALE
+    t, levels = _run(h, 0.01, 150)
+    assert set(levels) == {OK} and h.message == "reading"
 
 
 def test_thirty_percent_loss_warns_within_half_a_second_and_stays():
