@@ -4,10 +4,10 @@ Every handler answers within a bounded time (the client's handshake timeouts) an
 failure into ``success: false`` with a message naming the joint, the register and the reason;
 no exception escapes into the executor. Each call is also recorded as an event.
 
-Requests are taken from DDS at once and served in arrival order by one worker thread
-(:class:`RequestQueue`); the executor sends each reply when the worker has filled it. Up to
-``MAX_QUEUED`` requests wait; one more is refused at once with "busy: N queued". So a burst
-of calls is never lost in a DDS history that overflows while a handshake runs.
+Requests are taken from DDS at once by the node's own thread and served in arrival order by
+one worker thread (:class:`RequestQueue`). Up to ``MAX_QUEUED`` requests wait; one more is
+refused at once with "busy: N queued". So a burst of calls is never lost in a DDS history
+that overflows while a handshake runs, and costs the cycle little CPU.
 """
 
 from __future__ import annotations
@@ -20,7 +20,11 @@ from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from contextlib import ExitStack
+
 from builtin_interfaces.msg import Time
+from rclpy.callback_groups import CallbackGroup
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
@@ -53,79 +57,132 @@ SF_LD48 = 0x6C643438
 
 
 class _Job:
-    """One request: run by the worker, replied once both the reply header and result exist."""
+    """One request: run by the worker, then its reply sent with the request's header."""
 
-    __slots__ = ("run", "response", "header", "done", "send")
+    __slots__ = ("run", "service", "response", "header")
 
-    def __init__(self, run: Callable[[], Any], response: Any) -> None:
+    def __init__(self, run: Callable[[], Any], service: Any, response: Any, header: Any) -> None:
         self.run = run
+        self.service = service
         self.response = response
-        self.header: Any = None
-        self.done = False
-        self.send: Callable[[Any, Any], None] | None = None
+        self.header = header
+
+
+class _Detached(CallbackGroup):
+    """A callback group no executor runs: :class:`RequestQueue` takes these requests itself."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
 
 
 class RequestQueue:
-    """Runs service requests in arrival order on one worker thread, replies when each is done.
+    """Takes the requests of its services from DDS at once, serves them in arrival order.
 
-    rclpy hands a callback only (request, response) and sends the returned response itself;
-    the reply header reaches only ``Service.send_response``. So each service's
-    ``send_response`` is wrapped (:meth:`attach`): for a queued request it records the header
-    and the worker sends the reply when the handler has filled it (whichever comes second).
+    rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
+    1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a
+    queue. Here a taker thread waits on the services alone and takes every waiting request
+    per wake-up (the calls rclpy's executor makes: ``service_take_request`` and
+    ``send_response``); a worker thread runs them one at a time and replies; beyond ``limit``
+    waiting requests the taker refuses at once.
     """
 
-    def __init__(self, limit: int = MAX_QUEUED, name: str = "ssi_services") -> None:
+    def __init__(self, node: Any, limit: int = MAX_QUEUED, name: str = "ssi_services") -> None:
+        self.node = node
         self.limit = limit
+        self.group = _Detached()
+        self._services: list[tuple[Any, Callable[[Any, Any], Any], Callable[..., Any]]] = []
         self._jobs: deque[_Job] = deque()
-        self._pending: dict[int, _Job] = {}
         self._lock = threading.Condition()
         self._stopped = False
-        self._thread = threading.Thread(target=self._work, name=name, daemon=True)
-        self._thread.start()
+        self._wake = node.create_guard_condition(lambda: None, callback_group=self.group)
+        self._worker = threading.Thread(target=self._work, name=name, daemon=True)
+        self._taker = threading.Thread(target=self._take, name=f"{name}_take", daemon=True)
 
     def __len__(self) -> int:
         return len(self._jobs)
 
-    def attach(self, service: Any) -> None:
-        """Route ``service``'s replies through the queue (see the class docstring)."""
-        original = service.send_response
+    def add(self, service: Any, handler: Callable[[Any, Any], Any],
+            refuse: Callable[[Any, Any, int], None]) -> None:
+        """Serve ``service`` (created in :attr:`group`); ``refuse`` fills a busy answer."""
+        self._services.append((service, handler, refuse))
 
-        def send_response(response: Any, header: Any) -> None:
-            with self._lock:
-                job = self._pending.get(id(response))
-                if job is None or job.response is not response:
-                    job = None
-                else:
-                    job.header, job.send = header, original
-                    ready = job.done
-                    if ready:
-                        del self._pending[id(response)]
-            if job is None:
-                original(response, header)  # answered in the callback (e.g. busy)
-            elif ready:
-                original(response, header)
-
-        service.send_response = send_response
-
-    def submit(self, run: Callable[[], Any], response: Any) -> int | None:
-        """Queue ``run`` (it fills ``response``); None when ``limit`` requests already wait."""
-        with self._lock:
-            if len(self._jobs) >= self.limit or self._stopped:
-                return None
-            job = _Job(run, response)
-            self._jobs.append(job)
-            self._pending[id(response)] = job
-            self._lock.notify()
-            return len(self._jobs)
+    def start(self) -> None:
+        """Start taking requests (after every service was added)."""
+        self._worker.start()
+        self._taker.start()
 
     def stop(self) -> None:
-        """End the worker after the running request; waiting ones are not answered."""
+        """End both threads; waiting requests are not answered (the node is going)."""
         with self._lock:
             self._stopped = True
             self._jobs.clear()
             self._lock.notify()
-        if self._thread is not threading.current_thread():
-            self._thread.join(2.0)
+        self._wake.trigger()
+        for thread in (self._taker, self._worker):
+            if thread.is_alive() and thread is not threading.current_thread():
+                thread.join(2.0)
+
+    def _take(self) -> None:
+        context = self.node.context
+        while not self._stopped and context.ok():
+            try:
+                ready = self._wait(context)
+                for service, handler, refuse in self._services:
+                    if service.handle.pointer in ready:
+                        self._take_all(service, handler, refuse)
+            except Exception as err:  # noqa: BLE001 - shutdown invalidates the handles
+                if self._stopped or not context.ok():
+                    return
+                logger.error("service requests not taken: %s: %s", type(err).__name__, err)
+                time.sleep(0.1)
+
+    def _wait(self, context: Any) -> list[int]:
+        """Block until a request (or :meth:`stop`) arrives; the ready services' pointers."""
+        with ExitStack() as stack:
+            handles = [s.handle for s, _h, _r in self._services]
+            for handle in handles:
+                stack.enter_context(handle)
+            stack.enter_context(self._wake.handle)
+            stack.enter_context(context.handle)
+            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(handles), 0, context.handle)
+            wait_set.clear_entities()
+            for handle in handles:
+                wait_set.add_service(handle)
+            wait_set.add_guard_condition(self._wake.handle)
+            wait_set.wait(200_000_000)  # ns; also re-checks stop and the context
+            return wait_set.get_ready_entities("service")
+
+    def _take_all(self, service: Any, handler: Callable[[Any, Any], Any],
+                  refuse: Callable[[Any, Any, int], None]) -> None:
+        while True:
+            with service.handle:
+                taken = service.handle.service_take_request(service.srv_type.Request)
+            if taken is None or taken[1] is None:
+                return
+            request, header = taken
+            response = service.srv_type.Response()
+            with self._lock:
+                waiting = len(self._jobs)
+                if waiting < self.limit and not self._stopped:
+                    self._jobs.append(_Job(lambda r=request, a=response, h=handler: h(r, a),
+                                           service, response, header))
+                    self._lock.notify()
+                    continue
+            refuse(request, response, waiting)
+            self._send(service, response, header)
+
+    @staticmethod
+    def _send(service: Any, response: Any, header: Any) -> None:
+        try:
+            service.send_response(response, header)
+        except Exception as err:  # noqa: BLE001 - a client gone or shutdown
+            logger.debug("reply not sent: %s", err)
 
     def _work(self) -> None:
         while True:
@@ -140,16 +197,9 @@ class RequestQueue:
             except Exception:  # noqa: BLE001 - handlers answer themselves; keep serving
                 logger.exception("service handler failed")
             with self._lock:
-                self._jobs.popleft()
-                job.done = True
-                send = job.send
-                if send is not None:
-                    del self._pending[id(job.response)]
-            if send is not None:
-                try:
-                    send(job.response, job.header)
-                except Exception as err:  # noqa: BLE001 - a client gone or shutdown
-                    logger.debug("reply not sent: %s", err)
+                if self._jobs and self._jobs[0] is job:
+                    self._jobs.popleft()
+            self._send(job.service, job.response, job.header)
 
 
 class BridgeServices:
@@ -159,13 +209,14 @@ class BridgeServices:
         self.node = node
         self.events = node.create_publisher(Event, "~/events", 50)
         node.recorder.offer(self.events.topic_name, self.events.qos_profile)
-        self.queue = RequestQueue()
+        self.queue = RequestQueue(node)
         self.busy_refusals = 0
         self._busy_logged = 0.0
 
-    def register(self, group: Any) -> None:
-        """Create every service of the contract in ``group``; each request is queued for
-        the worker (one at a time: a handshake per slot is serialised anyway)."""
+    def register(self, group: Any = None) -> None:
+        """Create every service of the contract; their requests go through :attr:`queue`
+        (one at a time: a handshake per slot is serialised anyway). ``group`` is unused: no
+        executor runs these services."""
         node, rec = self.node, self.node.recorder
         for srv_type, name, handler in (
                 (ReadRegister, "~/read_register", self.read_register),
@@ -176,26 +227,25 @@ class BridgeServices:
                 (InjectFault, "~/inject_fault", self.inject_fault),
                 (StartRecording, "~/start_recording", rec.on_start),
                 (StopRecording, "~/stop_recording", rec.on_stop)):
-            service = node.create_service(srv_type, name, self._queued(name[2:], handler),
-                                          callback_group=group, qos_profile=SERVICE_QOS)
-            self.queue.attach(service)
+            service = node.create_service(srv_type, name, handler,
+                                          callback_group=self.queue.group,
+                                          qos_profile=SERVICE_QOS)
+            self.queue.add(service, handler, self._refuser(name[2:]))
+        self.queue.start()
 
     def stop(self) -> None:
         """Stop serving (node shutdown)."""
         self.queue.stop()
 
-    def _queued(self, kind: str, handler: Callable[[Any, Any], Any]) -> Callable[[Any, Any], Any]:
-        """The executor's callback: queue the request, or refuse it at once when busy."""
-        def callback(request: Any, response: Any) -> Any:
-            if self.queue.submit(lambda: handler(request, response), response) is None:
-                waiting = len(self.queue)
-                response.success = False
-                response.message = (f"{kind}: busy: {waiting} queued (at most "
-                                    f"{self.queue.limit} requests wait); call again later")
-                self.busy_refusals += 1
-                self._log_busy(kind, getattr(request, "joint", ""), response.message)
-            return response
-        return callback
+    def _refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
+        """Fills the prompt answer to a request beyond the queue's limit."""
+        def refuse(request: Any, response: Any, waiting: int) -> None:
+            response.success = False
+            response.message = (f"{kind}: busy: {waiting} queued (at most "
+                                f"{self.queue.limit} requests wait); call again later")
+            self.busy_refusals += 1
+            self._log_busy(kind, getattr(request, "joint", ""), response.message)
+        return refuse
 
     def _log_busy(self, kind: str, joint: str, message: str) -> None:
         """A log line at most once a second with the count (an event per refusal would cost
