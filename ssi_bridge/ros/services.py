@@ -431,10 +431,10 @@ class BridgeServices:
         them only as SSI_DIAG, and only for a frame bit REG_SSI_MASK selects with EN_Dx_RMSx
         and EN_Dx_DS (000 Table 3; bit 0 = the last bit clocked).
         """
-        station = self.node.station
-        if station is None or joint not in station.channels:
+        encoder = self.node.encoders.get(joint)
+        if encoder is None:
             return ""
-        cfg = station.channels[joint].encoder.config
+        cfg = encoder.config
         if cfg.error_output is not ErrorOutput.FLAGS or cfg.frame_format is not FrameFormat.PLAIN:
             return ""  # the position itself changes (error value / all ones): it shows
         para = Para1.decode(self.node.para1[joint])
