@@ -384,6 +384,13 @@ def main() -> int:
         run(records)
     except Exception as err:  # noqa: BLE001
         emit(records, {"metric": "node", "error": f"{type(err).__name__}: {err}"})
+    try:  # the service-burst part (issue 11); `python bench/service_burst.py` runs it alone
+        sys.path.insert(0, str(HERE))
+        import service_burst
+
+        service_burst.run(records)
+    except Exception as err:  # noqa: BLE001
+        emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}"})
     try:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         with open(RESULTS, "a") as f:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 import threading
 import time
 from collections import deque
@@ -22,6 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
@@ -30,16 +32,19 @@ from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.player import CanLogPlayer
-from ssi_bridge.exceptions import ConfigError, RecordingError
+from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
 from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.station import count_factor, joint_encoder
+from ssi_bridge.encoder.families import family_config
+from ssi_bridge.gateway.station import count_factor, joint_encoder, para1_mismatch
 from ssi_bridge.gateway.timebase import ModelClock, to_ros_ns, wire_now
 from ssi_bridge.gateway import wire
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
-from ssi_bridge.module.registers import validate_para1
+from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
-from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
+from ssi_bridge.ros.diagnostics import (
+    OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, status_name,
+)
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
@@ -57,6 +62,22 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
+#: parameters that change at run time (every other one is read-only in its descriptor)
+LIVE_NODE_PARAMETERS = ("publish_rate", "diagnostics_period", "frame_id", "velocity_window",
+                        "stale_cycles")
+LIVE_JOINT_PARAMETERS = ("para1", "max_speed")
+
+
+def spec_max_speed(family: str) -> float:
+    """The highest speed (rad/s) a family's manual specifies, 0 where it states none.
+
+    Only the TR encoders give one in these manuals: the overspeed limit, at most 6000 1/min
+    (001 §5.4.2); SICK's 004 states no speeds for its families.
+    """
+    if not family.upper().startswith("TR"):
+        return 0.0
+    cfg = family_config(family)
+    return 0.0 if cfg.linear else cfg.overspeed_rpm / 60.0 * 2.0 * math.pi
 
 
 def pin_process(cpus: tuple[int, ...]) -> None:
@@ -155,10 +176,24 @@ class SsiBridgeNode(Node):
             for joint in s.joints:
                 self._configure_para1(joint)
                 self.client.edit_output(joint.slot, idle_read)
+        #: REG_PARA1 each module holds, as this node last wrote or read it back (one truth
+        #: for the parameter, the scale and the velocity estimate: :meth:`change_para1`)
+        self.para1 = {j.name: j.para1 for j in s.joints}
+        self._para1_lock = threading.RLock()
+        #: samples latched at or before this time may carry another REG_PARA1 (inf: a change
+        #: is in flight): their position and velocity are published as NaN (unknown)
+        self._para1_since = {j.name: -math.inf for j in s.joints}
+        #: why the REG_PARA1 in force does not fit the simulated encoder (a WARN), or ""
+        self.para1_note = {j.name: self._para1_note(j.name, j.para1) for j in s.joints}
+        self._tls = threading.local()  # .mirror: a parameter set that only mirrors the module
         self.scales = {j.name: self._scale(j) for j in s.joints}
-        self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
+        self.max_speed = {j.name: self._max_speed(
+            j, float(self.get_parameter(f"{j.name}.max_speed").value)) for j in s.joints}
+        self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window,
+                                                   self.max_speed[j.name])
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
+        self.health = {j.name: ChannelHealth() for j in s.joints}
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
         self._cycle_started = wire_now()
@@ -211,6 +246,9 @@ class SsiBridgeNode(Node):
         if s.cpu_affinity:
             pin_process(s.cpu_affinity)
             self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
+        # Python hands the GIL to a waiting thread only every switch interval (5 ms by
+        # default): a service burst's CPU-bound handlers would hold the cycle that long
+        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
         self._cycle_started = wire_now()
         self.cycle.start()
         if self.player is not None:
@@ -313,6 +351,18 @@ class SsiBridgeNode(Node):
         return JointScale(counts_per_rev=joint.steps_per_rev or 8192,
                           revolutions=joint.revolutions or 4096, direction=joint.direction)
 
+    def _para1_note(self, joint: str, para1: int) -> str:
+        """Simulation: why ``para1`` does not fit the joint's encoder (or "")."""
+        if joint not in self.encoders:
+            return ""
+        mismatch = para1_mismatch(self.encoders[joint], para1)
+        return f"REG_PARA1 0x{para1:08X} does not fit the encoder: {mismatch}" if mismatch else ""
+
+    @staticmethod
+    def _max_speed(joint: JointSettings, value: float) -> float:
+        """``<joint>.max_speed`` in joint units/s; -1: the encoder family's specified limit."""
+        return spec_max_speed(joint.family) if value < 0 else value
+
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:
         """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
@@ -351,9 +401,11 @@ class SsiBridgeNode(Node):
 
     def _on_quiet(self) -> None:
         """Listen-only: a period without SYNC counts as a stale cycle for every joint."""
-        for counters in self.counters.values():
+        now = wire_now()
+        for name, counters in self.counters.items():
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
+            self._observe_health(name, now, stale=True, implausible=False)
         levels = self._levels()
         if self._last_levels and levels != self._last_levels:
             self.publish_diagnostics()
@@ -411,15 +463,24 @@ class SsiBridgeNode(Node):
             self.publish_diagnostics()
         self._last_levels = levels
 
+    def _observe_health(self, name: str, now: float, *, stale: bool, implausible: bool) -> None:
+        counters = self.counters[name]
+        self.health[name].observe(now, stale=stale, implausible=implausible,
+                                  sts=counters.last_sts,
+                                  consecutive_stale=counters.consecutive_stale,
+                                  stale_limit=self.settings.stale_cycles)
+
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
                       status: Status | None, sample: ChannelSample | None,
                       publish: bool = True) -> bool:
         """Count the joint's sample of this cycle; with ``publish``, add it to ``js``."""
         name = joint.name
         counters = self.counters[name]
+        now = wire_now()
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
+            self._observe_health(name, now, stale=True, implausible=False)
             return False
         fresh = sample.sync_time >= t_sync
         if fresh:
@@ -436,18 +497,31 @@ class SsiBridgeNode(Node):
             counters.error_cycles += 1
         if not publish:
             return fresh  # the cycle is not published: a joint is not latched at its SYNC
-        scale = self.scales[name]
-        position = scale.position(sample.position)
         estimator = self.velocity[name]
-        if sts & NOT_MEASURING:
+        # the estimator's scale is the one of the REG_PARA1 in force (change_para1 swaps both)
+        position = estimator.scale.position(sample.position)
+        implausible = False
+        if sample.sync_time <= self._para1_since[name]:
+            # latched while REG_PARA1 changed: either setting may have read it
+            position = velocity = math.nan
+        elif sts & NOT_MEASURING:
             # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
             # last good one and the speed is unknown; the estimate restarts on recovery
             estimator.reset()
             velocity = math.nan
         elif fresh:
             velocity = estimator.update(sample.sync_time, sample.position)
+            implausible = estimator.last_implausible
+            if implausible:
+                counters.implausible += 1
+        elif counters.consecutive_stale >= self.settings.stale_cycles:
+            # no fresh sample for stale_cycles cycles (silent gateway, lost frames): the
+            # position is frozen, so the speed is unknown and restarts with fresh samples
+            estimator.reset()
+            velocity = math.nan
         else:
             velocity = estimator.velocity
+        self._observe_health(name, now, stale=not fresh, implausible=implausible)
         self.positions[name] = position
         js.name.append(name)
         js.position.append(position)
@@ -481,20 +555,29 @@ class SsiBridgeNode(Node):
 
     def _levels(self) -> tuple[int, ...]:
         """The diagnostic levels without building the statuses (checked every cycle)."""
-        limit = self.settings.stale_cycles
-        levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
-                  for c in self.counters.values()]
+        levels = [max(h.level, WARN if self.para1_note[j] else OK)
+                  for j, h in self.health.items()]
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
     def _statuses(self) -> list:
         s = self.settings
+        fqn = self.get_fully_qualified_name()
         out = []
         for joint in s.joints:
+            name = joint.name
             hw = (f"{s.bus_interface}:{s.bus_channel} node {s.node_id} slot {joint.slot} "
                   f"XN-1SSI")
-            out.append(channel_status(joint.name, hw, self.counters[joint.name],
-                                      s.stale_cycles, self.positions[joint.name]))
+            extra = {"para1": f"0x{self.para1[name]:08X}",
+                     "max_speed": f"{self.max_speed[name]:g}",
+                     "velocity_window": str(s.velocity_window),
+                     "stale_limit_cycles": str(s.stale_cycles),
+                     "frame_id": s.frame_id}
+            st = channel_status(status_name(fqn, name), hw, self.counters[name],
+                                self.health[name], self.positions[name], extra)
+            if self.para1_note[name] and st.level < WARN:
+                st.level, st.message = WARN, self.para1_note[name]
+            out.append(st)
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         counters["clock_steps"] = self.clock_steps
@@ -504,8 +587,11 @@ class SsiBridgeNode(Node):
         meter = getattr(self.client, "load", None)
         if meter is not None:
             counters.update(meter.figures())
+        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
         out.append(bus_status(
-            "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
+            status_name(fqn, "bus"),
+            f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self._bus_problem()))
@@ -531,31 +617,145 @@ class SsiBridgeNode(Node):
         self.recorder.record("/diagnostics", msg, self.get_clock().now().nanoseconds)
 
     # -- parameters ------------------------------------------------------------------------
+    def change_para1(self, joint: str, value: int, via: str) -> str:
+        """Write REG_PARA1 of ``joint`` and move parameter, scale and estimate with it.
+
+        The one path for every REG_PARA1 change (``<joint>.para1``, ``~/write_register`` to
+        address 20): checked against the module's rules, written by the handshake, then the
+        parameter, the counts -> units scale and the velocity estimate (restarted, samples
+        latched before the write ignored) follow. Raises ConfigError / SsiBridgeError.
+        """
+        reason = validate_para1(value)
+        if reason:
+            raise ConfigError(f"REG_PARA1 0x{value:08X} refused (would raise ERR_PARA): {reason}")
+        with self._para1_lock:
+            old = self.para1[joint]
+            self.para1_changing(joint)
+            try:
+                self.client.write_register(self.joints[joint].slot, Reg.REG_PARA1, value)
+            except BaseException:
+                self.adopt_para1(joint, old, wire_now())
+                raise
+            self.adopt_para1(joint, value, wire_now())
+        return (f"REG_PARA1 0x{old:08X} -> 0x{value:08X} via {via}; {joint}.para1, scale and "
+                f"velocity estimate follow")
+
+    def para1_changing(self, joint: str) -> None:
+        """A REG_PARA1 change (write or LD20 reset) starts: samples are unknown until adopted."""
+        self._para1_since[joint] = math.inf
+        self.velocity[joint].reset(after=math.inf)
+
+    def adopt_para1(self, joint: str, value: int, since: float) -> None:
+        """The module now holds ``value`` (written or reset): parameter, scale, estimate follow.
+
+        Samples latched before ``since`` were acquired with the old REG_PARA1 and are skipped.
+        """
+        with self._para1_lock:
+            scale = self._scale(self.joints[joint], value)
+            s = self.settings
+            estimator = VelocityEstimator(scale, s.velocity_window, self.max_speed[joint])
+            estimator.reset(after=since)
+            self.scales[joint] = scale
+            self.velocity[joint] = estimator
+            self.para1[joint] = value
+            self.para1_note[joint] = self._para1_note(joint, value)
+            self._para1_since[joint] = since
+            if self.get_parameter(f"{joint}.para1").value != value:
+                self._tls.mirror = True
+                try:
+                    self.set_parameters([Parameter(f"{joint}.para1", value=value)])
+                finally:
+                    self._tls.mirror = False
+
     def _on_set_parameters(self, params: list) -> SetParametersResult:
-        """Runtime changes: REG_PARA1 via the module (refused with its reason), rates."""
+        """Runtime changes (LIVE_*_PARAMETERS): checked together, then applied together."""
+        s = self.settings
+        node_values: dict[str, Any] = {}
+        para1: dict[str, int] = {}
+        max_speed: dict[str, float] = {}
         for p in params:
-            if p.name.endswith(".para1"):
-                joint = p.name[: -len(".para1")]
-                if joint in self.joints:
-                    reason = self.handlers.apply_para1(joint, int(p.value))
-                    if reason:
-                        return SetParametersResult(successful=False, reason=reason)
-                    self.scales[joint] = self._scale(self.joints[joint], int(p.value))
-                    self.velocity[joint] = VelocityEstimator(self.scales[joint],
-                                                             self.settings.velocity_window)
-            elif p.name == "publish_rate":
-                self.cycle.period = 1.0 / float(p.value)
-            elif p.name == "diagnostics_period":
-                self.diag_timer.timer_period_ns = int(1e9 * float(p.value))
+            joint, _, key = p.name.partition(".")
+            if p.name in LIVE_NODE_PARAMETERS:
+                node_values[p.name] = p.value
+            elif joint in self.joints and key == "para1":
+                para1[joint] = int(p.value)
+            elif joint in self.joints and key == "max_speed":
+                value = float(p.value)
+                if not (value >= 0 or value == -1):
+                    return SetParametersResult(
+                        successful=False, reason=f"{p.name} {value}: >= 0 (0: off) or -1 "
+                        "(the encoder family's limit)")
+                max_speed[joint] = value
+        if getattr(self._tls, "mirror", False):
+            return SetParametersResult(successful=True)  # adopt_para1 mirrors the module
+        for joint, value in para1.items():
+            if value == self.para1[joint]:
+                continue
+            try:
+                self.change_para1(joint, value, "parameter")
+            except SsiBridgeError as err:
+                return SetParametersResult(successful=False,
+                                           reason=f"{joint}.para1 0x{value:08X}: {err}")
+        for joint, value in max_speed.items():
+            limit = self._max_speed(self.joints[joint], value)
+            self.max_speed[joint] = limit
+            self.velocity[joint].max_speed = limit
+        if node_values:
+            self._apply_node_parameters(node_values)
         return SetParametersResult(successful=True)
 
+    def _apply_node_parameters(self, values: dict[str, Any]) -> None:
+        """publish_rate, diagnostics_period, frame_id, velocity_window, stale_cycles."""
+        names = {"publish_rate": "publish_rate", "diagnostics_period": "diagnostics_period",
+                 "frame_id": "frame_id", "velocity_window": "velocity_window",
+                 "stale_cycles": "stale_cycles"}
+        self.settings = dataclasses.replace(
+            self.settings, **{names[k]: v for k, v in values.items()})
+        if "publish_rate" in values:
+            self.cycle.period = 1.0 / float(values["publish_rate"])
+        if "diagnostics_period" in values:
+            self.diag_timer.timer_period_ns = int(1e9 * float(values["diagnostics_period"]))
+            self.diag_timer.reset()
+        if "velocity_window" in values:
+            with self._para1_lock:
+                for joint in self.joints:
+                    self.velocity[joint] = VelocityEstimator(
+                        self.scales[joint], int(values["velocity_window"]),
+                        self.max_speed[joint])
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """rclpy's, plus an ~/events record of the change or the refusal."""
+        try:
+            result = super().set_parameters_atomically(parameter_list)
+        except Exception as err:
+            self._parameter_event(parameter_list, False, f"{type(err).__name__}: {err}")
+            raise
+        self._parameter_event(parameter_list, result.successful, result.reason)
+        return result
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """rclpy's, plus an ~/events record of each change or refusal."""
+        results = []
+        for param in parameter_list:
+            results.extend(super().set_parameters([param]))
+            self._parameter_event([param], results[-1].successful, results[-1].reason)
+        return results
+
+    def _parameter_event(self, params: list[Parameter], success: bool, reason: str) -> None:
+        if getattr(self._tls, "mirror", False) or not hasattr(self, "handlers"):
+            return  # the mirror of a register write (its own event) or during start-up
+        request = ", ".join(f"{p.name}={_short(p.value)}" for p in params)
+        self.handlers.log_event("set_parameters", "", request, success,
+                                "applied" if success else f"refused: {reason}")
+
     def shutdown(self) -> None:
-        """Stop recording, stop the bus side; safe to call twice.
+        """Stop services, recording, the bus side; safe to call twice.
 
         Every step runs even if an earlier one fails (a recording on a full disk must not
         leave the bus open); failures are logged on one line each.
         """
-        steps: list[tuple[str, Callable[[], object]]] = [("cycle", self.cycle.stop)]
+        steps: list[tuple[str, Callable[[], object]]] = [
+            ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
             steps.append(("log replay", self.player.stop))
         steps += [("recording", self.recorder.stop), ("bus", self.client.close)]
@@ -567,6 +767,13 @@ class SsiBridgeNode(Node):
             except Exception as err:  # noqa: BLE001 - the remaining steps must still run
                 self.get_logger().error(f"stopping the {what} failed: {err}")
         logbridge.uninstall()
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    """A parameter value for an event, truncated (a value may be huge)."""
+    text = f"0x{value:08X}" if isinstance(value, int) and not isinstance(value, bool) \
+        and value > 0xFFFF else repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 __all__ = ["SsiBridgeNode"]

@@ -180,6 +180,12 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         float_range=(0.0, 1.0))),
     "direction": (1, _describe("+1 or -1: sign of the joint against the count direction",
                                read_only=True, int_range=(-1, 1))),
+    "max_speed": (-1.0, _describe(
+        "Plausibility limit in rad/s (rotary) or m/s (linear): a sample whose step from the "
+        "previous one is faster is flagged in diagnostics and its velocity is NaN; 0: off; "
+        "-1: from the encoder family's specification (TR: overspeed 6000 1/min, 001 §5.4.2; "
+        "off where the family states none). Changes at run time",
+        float_range=(-1.0, 1e6))),
     "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
                                           read_only=True)),
     "motion.velocity": (0.25, _describe("constant: speed in rev/s or m/s", read_only=True,

@@ -46,9 +46,9 @@ def test_shipped_two_encoder_station(running, probe):
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     probe.wait_for(lambda: len(diags) > 0, 5.0, "diagnostics", node)
     levels = {st.name: st.level for st in diags[-1][1].status}
-    assert levels == {"ssi_bridge: shoulder": DiagnosticStatus.OK,
-                      "ssi_bridge: carriage": DiagnosticStatus.OK,
-                      "ssi_bridge: bus": DiagnosticStatus.OK}, levels
+    assert levels == {"/ssi_bridge: shoulder": DiagnosticStatus.OK,
+                      "/ssi_bridge: carriage": DiagnosticStatus.OK,
+                      "/ssi_bridge: bus": DiagnosticStatus.OK}, levels
 
 
 def test_two_bridges_side_by_side_in_namespaces(running, probe):
@@ -123,7 +123,7 @@ def test_eight_encoders_at_the_highest_wire_rate_never_report_a_false_wire_break
     time.sleep(2.0)
     probe.wait_for(lambda: len(diags) > 2, 5.0, "diagnostics", node)
     for st in diags[-1][1].status:
-        if st.name.startswith("ssi_bridge: axis"):
+        if st.name.startswith("/ssi_bridge: axis"):
             values = {kv.key: kv.value for kv in st.values}
             assert values["error_cycles"] == "0", f"{st.name}: {st.message} {values}"
             assert int(values["samples"]) > 50, st.name
