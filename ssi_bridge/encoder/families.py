@@ -152,6 +152,14 @@ FAMILIES: dict[str, Family] = {
     "TR_PROGRAMMABLE": Family(
         dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24),
         doc="001 §5: programmable scaling, code, data bits, formats, special bits"),
+    "SSI25_POWERFAIL": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.POWER_FAIL,)),
+        doc="003: a 25-bit frame whose last data bit is a PowerFail bit (24 position bits)"),
+    "TR_PARITY": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.ENCODER_ERROR, SpecialBit.EVEN_PARITY)),
+        doc="001 §5.5.6/§5.5.7: 24 data bits + encoder error + even parity (26 bits)"),
 }
 FAMILIES["ATM90"] = FAMILIES["ATM60"]
 

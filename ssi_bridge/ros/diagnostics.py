@@ -17,6 +17,7 @@ achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
@@ -38,6 +39,10 @@ class ChannelCounters:
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0
+    #: cycles whose frame failed the parity / filler check, and the latest verdict
+    #: (a ``FrameVerdict``, None when the latest image carried no checked frame)
+    frame_errors: int = 0
+    frame: Any = None
 
     @property
     def last_input(self) -> ProcessInput | None:
@@ -94,6 +99,20 @@ def channel_status(joint: str, hardware_id: str, counters: ChannelCounters, stal
     }
     if inp is not None:
         values.update({name: str(value) for name, value in inp.bits().items()})
+    frame = counters.frame
+    values["frame_errors"] = str(counters.frame_errors)
+    if frame is not None:
+        values.update({"POWER_FAILURE": str(frame.power_failure),
+                       "ENCODER_ERROR": str(frame.encoder_error),
+                       "PARITY_ERROR": str(frame.parity_error),
+                       "FILLER_ERROR": str(frame.filler_error)})
+        if level < ERROR and frame.power_failure:
+            level, message = ERROR, "POWER_FAILURE: the encoder's PowerFail bit is set (003)"
+        elif level < WARN and (frame.parity_error or frame.filler_error or frame.encoder_error):
+            level = WARN
+            message = ("parity error (001 5.5.7)" if frame.parity_error else
+                       "bit that must be 0 read as 1 (004 3)" if frame.filler_error else
+                       "encoder error bit set")
     return DiagnosticStatus(
         level=level, name=f"ssi_bridge: {joint}", message=message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])

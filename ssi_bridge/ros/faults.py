@@ -1,7 +1,8 @@
 """Fault injection into the simulated station (the ``~/inject_fault`` service's backend).
 
 Each fault acts where a real one would: a broken wire or noise on the SSI line, an error or
-power-failure bit in the encoder, lost CAN frames or a silent gateway on the bus. Faults
+power-failure bit in the encoder, an invalid REG_PARA1 set at the module's parameter
+interface (ERR_PARA), lost CAN frames or a silent gateway on the bus. Faults
 with a duration clear themselves; ``CLEAR_ALL`` clears everything. ROS-free.
 """
 
@@ -31,6 +32,7 @@ class FaultKind(IntEnum):
     BIT_NOISE = 5
     CAN_FRAME_LOSS = 6
     GATEWAY_SILENT = 7
+    INVALID_PARA1 = 8
 
 
 #: faults of the bus or gateway (the joint is ignored)
@@ -136,3 +138,10 @@ class FaultInjector:
             channel.encoder.set_error(on)  # type: ignore[attr-defined]
         elif kind is FaultKind.POWER_FAILURE:
             channel.encoder.power_failure = on  # type: ignore[attr-defined]
+        elif kind is FaultKind.INVALID_PARA1:
+            # an invalid set at the module's parameter interface, past the node's own check
+            module = channel.module  # type: ignore[attr-defined]
+            if on:
+                module.inject_parameter_error()
+            else:
+                module.clear_parameter_error()

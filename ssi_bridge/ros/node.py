@@ -28,7 +28,9 @@ from ssi_bridge_msgs.msg import Status
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.player import CanLogPlayer
-from ssi_bridge.exceptions import ConfigError, RecordingError
+from ssi_bridge.encoder.config import EncoderConfig
+from ssi_bridge.encoder.families import family_config
+from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
@@ -42,7 +44,8 @@ from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
-from ssi_bridge.ros.station import SimStation, count_factor
+from ssi_bridge.ros.frame_watch import CamSettings, FrameWatch, edges
+from ssi_bridge.ros.station import SimStation, count_factor, encoder_overrides
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
@@ -51,6 +54,9 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
+#: REG_SSI_MASK object (000 Table 35) and the CAM objects low, high, enable, polarity (Tables 43-48)
+SSI_DIAG_MAPPING = 0x5840
+CAM_OBJECTS = (0x6B10, 0x6B20, 0x6B01, 0x6B02)
 
 
 def pin_process(cpus: tuple[int, ...]) -> None:
@@ -112,11 +118,16 @@ class SsiBridgeNode(Node):
             self.client.connect()
             for joint in s.joints:
                 self._configure_para1(joint)
+                if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
+                    self.client.write_object(SSI_DIAG_MAPPING, joint.slot, joint.ssi_mask)
                 self.client.edit_output(joint.slot, idle_read)
         self.scales = {j.name: self._scale(j) for j in s.joints}
         self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
+        self.frames = {j.name: FrameWatch(self._encoder_config(j), j.para1) for j in s.joints}
+        if not s.listen_only:
+            self.refresh_cams()
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
         self._cycle_started = time.monotonic()
@@ -186,6 +197,27 @@ class SsiBridgeNode(Node):
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
+
+    def _encoder_config(self, joint: JointSettings) -> EncoderConfig | None:
+        """The joint's encoder layout (family + overrides) for the frame checks, if known."""
+        if self.station is not None:
+            return self.station.channels[joint.name].encoder.config
+        try:
+            return family_config(joint.family, **encoder_overrides(joint))
+        except ConfigError as err:
+            self.get_logger().warning(f"{joint.name}: no frame checks: {err}")
+            return None
+
+    def refresh_cams(self) -> None:
+        """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)."""
+        for joint in self.settings.joints:
+            try:
+                low, high, enabled, polarity = (
+                    int(self.client.read_object(index, joint.slot)) & 0xFFFFFFFF
+                    for index in CAM_OBJECTS)
+                self.frames[joint.name].set_cam(CamSettings(low, high, bool(enabled), polarity))
+            except SsiBridgeError as err:
+                self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
     def _configure_para1(self, joint: JointSettings) -> None:
         """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
@@ -338,7 +370,24 @@ class SsiBridgeNode(Node):
         scale = self.scales[name]
         position = scale.position(sample.position)
         estimator = self.velocity[name]
-        if sts & NOT_MEASURING:
+        watch = self.frames[name]
+        seen = watch.evaluate(image) if fresh else None
+        corrupt = seen is not None and seen[1].corrupt
+        if seen is not None:
+            for text in edges(*seen):
+                self.handlers.log_event("encoder_status", name, "frame check", True, text)
+            if corrupt:
+                counters.frame_errors += 1
+                text = watch.failures.failed(t_sync, seen[1])
+                if text:
+                    self.handlers.log_event("encoder_status", name, "frame check", False, text)
+        counters.frame = watch.verdict if watch.checked else None
+        if corrupt:
+            # parity or filler check failed (001 5.5.7, 004 3): the frame is not what the
+            # encoder sent; keep the last good position and speed
+            position = self.positions[name]
+            velocity = estimator.velocity
+        elif sts & NOT_MEASURING:
             # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
             # last good one and the speed is unknown; the estimate restarts on recovery
             estimator.reset()
@@ -353,7 +402,7 @@ class SsiBridgeNode(Node):
         js.velocity.append(velocity)
         if status is not None:
             inp = ProcessInput.decode(image)
-            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters))
+            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters, watch))
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
@@ -406,6 +455,8 @@ class SsiBridgeNode(Node):
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
         if not self.context.ok():
             return
+        if not self.settings.listen_only:
+            self.refresh_cams()
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = self._statuses()
@@ -424,6 +475,7 @@ class SsiBridgeNode(Node):
                     if reason:
                         return SetParametersResult(successful=False, reason=reason)
                     self.scales[joint] = self._scale(self.joints[joint], int(p.value))
+                    self.frames[joint].set_para1(int(p.value))
                     self.velocity[joint] = VelocityEstimator(self.scales[joint],
                                                              self.settings.velocity_window)
             elif p.name == "publish_rate":
