@@ -53,6 +53,8 @@ class FrameWatch:
         #: the latest image carried a frame that was checked
         self.checked = False
         self.failures = ParityEvents()
+        #: the process input image last evaluated
+        self.image = b""
 
     def set_para1(self, para1: int) -> None:
         """Follow a new REG_PARA1: the frame as read has SSI_FRAME_LEN bits (000 Table 19)."""
@@ -67,11 +69,12 @@ class FrameWatch:
 
     def evaluate(self, image: bytes) -> tuple[FrameVerdict, FrameVerdict] | None:
         """Check the frame in ``image``; (previous verdict, new verdict), None when no frame."""
+        self.image = image
         check = self.check
         if check is None or image[4] & (_ADR_MASK | _ABORT) != _FRAME_REGISTER:
             self.checked = False
             return None
-        frame = int.from_bytes(image[0:4], "little") & ((1 << check.frame_len) - 1)
+        frame = int.from_bytes(image[0:4], "big") & ((1 << check.frame_len) - 1)  # IMAGE_STRUCT
         before, self.verdict = self.verdict, check.check(frame)
         self.checked = True
         return before, self.verdict

@@ -371,7 +371,8 @@ class SsiBridgeNode(Node):
         position = scale.position(sample.position)
         estimator = self.velocity[name]
         watch = self.frames[name]
-        seen = watch.evaluate(image) if fresh else None
+        # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
+        seen = watch.evaluate(image) if image != watch.image else None
         corrupt = seen is not None and seen[1].corrupt
         if seen is not None:
             for text in edges(*seen):
