@@ -178,3 +178,17 @@ def test_injected_invalid_para1_raises_err_para_and_its_emcy(station) -> None:
     module.clear_parameter_error()
     st.sync()
     st.wait_for(lambda: st.node.emcy.log[-1].code == 0, "no error-reset EMCY")
+
+
+def test_identity_revision_from_the_manual_rest_marked_as_simulation(station) -> None:
+    # 000 ch. 4: "The support of XN-1SSI modules has been implemented from firmware version
+    # V3.00 of XN-GW-CANOPEN" -> revision 3.0 (CiA 301: major in the upper 16 bits). The manual
+    # gives no Vendor-ID, product code or serial number: named simulation values, also in the EDS
+    sdo = station.node.sdo
+    assert sdo[0x1018][3].raw == 0x0003_0000
+    eds = canopen.import_od(str(EDS), NODE_ID)
+    for sub in (1, 2, 4):
+        assert eds[0x1018][sub].name.endswith("(simulation value)")
+        assert sdo[0x1018][sub].raw == eds[0x1018][sub].default
+    assert eds[0x1018][3].name == "Revision number"
+    assert "simulation values" in EDS.read_text()
