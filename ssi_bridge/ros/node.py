@@ -54,9 +54,10 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
-#: REG_SSI_MASK object (000 Table 35) and the CAM objects low, high, enable, polarity (Tables 43-48)
+#: REG_SSI_MASK object (000 Table 35); CAM enable and the CAM low, high, polarity (Tables 43-48)
 SSI_DIAG_MAPPING = 0x5840
-CAM_OBJECTS = (0x6B10, 0x6B20, 0x6B01, 0x6B02)
+CAM_ENABLE = 0x6B01
+CAM_OBJECTS = (0x6B10, 0x6B20, 0x6B02)
 
 
 def pin_process(cpus: tuple[int, ...]) -> None:
@@ -152,7 +153,7 @@ class SsiBridgeNode(Node):
                 on_end=self._on_replay_end)
         else:
             self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
-        self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
+        self.diag_timer = self.create_timer(s.diagnostics_period, self._on_diag_timer,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
@@ -212,10 +213,14 @@ class SsiBridgeNode(Node):
         """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)."""
         for joint in self.settings.joints:
             try:
-                low, high, enabled, polarity = (
+                # one SDO while CAM enable (0x6B01) is 0: the state is then 0 whatever the rest
+                if not int(self.client.read_object(CAM_ENABLE, joint.slot)):
+                    self.frames[joint.name].set_cam(CamSettings())
+                    continue
+                low, high, polarity = (
                     int(self.client.read_object(index, joint.slot)) & 0xFFFFFFFF
                     for index in CAM_OBJECTS)
-                self.frames[joint.name].set_cam(CamSettings(low, high, bool(enabled), polarity))
+                self.frames[joint.name].set_cam(CamSettings(low, high, True, polarity))
             except SsiBridgeError as err:
                 self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
@@ -452,12 +457,16 @@ class SsiBridgeNode(Node):
             extra_error=self.recorder.error))
         return out
 
+    def _on_diag_timer(self) -> None:
+        """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
+        if not self.settings.listen_only and self.context.ok():
+            self.refresh_cams()
+        self.publish_diagnostics()
+
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
         if not self.context.ok():
             return
-        if not self.settings.listen_only:
-            self.refresh_cams()
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = self._statuses()
