@@ -15,6 +15,7 @@ CAM objects 0x6B10/0x6B20/0x6B01/0x6B02, which the node reads over SDO now and t
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from ssi_bridge.encoder.config import EncoderConfig
@@ -38,6 +39,24 @@ class CamSettings:
     high: int = 0         #: 0x6B20 CAM1 high limit (= REG_CMP1)
     enabled: bool = False  #: 0x6B01
     polarity: int = 0     #: 0x6B02
+
+
+#: CAM objects (000 Tables 43-48): enable, polarity, low limit, high limit
+CAM_ENABLE, CAM_POLARITY, CAM_LOW, CAM_HIGH = 0x6B01, 0x6B02, 0x6B10, 0x6B20
+
+
+def read_cam(read: Callable[[int], int]) -> CamSettings:
+    """The CAM objects of one slot through ``read(index)`` (an SDO upload of sub = slot).
+
+    Two reads while CAM enable is 0 (the state is then 0x00, or 0x01 with polarity 1: "or the
+    comparison function is not activated", Table 42 with its inversion note); four otherwise.
+    """
+    enabled = bool(int(read(CAM_ENABLE)))
+    polarity = int(read(CAM_POLARITY)) & 1
+    if not enabled:
+        return CamSettings(polarity=polarity)
+    return CamSettings(int(read(CAM_LOW)) & 0xFFFFFFFF, int(read(CAM_HIGH)) & 0xFFFFFFFF,
+                       True, polarity)
 
 
 class FrameWatch:

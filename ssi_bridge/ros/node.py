@@ -44,7 +44,7 @@ from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
-from ssi_bridge.ros.frame_watch import CamSettings, FrameWatch, edges
+from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import SimStation, count_factor, encoder_overrides
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
@@ -54,10 +54,8 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
-#: REG_SSI_MASK object (000 Table 35); CAM enable and the CAM low, high, polarity (Tables 43-48)
+#: REG_SSI_MASK object (000 Table 35)
 SSI_DIAG_MAPPING = 0x5840
-CAM_ENABLE = 0x6B01
-CAM_OBJECTS = (0x6B10, 0x6B20, 0x6B02)
 
 
 def pin_process(cpus: tuple[int, ...]) -> None:
@@ -213,14 +211,8 @@ class SsiBridgeNode(Node):
         """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)."""
         for joint in self.settings.joints:
             try:
-                # one SDO while CAM enable (0x6B01) is 0: the state is then 0 whatever the rest
-                if not int(self.client.read_object(CAM_ENABLE, joint.slot)):
-                    self.frames[joint.name].set_cam(CamSettings())
-                    continue
-                low, high, polarity = (
-                    int(self.client.read_object(index, joint.slot)) & 0xFFFFFFFF
-                    for index in CAM_OBJECTS)
-                self.frames[joint.name].set_cam(CamSettings(low, high, True, polarity))
+                self.frames[joint.name].set_cam(read_cam(
+                    lambda index: int(self.client.read_object(index, joint.slot))))
             except SsiBridgeError as err:
                 self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
