@@ -130,7 +130,7 @@ class SsiBridgeNode(Node):
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
         self._cycle_started = time.monotonic()
-        self._last_levels: tuple[int, ...] = ()
+        self._last_levels: tuple = ()
 
     def _create_ros_side(self, s: NodeSettings) -> None:
         """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
@@ -424,11 +424,15 @@ class SsiBridgeNode(Node):
             times.popleft()
         return len(times) / window
 
-    def _levels(self) -> tuple[int, ...]:
+    def _levels(self) -> tuple:
         """The diagnostic levels without building the statuses (checked every cycle)."""
         limit = self.settings.stale_cycles
         levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
                   for c in self.counters.values()]
+        # PowerFail / error bits change a joint's level too (a failed check under noise would
+        # flip it every few cycles: that one waits for the periodic message)
+        levels += [(f.power_failure, f.encoder_error) if (f := c.frame) else None
+                   for c in self.counters.values()]
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self.recorder.error)))
         return tuple(levels)
 
