@@ -43,9 +43,15 @@ from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
 )
-from ssi_bridge.module.images import CmpControl, Control, ProcessInput
+from ssi_bridge.module.images import CmpControl, CmpStatus, Control, ProcessInput
 
 logger = logging.getLogger(__name__)
+#: how often a clear pulse is sent again when the next image shows it never arrived
+PULSE_RESENDS = 3
+#: (CLR_CMPx, FLAG_CMPx, STS_CMPx) per comparator
+_PULSE_CHECKS = tuple((int(c), int(f), int(s_)) for c, f, s_ in (
+    (CmpControl.CLR_CMP1, CmpStatus.FLAG_CMP1, CmpStatus.STS_CMP1),
+    (CmpControl.CLR_CMP2, CmpStatus.FLAG_CMP2, CmpStatus.STS_CMP2)))
 
 SYNC_COB_ID = 0x80
 
@@ -224,6 +230,7 @@ class BridgeClient:
             st.output[6] = int(bits)
             st.output[7] = int(Control.STOP) if stop else 0
             st.pulse_seq = self.table.sync_seq if clear_cmp1 or clear_cmp2 else None
+            st.pulse_resends, st.release_seq = 0, None
             data = bytes(st.output)
         self._send_output(slot, data)
 
@@ -321,15 +328,40 @@ class BridgeClient:
 
     def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
         st = self.table.on_image(slot, data, timestamp)
-        if st.pulse_seq is None:  # re-checked under the lock; set_control arms it there
+        if st.pulse_seq is None and st.release_seq is None:  # re-checked under the lock
             return
         with self.table.cond:
-            if st.pulse_seq is None or self.table.sync_seq <= st.pulse_seq:
+            seq = self.table.sync_seq
+            if st.release_seq is not None and seq > st.release_seq:
+                # the release is sent once more: a lost release RPDO would leave CLR_CMPx
+                # set, and a flag that can never latch again (000 comparator table)
+                st.release_seq = None
+                out = bytes(st.output)
+            elif st.pulse_seq is None or seq <= st.pulse_seq:
                 return
-            st.pulse_seq = None
-            st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
-            out = bytes(st.output)
+            elif self._pulse_lost(st.output[6], data[6]) and st.pulse_resends < PULSE_RESENDS:
+                # the image of a cycle after the pulse still shows FLAG_CMPx = 1 with the
+                # values not matching (a clear that the module would have carried out): the
+                # pulse RPDO never arrived, so send it again for one more cycle
+                st.pulse_resends += 1
+                st.pulse_seq = seq
+                self.counters.pulse_resends += 1
+                out = bytes(st.output)
+                logger.info("slot %d: clear pulse not applied (lost RPDO?), sent again (%d)",
+                            slot, st.pulse_resends)
+            else:
+                st.pulse_seq = None
+                st.release_seq = seq
+                st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
+                out = bytes(st.output)
         self._send_output(slot, out)
+
+    @staticmethod
+    def _pulse_lost(control: int, cmp: int) -> bool:
+        """A requested CLR_CMPx whose FLAG_CMPx is still 1 while STS_CMPx = 0 (000 comparator
+        table: "Reset of FLAG_CMPx not possible when values match", else CLR resets it)."""
+        return any(control & clr and cmp & flag and not cmp & sts
+                   for clr, flag, sts in _PULSE_CHECKS)
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1

@@ -46,6 +46,8 @@ class ClientCounters:
     can_errors: int = 0
     #: register handshakes that failed (refusal, timeout, silent gateway)
     handshake_failures: int = 0
+    #: clear pulses (CLR_CMPx) sent again because the image showed they never arrived
+    pulse_resends: int = 0
     #: handshake steps or SDO transfers that timed out
     timeouts: int = 0
     #: SYNC frames sent
@@ -70,6 +72,8 @@ class _Slot:
     output: bytearray = field(default_factory=lambda: bytearray(8))
     edit_seq: int = 0  # sync sequence at the last output edit
     pulse_seq: int | None = None  # clear pulse armed at this sync sequence
+    pulse_resends: int = 0  # times the current clear pulse was sent again (lost RPDO)
+    release_seq: int | None = None  # CLR released at this sync sequence: sent once more
 
 
 class SlotTable:

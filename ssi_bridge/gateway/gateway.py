@@ -113,7 +113,7 @@ class XnGateway:
         self.node.add_write_callback(self.emergencies.on_write)
         self.node.add_write_callback(self.objects.on_write)
         self.pdo = PdoEngine(self.node, self._send_frames, self.objects.pdo_reader,
-                             self.objects.pdo_packer)
+                             self.objects.pdo_packer, lock=self._lock)
         self.bus: LossyBus | None = None
         self.network: BridgeNetwork | None = None
         self._sync_cob: int | None = None

@@ -65,6 +65,8 @@ class JointSettings:
     #: simulated SSI cable length (m): sets the line delay and the 004 §2.7 bit-rate check
     cable_length: float = 10.0
     para1: int = DEFAULT_PARA1
+    #: REG_SSI_MASK written at start-up (000 Table 3, object 0x5840); -1: leave it as stored
+    ssi_mask: int = -1
     #: 0: take it from the simulated encoder family
     steps_per_rev: int = 0
     revolutions: int = 0

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
@@ -49,6 +50,10 @@ class ChannelCounters:
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0
+    #: cycles whose frame failed the parity / filler check, and the latest verdict
+    #: (a ``FrameVerdict``, None when the latest image carried no checked frame)
+    frame_errors: int = 0
+    frame: Any = None
 
     @property
     def last_input(self) -> ProcessInput | None:
@@ -237,6 +242,20 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
     values.update(extra or {})
     if inp is not None:
         values.update({name: str(value) for name, value in inp.bits().items()})
+    frame = counters.frame
+    values["frame_errors"] = str(counters.frame_errors)
+    if frame is not None:
+        values.update({"POWER_FAILURE": str(frame.power_failure),
+                       "ENCODER_ERROR": str(frame.encoder_error),
+                       "PARITY_ERROR": str(frame.parity_error),
+                       "FILLER_ERROR": str(frame.filler_error)})
+        if level < ERROR and frame.power_failure:
+            level, message = ERROR, "POWER_FAILURE: the encoder's PowerFail bit is set (003)"
+        elif level < WARN and (frame.parity_error or frame.filler_error or frame.encoder_error):
+            level = WARN
+            message = ("parity error (001 5.5.7)" if frame.parity_error else
+                       "bit that must be 0 read as 1 (004 3)" if frame.filler_error else
+                       "encoder error bit set")
     return DiagnosticStatus(
         level=health.level, name=name, message=health.message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])

@@ -32,10 +32,13 @@ from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.player import CanLogPlayer
+from ssi_bridge.encoder.config import EncoderConfig
+from ssi_bridge.encoder.families import family_config
 from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
 from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.encoder.families import family_config
-from ssi_bridge.gateway.station import count_factor, joint_encoder, para1_mismatch
+from ssi_bridge.gateway.station import (
+    count_factor, encoder_overrides, joint_encoder, para1_mismatch,
+)
 from ssi_bridge.gateway.timebase import ModelClock, to_ros_ns, wire_now
 from ssi_bridge.gateway import wire
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
@@ -51,6 +54,7 @@ from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
+from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import (
     ChildStation, InProcessStation, start_station, with_station_bus,
 )
@@ -62,6 +66,9 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
+#: REG_SSI_MASK object (000 Table 35)
+SSI_DIAG_MAPPING = 0x5840
+
 #: parameters that change at run time (every other one is read-only in its descriptor)
 LIVE_NODE_PARAMETERS = ("publish_rate", "diagnostics_period", "frame_id", "velocity_window",
                         "stale_cycles")
@@ -175,6 +182,8 @@ class SsiBridgeNode(Node):
                                             self.sim_time)
             for joint in s.joints:
                 self._configure_para1(joint)
+                if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
+                    self.client.write_object(SSI_DIAG_MAPPING, joint.slot, joint.ssi_mask)
                 self.client.edit_output(joint.slot, idle_read)
         #: REG_PARA1 each module holds, as this node last wrote or read it back (one truth
         #: for the parameter, the scale and the velocity estimate: :meth:`change_para1`)
@@ -194,10 +203,13 @@ class SsiBridgeNode(Node):
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
         self.health = {j.name: ChannelHealth() for j in s.joints}
+        self.frames = {j.name: FrameWatch(self._encoder_config(j), j.para1) for j in s.joints}
+        if not s.listen_only:
+            self.refresh_cams()
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
         self._cycle_started = wire_now()
-        self._last_levels: tuple[int, ...] = ()
+        self._last_levels: tuple = ()
 
     def _create_ros_side(self, s: NodeSettings) -> None:
         """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
@@ -219,7 +231,7 @@ class SsiBridgeNode(Node):
                 silent_warning=None if self.player is not None else SILENT_WARNING_S)
         else:
             self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
-        self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
+        self.diag_timer = self.create_timer(s.diagnostics_period, self._on_diag_timer,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
@@ -268,6 +280,25 @@ class SsiBridgeNode(Node):
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
+
+    def _encoder_config(self, joint: JointSettings) -> EncoderConfig | None:
+        """The joint's encoder layout (family + overrides) for the frame checks, if known."""
+        if joint.name in self.encoders:
+            return self.encoders[joint.name].config
+        try:
+            return family_config(joint.family, **encoder_overrides(joint))
+        except ConfigError as err:
+            self.get_logger().warning(f"{joint.name}: no frame checks: {err}")
+            return None
+
+    def refresh_cams(self) -> None:
+        """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)."""
+        for joint in self.settings.joints:
+            try:
+                self.frames[joint.name].set_cam(read_cam(
+                    lambda index: int(self.client.read_object(index, joint.slot))))
+            except SsiBridgeError as err:
+                self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
     def _configure_para1(self, joint: JointSettings) -> None:
         """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
@@ -501,9 +532,27 @@ class SsiBridgeNode(Node):
         # the estimator's scale is the one of the REG_PARA1 in force (change_para1 swaps both)
         position = estimator.scale.position(sample.position)
         implausible = False
+        watch = self.frames[name]
+        # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
+        seen = watch.evaluate(image) if image != watch.image else None
+        corrupt = seen is not None and seen[1].corrupt
+        if seen is not None:
+            for text in edges(*seen):
+                self.handlers.log_event("encoder_status", name, "frame check", True, text)
+            if corrupt:
+                counters.frame_errors += 1
+                text = watch.failures.failed(t_sync, seen[1])
+                if text:
+                    self.handlers.log_event("encoder_status", name, "frame check", False, text)
+        counters.frame = watch.verdict if watch.checked else None
         if sample.sync_time <= self._para1_since[name]:
             # latched while REG_PARA1 changed: either setting may have read it
             position = velocity = math.nan
+        elif corrupt:
+            # parity or filler check failed (001 5.5.7, 004 3): the frame is not what the
+            # encoder sent; keep the last good position and speed
+            position = self.positions[name]
+            velocity = estimator.velocity
         elif sts & NOT_MEASURING:
             # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
             # last good one and the speed is unknown; the estimate restarts on recovery
@@ -528,7 +577,7 @@ class SsiBridgeNode(Node):
         js.velocity.append(velocity)
         if status is not None:
             inp = ProcessInput.decode(image)
-            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters))
+            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters, watch))
         return fresh
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
@@ -553,10 +602,14 @@ class SsiBridgeNode(Node):
             times.popleft()
         return len(times) / window
 
-    def _levels(self) -> tuple[int, ...]:
+    def _levels(self) -> tuple:
         """The diagnostic levels without building the statuses (checked every cycle)."""
         levels = [max(h.level, WARN if self.para1_note[j] else OK)
                   for j, h in self.health.items()]
+        # PowerFail / error bits change a joint's level too (a failed check under noise would
+        # flip it every few cycles: that one waits for the periodic message)
+        levels += [(f.power_failure, f.encoder_error) if (f := c.frame) else None
+                   for c in self.counters.values()]
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
@@ -601,6 +654,12 @@ class SsiBridgeNode(Node):
         """An error beside the bus state: the recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
         return "; ".join(p for p in (self.recorder.error, station) if p)
+
+    def _on_diag_timer(self) -> None:
+        """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
+        if not self.settings.listen_only and self.context.ok():
+            self.refresh_cams()
+        self.publish_diagnostics()
 
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
@@ -657,6 +716,7 @@ class SsiBridgeNode(Node):
             estimator.reset(after=since)
             self.scales[joint] = scale
             self.velocity[joint] = estimator
+            self.frames[joint].set_para1(value)
             self.para1[joint] = value
             self.para1_note[joint] = self._para1_note(joint, value)
             self._para1_since[joint] = since

@@ -170,6 +170,11 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "REG_PARA1 (000 Table 18/19): frame length, bit rate, Gray/binary, invalid bits, "
         "ZERO test; a change is written to the module and refused with its ERR_PARA reason",
         int_range=(0, 0xFFFF_FFFF))),
+    "ssi_mask": (-1, _describe(
+        "REG_SSI_MASK (000 Table 3, object 0x5840) written at start-up: per byte x, bit 7 "
+        "copies frame bit SSI_FRAME_BIT_SELx (bits 4-0, 0 = last bit) into SSI_STSx, bit 6 "
+        "also raises SSI_DIAG; -1: leave the module's stored value",
+        read_only=True, int_range=(-1, 0xFFFF_FFFF))),
     "steps_per_rev": (0, _describe(
         "Counts per revolution of REG_SSI_POS; 0: from the encoder family",
         read_only=True, int_range=(0, 1 << 31))),
@@ -283,7 +288,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         joints.append(JointSettings(
             name=joint, slot=jv["slot"] or index + 1, family=jv["family"], code=jv["code"],
             cable_length=jv["cable_length"],
-            para1=jv["para1"], steps_per_rev=jv["steps_per_rev"],
+            para1=jv["para1"], ssi_mask=jv["ssi_mask"], steps_per_rev=jv["steps_per_rev"],
             revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
             direction=jv["direction"],
             motion=MotionSettings(kind=jv["motion.kind"], velocity=jv["motion.velocity"],
