@@ -4,7 +4,9 @@ The recorder closes a chunk and flushes the file every half second, so everythin
 last flush is a sequence of complete MCAP records. Recovery reads records sequentially up to
 the first incomplete or corrupt one, then rewrites the file with the same schemas, channels
 and messages plus chunk indexes, message indexes, statistics and summary, and writes
-metadata.yaml. The original file is replaced only after the new one is complete.
+metadata.yaml. The original file is replaced only after the new one is complete. Of a split
+session only the cut file (the one open at the crash) is rewritten; the files closed before
+are complete MCAP files and are only read.
 Documented command: ``ros2 run ssi_bridge replay --recover DIR``.
 """
 
@@ -15,10 +17,13 @@ import os
 import struct
 import zlib
 from pathlib import Path
+from typing import BinaryIO
 
 from mcap.exceptions import McapError
+from mcap.reader import make_reader
 from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
+from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
 
 from ssi_bridge.exceptions import RecordingError
@@ -26,20 +31,22 @@ from ssi_bridge.record.bag import BagSummary
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
     BagInfo,
+    FileInfo,
     TopicInfo,
     metadata_text,
     write_metadata,
 )
+from ssi_bridge.record.reader import MCAP_MAGIC, bag_files, read_summary
 
 logger = logging.getLogger(__name__)
 
 
-def _mcap_file(directory: Path) -> Path:
-    """The single ``*.mcap`` file of a bag directory."""
-    files = sorted(directory.glob("*.mcap"))
-    if len(files) != 1:
-        raise RecordingError(f"{directory}: expected one .mcap file, found {len(files)}")
-    return files[0]
+def _mcap_files(directory: Path) -> list[Path]:
+    """The ``*.mcap`` files of a bag directory, a split session's in index order."""
+    files = bag_files(directory)
+    if not files:
+        raise RecordingError(f"{directory}: expected one .mcap file, found 0")
+    return files
 
 
 def _salvage(path: Path) -> tuple[list[Schema], list[Channel], list[Message], list[Metadata],
@@ -72,24 +79,101 @@ def _salvage(path: Path) -> tuple[list[Schema], list[Channel], list[Message], li
 
 
 def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
-    """Rewrite the MCAP file of ``directory`` with a summary and write metadata.yaml."""
+    """Rebuild what a crash cut short in ``directory`` and write metadata.yaml.
+
+    The files of a split session that are complete (footer and summary: every file but the
+    one open at the crash) are kept as they are and only read for metadata.yaml; a cut file
+    is rewritten from its complete records with indexes and summary.
+    """
     directory = Path(directory).absolute()
     if not directory.is_dir():
         raise RecordingError(f"{directory} is not a bag directory")
-    source = _mcap_file(directory)
-    if source.read_bytes()[:8] != b"\x89MCAP0\r\n":
-        raise RecordingError(f"{source} is not an MCAP file (bad magic)")
+    files = _mcap_files(directory)
+    info = BagInfo()
+    topics: dict[str, TopicInfo] = {}
+    known: tuple[list[Schema], list[Channel]] = ([], [])
+    rewritten = []
+    for source in files:
+        with open(source, "rb") as stream:
+            if stream.read(8) != MCAP_MAGIC:
+                raise RecordingError(f"{source} is not an MCAP file (bad magic)")
+            try:
+                _reader, summary = read_summary(stream, source)
+            except RecordingError:
+                summary = None
+            if summary is not None:
+                entry, known = _take_complete(stream, summary, source, info, topics)
+        if summary is None:
+            entry, known = _recover_file(source, compression, known, info, topics)
+            rewritten.append(source.name)
+        info.files.append(entry)
+    info.topics = list(topics.values())
+    spans = [f for f in info.files if f.message_count]
+    if spans:
+        info.start_ns = min(f.start_ns for f in spans)
+        info.end_ns = max(f.end_ns for f in spans)
+    write_metadata(directory, info)
+    logger.info("recovered %s: %d messages in %d file(s), rewrote %s", directory,
+                info.message_count, len(info.files), ", ".join(rewritten) or "none")
+    return BagSummary(directory, info.message_count, info.duration_ns / 1e9,
+                      {t.name: t.message_count for t in info.topics},
+                      tuple(f.path for f in info.files))
+
+
+def _topic(topics: dict[str, TopicInfo], channel: Channel, schemas: dict[int, Schema],
+           ) -> TopicInfo:
+    """The bag-wide TopicInfo of a file's channel (created on first sight)."""
+    if channel.topic not in topics:
+        schema = schemas.get(channel.schema_id)
+        topics[channel.topic] = TopicInfo(channel.topic, schema.name if schema else "",
+                                          channel.metadata.get("offered_qos_profiles", ""),
+                                          channel.metadata.get("topic_type_hash", ""))
+    return topics[channel.topic]
+
+
+def _take_complete(stream: BinaryIO, summary: Summary, source: Path, info: BagInfo,
+                   topics: dict[str, TopicInfo],
+                   ) -> tuple[FileInfo, tuple[list[Schema], list[Channel]]]:
+    """Account a complete file from its summary (it is not rewritten)."""
+    stats = summary.statistics
+    assert stats is not None
+    for cid, channel in summary.channels.items():
+        _topic(topics, channel, summary.schemas).message_count += \
+            stats.channel_message_counts.get(cid, 0)
+    entry = FileInfo(source.name)
+    if stats.message_count:
+        entry.add(stats.message_start_time)
+        entry.add(stats.message_end_time, stats.message_count - 1)
+    if not info.custom_data:
+        stream.seek(0)
+        for record in make_reader(stream).iter_metadata():
+            if record.name != "rosbag2":
+                info.custom_data.update(record.metadata)
+    return entry, (list(summary.schemas.values()), list(summary.channels.values()))
+
+
+def _recover_file(source: Path, compression: str,
+                  known: tuple[list[Schema], list[Channel]], info: BagInfo,
+                  topics: dict[str, TopicInfo],
+                  ) -> tuple[FileInfo, tuple[list[Schema], list[Channel]]]:
+    """Rewrite one cut file with a summary; return its files: entry.
+
+    A file cut before its first chunk reached the disk has no schema or channel record;
+    those of the previous file (every file registers the same topics in the same order)
+    make it a valid, empty file then.
+    """
     schemas, channels, messages, metadata, complete = _salvage(source)
     if not channels:
-        raise RecordingError(f"{source}: no channel record survived; nothing to recover")
+        if not known[1]:
+            raise RecordingError(f"{source}: no channel record survived; nothing to recover")
+        schemas, channels = known
     messages.sort(key=lambda m: m.log_time)
     tmp = source.with_name(source.name + ".recovering")
     kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(
         compression, CompressionType.NONE)
-    topics = {c.id: TopicInfo(c.topic, next((s.name for s in schemas if s.id == c.schema_id), ""),
-                              c.metadata.get("offered_qos_profiles", ""),
-                              c.metadata.get("topic_type_hash", "")) for c in channels}
-    info = BagInfo(source.name, list(topics.values()))
+    by_id = {s.id: s for s in schemas}
+    file_topics = {c.id: _topic(topics, c, by_id) for c in channels}
+    entry = FileInfo(source.name)
     with open(tmp, "wb") as out:
         writer = Writer(out, compression=kind)
         writer.start(profile="ros2", library="ssi_bridge recover")
@@ -105,17 +189,15 @@ def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
                 continue
             writer.add_message(ids[msg.channel_id], msg.log_time, msg.data, msg.publish_time,
                                msg.sequence)
-            topics[msg.channel_id].message_count += 1
-        if messages:
-            info.start_ns, info.end_ns = messages[0].log_time, messages[-1].log_time
+            file_topics[msg.channel_id].message_count += 1
+            entry.add(msg.log_time)
+        info.topics = list(topics.values())
         writer.add_metadata("rosbag2", {"serialized_metadata": metadata_text(info),
                                         "ROS_DISTRO": ROS_DISTRO})
         writer.finish()
         out.flush()
         os.fsync(out.fileno())
     os.replace(tmp, source)
-    write_metadata(directory, info)
-    logger.info("recovered %s: %d messages (%s)", directory, info.message_count,
+    logger.info("%s: rewrote %d messages (%s)", source.name, entry.message_count,
                 "file was complete" if complete else "file was truncated")
-    return BagSummary(directory, info.message_count, info.duration_ns / 1e9,
-                      {t.name: t.message_count for t in info.topics})
+    return entry, (schemas, channels)
