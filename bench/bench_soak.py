@@ -11,8 +11,10 @@ then N minutes the same without recording, in the same run. A subscriber in anot
 * ``soak_messages_lost``: joint_states the subscriber received inside the bag's time span
   that are not in the bag (node -> bag losses); goal 0. The note also gives the reverse
   (in the bag, not received: DDS losses), and checks every file opens as a complete MCAP
-* ``soak_cycles_missed``: SYNC slots without a message (gaps in the stamps of the received
-  joint_states, the SSI latch times), with recording; baseline: without
+* ``soak_cycles_missed``: SYNC slots without a message at the subscriber (gaps in the
+  stamps of the received joint_states, the SSI latch times: the node's missed cycles plus
+  DDS drops), with recording; baseline: without. The note adds the node's own count with
+  recording, from the gaps in the bag's stamps
 * ``soak_bag_mb_per_min``: bag size per minute of recording, and the files it was split into
 * ``soak_cpu_s_per_s``: node CPU (utime + stime) per second; baseline: without recording
 
@@ -161,6 +163,7 @@ def bag_figures(bag: Path, received: list[int]) -> dict:
     topic = f"{NS}/joint_states"
     with Bag(bag) as reader:
         recorded = [m.publish_time for _, m in reader.messages([topic])]
+    own_missed = missed_cycles(recorded)
     in_bag = set(recorded)
     lo, hi = min(recorded), max(recorded)
     window = {s for s in received if lo <= s <= hi}
@@ -168,7 +171,8 @@ def bag_figures(bag: Path, received: list[int]) -> dict:
             "recorded": len(recorded), "duplicates": len(recorded) - len(in_bag),
             "received_in_window": len(window), "files": len(files), "complete_files": complete,
             "bytes": sum(p.stat().st_size for p in files),
-            "span_min": (hi - lo) / 60e9, "metadata_count": info["message_count"]}
+            "span_min": (hi - lo) / 60e9, "metadata_count": info["message_count"],
+            "own_missed": own_missed}
 
 
 def emit(records: list[dict], rec: dict) -> None:
@@ -201,9 +205,13 @@ def report(records: list[dict], on: dict, off: dict, bag: dict, minutes: float) 
     emit(records, {"metric": "soak_cycles_missed", "value": m_on, "unit": "cycles",
                    "baseline": m_off, "ratio": round(m_on / m_off, 3) if m_off else None,
                    "duration_min": minutes,
-                   "note": f"SYNC slots without a received joint_states (stamp gaps), with "
-                           f"recording; baseline: without; of ~{int(on['window_s'] * RATE_HZ)} "
-                           f"cycles per phase (+ warm-up); {dur}; lower is better"})
+                   "note": f"SYNC slots without a joint_states at the subscriber (gaps in "
+                           f"the received stamps: the node's missed cycles plus DDS drops), "
+                           f"with recording; baseline: without; of ~"
+                           f"{int(on['window_s'] * RATE_HZ)} cycles per phase (+ warm-up); "
+                           f"the node's own with recording (gaps in the bag's stamps over "
+                           f"{bag['span_min']:.2f} min): {bag['own_missed']}; {dur}; lower is "
+                           f"better"})
     emit(records, {"metric": "soak_bag_mb_per_min",
                    "value": round(bag["bytes"] / 1e6 / max(bag["span_min"], 1e-9), 3),
                    "unit": "MB/min", "duration_min": minutes,

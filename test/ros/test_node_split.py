@@ -185,3 +185,25 @@ def test_kill_9_in_the_third_file_then_replay_recover(start_node, probe, tmp_pat
     with Bag(bag) as reopened:
         stamps = [m.publish_time for _, m in reopened.messages([node.topic("joint_states")])]
     assert stamps and all(a < b for a, b in zip(stamps, stamps[1:])), "no repeat at a split"
+
+
+def test_split_parameters_are_described_with_ranges(session) -> None:  # type: ignore[no-untyped-def]
+    from rcl_interfaces.srv import DescribeParameters
+
+    node: NodeProcess = session["node"]
+    names = ["record.max_size", "record.max_duration"]
+    res = session["probe"].call(DescribeParameters, node.topic("~/describe_parameters"),
+                                DescribeParameters.Request(names=names))
+    by_name = {d.name: d for d in res.descriptors}
+    size, duration = by_name["record.max_size"], by_name["record.max_duration"]
+    assert "bytes" in size.description and "seconds" in duration.description
+    assert size.integer_range[0].from_value == 0 and duration.integer_range[0].from_value == 0
+    assert size.read_only and duration.read_only
+
+
+def test_a_split_size_below_the_minimum_is_refused_at_start(start_node) -> None:  # type: ignore[no-untyped-def]
+    node = start_node({"record.max_size": 1000})
+    assert node.proc.wait(30) == 1, node.log()
+    log = node.log()
+    assert "cannot start" in log and "record.max_size 1000" in log and "65536" in log, log
+    assert "Traceback" not in log, log
