@@ -287,8 +287,9 @@ class BagRecorder:
         (already waiting when a split opens the file) completes.
         """
         entry = FileInfo(file_name(self._directory.name, len(self._info.files)))
-        file = McapFile.create(self._directory / entry.path, entry, self._compression,
-                               self._chunk_size, f"ssi_bridge {__version__}")
+        path = self._directory / entry.path
+        file = McapFile.create(path, entry, self._compression, self._chunk_size,
+                               f"ssi_bridge {__version__}")
         try:
             if self._info.custom_data:
                 file.add_metadata(CONFIG_METADATA_NAME, self._info.custom_data)
@@ -297,6 +298,10 @@ class BagRecorder:
             file.flush()
         except OSError:
             file.abandon()
+            if self._info.files:
+                # a split that could not start its file (disk full) leaves the closed files
+                # complete; a header without messages is no part of the bag
+                path.unlink(missing_ok=True)
             raise
         self._info.files.append(entry)
         return file

@@ -37,7 +37,8 @@ class McapFile:
             writer = Writer(stream, chunk_size=chunk_size, compression=compression)
             writer.start(profile="ros2", library=library)
         except OSError:
-            stream.close()
+            with contextlib.suppress(OSError):
+                stream.close()
             raise
         return cls(path, stream, writer, info)
 

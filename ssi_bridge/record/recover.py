@@ -94,6 +94,10 @@ def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
     known: tuple[list[Schema], list[Channel]] = ([], [])
     rewritten = []
     for source in files:
+        if source == files[-1] and len(files) > 1 and source.stat().st_size < len(MCAP_MAGIC):
+            # the crash came as a split created this file: it holds no record at all
+            logger.warning("%s: empty, left out of the bag", source.name)
+            continue
         with open(source, "rb") as stream:
             if stream.read(8) != MCAP_MAGIC:
                 raise RecordingError(f"{source} is not an MCAP file (bad magic)")

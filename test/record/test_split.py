@@ -221,3 +221,16 @@ def test_kill_9_in_the_third_file_recovers_only_that_file(tmp_path: Path) -> Non
         seq = [m.sequence for _, m in reopened.messages()]
     assert seq == list(range(len(seq))), "no message lost or repeated before the cut"
     assert third.stat().st_size > 0
+
+
+def test_recover_keeps_complete_files_and_leaves_out_an_empty_last_one(tmp_path: Path) -> None:
+    bag, written = write_split(tmp_path / "whole", 700, max_duration_s=2)
+    before = {p.name: digest(p) for p in bag.glob("*.mcap")}
+    (bag / "metadata.yaml").unlink()
+    (bag / f"whole_{len(before)}.mcap").write_bytes(b"")    # a crash as a split began
+    summary = recover_bag(bag)
+    assert {name: digest(bag / name) for name in before} == before
+    assert summary.files == tuple(sorted(before, key=lambda n: int(n[6:-5])))
+    assert summary.message_count == len(written)
+    with AnyReader([bag]) as reader:
+        assert reader.message_count == len(written)
