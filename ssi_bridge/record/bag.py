@@ -36,6 +36,7 @@ from rclpy.qos import QoSProfile
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
+from ssi_bridge.record.mcap_file import McapFile
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
     BagInfo,
@@ -45,9 +46,11 @@ from ssi_bridge.record.metadata import (
     metadata_text,
     write_metadata,
 )
-from ssi_bridge.record.mcap_file import McapFile
 from ssi_bridge.record.qos import qos_text
 from ssi_bridge.record.schema import build_schema
+from ssi_bridge.record.split import MIN_SPLIT_SIZE, SplitPolicy
+
+__all__ = ["CONFIG_METADATA_NAME", "MIN_SPLIT_SIZE", "BagRecorder", "BagSummary", "SplitPolicy"]
 
 logger = logging.getLogger(__name__)
 
@@ -57,8 +60,6 @@ COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
 DEFAULT_QOS = QoSProfile(depth=10)
 #: name of the MCAP metadata record holding the session configuration
 CONFIG_METADATA_NAME = "ssi_bridge"
-#: smallest accepted ``max_size``: a file must hold its header, schemas and a chunk or two
-MIN_SPLIT_SIZE = 64 * 1024
 
 
 @dataclass(frozen=True)
@@ -72,32 +73,6 @@ class BagSummary:
     topics: dict[str, int] = field(default_factory=dict)
     #: the bag's MCAP files (relative names) in writing order
     files: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class SplitPolicy:
-    """When a session moves on to its next file (rosbag2 ``--max-bag-size/-duration``)."""
-
-    #: bytes; 0 = no split by size
-    max_size: int = 0
-    #: seconds of log time; 0 = no split by duration
-    max_duration_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.max_size < 0 or 0 < self.max_size < MIN_SPLIT_SIZE:
-            raise RecordingError(f"max_size {self.max_size}: 0 (no split) or at least "
-                                 f"{MIN_SPLIT_SIZE} bytes")
-        if self.max_duration_s < 0:
-            raise RecordingError(f"max_duration {self.max_duration_s}: 0 (no split) or > 0 s")
-
-    def due(self, file: FileInfo, size: int, log_time_ns: int) -> bool:
-        """True when the file (``size`` bytes so far) must close before this message."""
-        if file.message_count == 0:
-            return False
-        if self.max_size and size >= self.max_size:
-            return True
-        return bool(self.max_duration_s) and (
-            log_time_ns - file.start_ns > int(self.max_duration_s * 1e9))
 
 
 @dataclass
