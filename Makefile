@@ -52,7 +52,9 @@ test: setup
 
 bench: setup
 	@$(ENV) && mkdir -p bench/results && : > bench/results/latest.jsonl && \
-	for f in bench/bench_$(if $(ONLY),$(ONLY),*).py; do echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
+	for f in bench/bench_$(if $(ONLY),$(ONLY),*).py; do \
+	  case "$$f" in *bench_soak.py) [ -n "$(ONLY)" ] || { echo "# $$f: minutes long, run it with make bench ONLY=soak"; continue; };; esac; \
+	  echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
 
 lock:
 	@py=$$(scripts/find_python.sh); rm -rf /tmp/ssi_bridge_lock_venv; "$$py" -m venv /tmp/ssi_bridge_lock_venv

@@ -17,10 +17,15 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
+
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.gateway.settings import (  # noqa: F401 - re-exported
     DEFAULT_PARA1, JointSettings, MotionSettings,
 )
+
+#: smallest record.max_size (bytes); the same floor as record/bag.py's MIN_SPLIT_SIZE
+MIN_SPLIT_SIZE = 64 * 1024
+
 
 @dataclass(frozen=True)
 class NodeSettings:
@@ -47,6 +52,9 @@ class NodeSettings:
     record_path: str = ""
     record_compression: str = "zstd"
     record_can_log: bool = False
+    #: split a session into a new file at this size (bytes) / duration (s); 0 = never
+    record_max_size: int = 0
+    record_max_duration: int = 0
     cpu_affinity: tuple[int, ...] = ()
     #: observe another master's traffic (or a replayed log) instead of driving the bus
     bus_listen_only: bool = False
@@ -152,6 +160,14 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "record.can_log": (False, _describe(
         "Also log the raw CAN traffic of each session beside the bag (can_0.log, candump "
         "format, read by python-can's LogReader)", read_only=True)),
+    "record.max_size": (0, _describe(
+        "Split a session into its next file <name>_<k>.mcap once the open one holds this many "
+        "bytes (rosbag2 --max-bag-size); 0: no split by size, else at least 65536",
+        read_only=True, int_range=(0, 1 << 50))),
+    "record.max_duration": (0, _describe(
+        "Split a session into its next file once a message is more than this many seconds "
+        "after the open file's first one (rosbag2 --max-bag-duration); 0: no split by time",
+        read_only=True, int_range=(0, 7 * 86400))),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
@@ -299,6 +315,9 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
     if values["record.compression"] not in ("zstd", "lz4", "none"):
         raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
+    if 0 < values["record.max_size"] < MIN_SPLIT_SIZE:
+        raise ConfigError(f"record.max_size {values['record.max_size']}: 0 (no split) or at "
+                          f"least {MIN_SPLIT_SIZE} bytes")
     if values["simulation.transport"] not in TRANSPORTS:
         raise ConfigError(f"simulation.transport {values['simulation.transport']!r}: one of "
                           f"{TRANSPORTS}")
@@ -320,7 +339,8 @@ def declare_parameters(node: Node) -> NodeSettings:
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
-        record_can_log=values["record.can_log"], bus_listen_only=values["bus.listen_only"],
+        record_can_log=values["record.can_log"], record_max_size=values["record.max_size"],
+        record_max_duration=values["record.max_duration"], bus_listen_only=values["bus.listen_only"],
         cpu_affinity=_cpus(values["cpu_affinity"]),
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
