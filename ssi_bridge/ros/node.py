@@ -37,6 +37,7 @@ from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
@@ -145,6 +146,9 @@ class SsiBridgeNode(Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
+        self.liveview = LiveView(self, s)
+        for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
+            self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def _start_player_when_heard(self, timeout: float) -> None:
@@ -297,7 +301,8 @@ class SsiBridgeNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.settings.frame_id
         # ~/status costs as much as the rest of the cycle: build it only for a listener
-        want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
+        want_status = (self.recorder.active or self.status_pub.get_subscription_count() > 0
+                       or self.liveview.wants(self.status_pub))
         status = Status(header=js.header) if want_status else None
         for joint in self.settings.joints:
             self._update_joint(joint, t_sync, js, status)
@@ -363,6 +368,7 @@ class SsiBridgeNode(Node):
             if self.context.ok():
                 raise
             return False
+        self.liveview.publish(publisher, msg)
         return True
 
     # -- diagnostics -----------------------------------------------------------------------
@@ -395,11 +401,12 @@ class SsiBridgeNode(Node):
                                       s.stale_cycles, self.positions[joint.name]))
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
+        counters.update(self.liveview.counters())
         out.append(bus_status(
             "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self.recorder.error))
+            extra_error=self.recorder.error or self.liveview.error))
         return out
 
     def publish_diagnostics(self) -> None:
@@ -439,6 +446,7 @@ class SsiBridgeNode(Node):
         if self.player is not None:
             self.player.stop()
         self.recorder.stop()
+        self.liveview.stop()
         self.client.close()
         if self.gateway is not None:
             self.gateway.stop()
