@@ -15,6 +15,11 @@ same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per p
 * ``cpu_s_per_s``: utime+stime of the publisher process (/proc/<pid>/stat) over the window per
   second; the node's includes its simulated station, gateway and CAN bus (lower is better)
 
+Live view cost (``foxglove.port``): one node with 1 encoder at 1 kHz and its Foxglove WebSocket
+server on; its CPU s/s in alternating windows with no client, one client
+(``bench/liveview_client.py``, another process) subscribed to joint_states, and one subscribed
+to every node topic; medians of 3 rounds (``node_1enc_liveview_*``).
+
 QoS on both sides is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID.
 
@@ -40,6 +45,7 @@ REPO = HERE.parent
 RESULTS = HERE / "results" / "latest.jsonl"
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
 SUBSCRIBER = HERE / "node_subscriber.py"
+LIVEVIEW_CLIENT = HERE / "liveview_client.py"
 
 RATE_HZ = 1000.0
 CASES = (1, 8)
@@ -256,11 +262,122 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
         emit(records, rec)
 
 
+# -- live view (foxglove.port): node CPU with one Foxglove WebSocket client vs none -------------
+LIVEVIEW_ROUNDS = 3
+LIVEVIEW_WINDOW_S = 3.0
+#: what the client subscribes to: joint_states alone (a plot panel), or every node topic
+LIVEVIEW_CASES = {"client": [f"{NODE_NS}/joint_states"],
+                  "all_topics": [f"{NODE_NS}/joint_states", f"{NODE_NS}/ssi_bridge/status",
+                                 "/diagnostics", f"{NODE_NS}/ssi_bridge/events"]}
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_file(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str) -> None:
+    deadline = time.monotonic() + STARTUP_TIMEOUT_S
+    while not path.exists():
+        for p, log in procs:
+            if p.poll() is not None:
+                raise RuntimeError(f"{what}: {p.args[1] if len(p.args) > 1 else p.args[0]} "
+                                   f"exited {p.returncode}: {_tail(log)}")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{what}: nothing within {STARTUP_TIMEOUT_S} s")
+        time.sleep(0.05)
+
+
+def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[str, list[float]]:
+    """One node (1 encoder, 1 kHz, live view on): CPU s/s per window, alternating no client,
+    one client on joint_states, one client on every topic; plus the client's message rate."""
+    port = _free_port()
+    cmd = node_cmd(1, domain_id, work, {"foxglove.port": port})
+    out: dict[str, list[float]] = {"idle": [], "client": [], "all_topics": [], "ws_rate_hz": []}
+    procs: list[subprocess.Popen] = []
+    ready, pub_log, sub_log = work / "lv.ready", work / "lv.pub.log", work / "lv.sub.log"
+    try:
+        with open(sub_log, "wb") as log:
+            procs.append(subprocess.Popen(
+                [sys.executable, str(SUBSCRIBER), f"{NODE_NS}/joint_states",
+                 str(work / "lv.samples"), str(ready)], stdout=log, stderr=subprocess.STDOUT,
+                env=env, cwd=work, start_new_session=True))
+        with open(pub_log, "wb") as log:
+            node = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                    cwd=work, start_new_session=True)
+        procs.append(node)
+        _wait_file(ready, [(node, pub_log)], "live view node: first joint_states")
+        time.sleep(WARMUP_S)
+        for r in range(LIVEVIEW_ROUNDS):
+            cpu0, m0 = _cpu_seconds(node.pid), time.monotonic()
+            time.sleep(LIVEVIEW_WINDOW_S)
+            out["idle"].append((_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - m0))
+            for case, topics in LIVEVIEW_CASES.items():
+                tag = f"lv_{case}_{r}"
+                c_ready, c_out, c_log = (work / f"{tag}.ready", work / f"{tag}.out",
+                                         work / f"{tag}.log")
+                with open(c_log, "wb") as log:
+                    client = subprocess.Popen(
+                        [sys.executable, str(LIVEVIEW_CLIENT), f"ws://127.0.0.1:{port}",
+                         ",".join(topics), str(c_ready), str(c_out)], stdout=log,
+                        stderr=subprocess.STDOUT, env=env, cwd=work, start_new_session=True)
+                try:
+                    _wait_file(c_ready, [(client, c_log), (node, pub_log)],
+                               f"live view client on {topics}")
+                    time.sleep(0.5)
+                    cpu0, m0 = _cpu_seconds(node.pid), time.monotonic()
+                    time.sleep(LIVEVIEW_WINDOW_S)
+                    out[case].append((_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - m0))
+                finally:
+                    _stop(client)
+                if case == "client":
+                    n, first, last = (int(v) for v in c_out.read_text().split())
+                    out["ws_rate_hz"].append((n - 1) / ((last - first) / 1e9))
+                time.sleep(0.5)  # the server notices the disconnect; serializing stops
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+    return out
+
+
+def report_liveview(records: list[dict], lv: dict[str, list[float]], plain: dict) -> None:
+    """Medians of the alternating windows; baselines from the same node or the same run."""
+    import statistics
+
+    med = {k: statistics.median(v) for k, v in lv.items()}
+    rows = [
+        ("client_cpu_s_per_s", med["client"], med["idle"], "s/s",
+         "node CPU with one Foxglove WebSocket client subscribed to joint_states; baseline = "
+         "the same node process, live view server on, no client (alternating windows)"),
+        ("all_topics_cpu_s_per_s", med["all_topics"], med["idle"], "s/s",
+         "node CPU with one client subscribed to joint_states, ~/status, /diagnostics and "
+         "~/events (~/status is then built every cycle); baseline = same node, no client"),
+        ("idle_cpu_s_per_s", med["idle"], plain["cpu_s_per_s"], "s/s",
+         "node CPU with the live view server on and no client; baseline = node with "
+         "foxglove.port 0 (the default) measured earlier in this run"),
+        ("ws_rate_hz", med["ws_rate_hz"], plain["rate_hz"], "Hz",
+         "joint_states per second received by the WebSocket client; baseline = rate over DDS "
+         "measured earlier in this run"),
+    ]
+    for name, value, base, unit, note in rows:
+        rec = {"metric": f"node_1enc_liveview_{name}", "value": round(value, 3), "unit": unit,
+               "baseline": round(base, 3)}
+        if base:
+            rec["ratio"] = round(value / base, 3)
+        rec["note"] = (f"{note}; 1 encoder at {RATE_HZ:g} Hz, median of {LIVEVIEW_ROUNDS} "
+                       f"windows of {LIVEVIEW_WINDOW_S:g} s")
+        emit(records, rec)
+
+
 def run(records: list[dict]) -> None:
     if not NODE_EXE.exists():
         raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
     domain_id = _domain_id()
     env = _env(domain_id)
+    plain: dict[int, dict] = {}
     with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
         work = Path(tmp)
         for n in CASES:
@@ -269,12 +386,20 @@ def run(records: list[dict]) -> None:
                                f"{NODE_NS}/joint_states", env, work)
                 bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work)
                 report(records, n, node, bare)
+                plain[n] = node
                 if n == max(CASES):
                     pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
                         "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work)
                     report(records, n, pinned, bare, "_pinned")
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
+                               "note": traceback.format_exc(limit=3)[-800:]})
+        if 1 in plain:
+            try:
+                report_liveview(records, measure_liveview(domain_id, env, work), plain[1])
+            except Exception as err:  # noqa: BLE001
+                emit(records, {"metric": "node_1enc_liveview",
+                               "error": f"{type(err).__name__}: {err}",
                                "note": traceback.format_exc(limit=3)[-800:]})
 
 

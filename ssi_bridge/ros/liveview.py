@@ -130,7 +130,9 @@ class LiveView:
         channel = self._channels.get(publisher.topic_name)
         if channel is None or not channel.has_sinks():
             return
-        channel.log(self._serialize(msg), log_time=self._node.get_clock().now().nanoseconds)
+        # no log_time: the SDK stamps the receive time itself (system clock, as ROS time is
+        # here), which saves the ~15 us of an rclpy clock call per message
+        channel.log(self._serialize(msg))
 
     def counters(self) -> dict[str, int]:
         """Live view figures for the bus diagnostics."""
