@@ -291,12 +291,22 @@ def _wait_file(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str
         time.sleep(0.05)
 
 
+def _cpu_window(pid: int) -> tuple[float, float, int, int]:
+    """(CPU s, elapsed s, wall ns start, wall ns end) of ``pid`` over LIVEVIEW_WINDOW_S."""
+    cpu0, m0, w0 = _cpu_seconds(pid), time.monotonic(), time.time_ns()
+    time.sleep(LIVEVIEW_WINDOW_S)
+    return _cpu_seconds(pid) - cpu0, time.monotonic() - m0, w0, time.time_ns()
+
+
 def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[str, list[float]]:
-    """One node (1 encoder, 1 kHz, live view on): CPU s/s per window, alternating no client,
-    one client on joint_states, one client on every topic; plus the client's message rate."""
+    """One node (1 encoder, 1 kHz, live view on), alternating windows with no client, one
+    client on joint_states and one on every topic: node CPU s/s, and the joint_states rates
+    the WebSocket client and the DDS subscriber received."""
     port = _free_port()
     cmd = node_cmd(1, domain_id, work, {"foxglove.port": port})
-    out: dict[str, list[float]] = {"idle": [], "client": [], "all_topics": [], "ws_rate_hz": []}
+    windows: dict[str, list[tuple[float, float, int, int]]] = {"idle": [], **{
+        case: [] for case in LIVEVIEW_CASES}}
+    ws_rates: list[float] = []
     procs: list[subprocess.Popen] = []
     ready, pub_log, sub_log = work / "lv.ready", work / "lv.pub.log", work / "lv.sub.log"
     try:
@@ -312,9 +322,7 @@ def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[st
         _wait_file(ready, [(node, pub_log)], "live view node: first joint_states")
         time.sleep(WARMUP_S)
         for r in range(LIVEVIEW_ROUNDS):
-            cpu0, m0 = _cpu_seconds(node.pid), time.monotonic()
-            time.sleep(LIVEVIEW_WINDOW_S)
-            out["idle"].append((_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - m0))
+            windows["idle"].append(_cpu_window(node.pid))
             for case, topics in LIVEVIEW_CASES.items():
                 tag = f"lv_{case}_{r}"
                 c_ready, c_out, c_log = (work / f"{tag}.ready", work / f"{tag}.out",
@@ -328,18 +336,24 @@ def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[st
                     _wait_file(c_ready, [(client, c_log), (node, pub_log)],
                                f"live view client on {topics}")
                     time.sleep(0.5)
-                    cpu0, m0 = _cpu_seconds(node.pid), time.monotonic()
-                    time.sleep(LIVEVIEW_WINDOW_S)
-                    out[case].append((_cpu_seconds(node.pid) - cpu0) / (time.monotonic() - m0))
+                    windows[case].append(_cpu_window(node.pid))
                 finally:
                     _stop(client)
                 if case == "client":
                     n, first, last = (int(v) for v in c_out.read_text().split())
-                    out["ws_rate_hz"].append((n - 1) / ((last - first) / 1e9))
+                    ws_rates.append((n - 1) / ((last - first) / 1e9))
                 time.sleep(0.5)  # the server notices the disconnect; serializing stops
     finally:
         for p in reversed(procs):
             _stop(p)
+    import numpy as np
+
+    recv = np.loadtxt(work / "lv.samples", dtype=np.int64, ndmin=2)[:, 0]
+    out: dict[str, list[float]] = {"ws_rate_hz": ws_rates}
+    for case, wins in windows.items():
+        cycles = [int(((recv >= w0) & (recv < w1)).sum()) for _, _, w0, w1 in wins]
+        out[case] = [cpu / el for cpu, el, _, _ in wins]
+        out[f"{case}_dds_rate_hz"] = [n / (el or 1.0) for (_, el, _, _), n in zip(wins, cycles)]
     return out
 
 
@@ -358,9 +372,10 @@ def report_liveview(records: list[dict], lv: dict[str, list[float]], plain: dict
         ("idle_cpu_s_per_s", med["idle"], plain["cpu_s_per_s"], "s/s",
          "node CPU with the live view server on and no client; baseline = node with "
          "foxglove.port 0 (the default) measured earlier in this run"),
-        ("ws_rate_hz", med["ws_rate_hz"], plain["rate_hz"], "Hz",
-         "joint_states per second received by the WebSocket client; baseline = rate over DDS "
-         "measured earlier in this run"),
+        ("ws_rate_hz", med["ws_rate_hz"], med["client_dds_rate_hz"], "Hz",
+         "joint_states per second received by the WebSocket client; baseline = joint_states "
+         "per second received over DDS by the subscriber (also a Python process) in the same "
+         "windows"),
     ]
     for name, value, base, unit, note in rows:
         rec = {"metric": f"node_1enc_liveview_{name}", "value": round(value, 3), "unit": unit,

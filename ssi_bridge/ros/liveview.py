@@ -11,8 +11,9 @@ while a client is subscribed to its channel (the SDK's ``has_sinks``), so the de
 dictionary or attribute lookup per message. The server binds to ``foxglove.address``
 (default 127.0.0.1): a client on another host finds no listening socket unless the address
 says otherwise. The SDK and record/'s schema and CDR code are imported only when the server
-starts, as the recorder imports record/ only when a session starts. A server that cannot start (port in use, bad address) is logged and shown on
-the bus diagnostics; the bridge keeps publishing.
+starts, as the recorder imports record/ only when a session starts. A server that cannot
+start (port in use, bad address) is logged and shown on the bus diagnostics; the bridge keeps
+publishing.
 """
 
 from __future__ import annotations

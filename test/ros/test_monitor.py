@@ -34,7 +34,8 @@ def test_report_shows_joints_levels_and_the_bus_load_of_this_bridge():
     state.on_joint_states(JointState(name=["lift", "tilt"], position=[1.5, -0.25],
                                      velocity=[0.5, float("nan")]))
     state.on_diagnostics(DiagnosticArray(status=[
-        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading", "virtual:a node 1 slot 1 XN-1SSI"),
+        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading",
+                "virtual:a node 1 slot 1 XN-1SSI"),
         _status("ssi_bridge: tilt", DiagnosticStatus.ERROR, "ERR_SSI: wire break",
                 "virtual:a node 1 slot 2 XN-1SSI"),
         _status("ssi_bridge: bus", DiagnosticStatus.OK, "cycling at 100.0 Hz",
@@ -58,7 +59,8 @@ def test_report_ignores_the_bus_status_of_another_bridge_and_says_what_it_waits_
                                                           1.0, node_seen=False)[0]
     state.on_joint_states(JointState(name=["lift"], position=[0.0], velocity=[0.0]))
     state.on_diagnostics(DiagnosticArray(status=[
-        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading", "virtual:a node 1 slot 1 XN-1SSI"),
+        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading",
+                "virtual:a node 1 slot 1 XN-1SSI"),
         _status("ssi_bridge: bus", DiagnosticStatus.ERROR, "gateway silent",
                 "virtual:b node 1 XN-GW-CANOPEN")]))
     assert "bus: (no diagnostics yet)" in "\n".join(
