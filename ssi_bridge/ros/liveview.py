@@ -62,7 +62,7 @@ class LiveView:
 
     def __init__(self, node: Node, settings: NodeSettings) -> None:
         self._node = node
-        self._channels: dict[str, Any] = {}
+        self._channels: dict[Any, Any] = {}
         self._server: Any = None
         self._context: Any = None
         self._listener = _Subscriptions(node)
@@ -116,19 +116,20 @@ class LiveView:
         except RecordingError as err:
             self._node.get_logger().error(f"live view: {publisher.topic_name} not offered: {err}")
             return
-        self._channels[publisher.topic_name] = foxglove.Channel(
+        # keyed by the publisher object: its topic_name is a call into rcl every time
+        self._channels[publisher] = foxglove.Channel(
             publisher.topic_name, message_encoding="cdr", context=self._context,
             schema=foxglove.Schema(name=schema.name, encoding="ros2msg",
                                    data=schema.text.encode("utf-8")))
 
     def wants(self, publisher: Any) -> bool:
         """True while a client is subscribed to ``publisher``'s topic."""
-        channel = self._channels.get(publisher.topic_name)
+        channel = self._channels.get(publisher)
         return channel is not None and channel.has_sinks()
 
     def publish(self, publisher: Any, msg: Any) -> None:
         """Send ``msg`` (just published on ``publisher``) to the subscribed clients, if any."""
-        channel = self._channels.get(publisher.topic_name)
+        channel = self._channels.get(publisher)
         if channel is None or not channel.has_sinks():
             return
         # no log_time: the SDK stamps the receive time itself (system clock, as ROS time is
