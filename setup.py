@@ -28,6 +28,7 @@ setup(
             f"replay = {PACKAGE}.record.replay_cli:main",
             f"plot = {PACKAGE}.record.plot_cli:main",
             f"monitor = {PACKAGE}.ros.monitor:main",
+            f"station = {PACKAGE}.gateway.station_cli:main",
         ],
     },
 )
