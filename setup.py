@@ -27,6 +27,7 @@ setup(
             f"ssi_bridge_node = {PACKAGE}.ros.main:main",
             f"replay = {PACKAGE}.record.replay_cli:main",
             f"plot = {PACKAGE}.record.plot_cli:main",
+            f"monitor = {PACKAGE}.ros.monitor:main",
             f"station = {PACKAGE}.gateway.station_cli:main",
         ],
     },

@@ -49,6 +49,7 @@ from ssi_bridge.ros.diagnostics import (
     OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, status_name,
 )
 from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
@@ -235,6 +236,9 @@ class SsiBridgeNode(Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
+        self.liveview = LiveView(self, s)
+        for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
+            self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def _start_player_when_heard(self, timeout: float) -> None:
@@ -463,7 +467,8 @@ class SsiBridgeNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.settings.frame_id
         # ~/status costs as much as the rest of the cycle: build it only for a listener
-        want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
+        want_status = (self.recorder.active or self.status_pub.get_subscription_count() > 0
+                       or self.liveview.wants(self.status_pub))
         status = Status(header=js.header) if want_status else None
         # a joint without a sample latched at this SYNC holds an older latch than this stamp:
         # while it is not (yet) STALE the cycle is not published and no estimate takes it in
@@ -588,6 +593,7 @@ class SsiBridgeNode(Node):
             if self.context.ok():
                 raise
             return False
+        self.liveview.publish(publisher, msg)
         return True
 
     # -- diagnostics -----------------------------------------------------------------------
@@ -642,6 +648,7 @@ class SsiBridgeNode(Node):
             counters.update(meter.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters.update(self.liveview.counters())
         out.append(bus_status(
             status_name(fqn, "bus"),
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
@@ -653,7 +660,7 @@ class SsiBridgeNode(Node):
     def _bus_problem(self) -> str:
         """An error beside the bus state: the recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
-        return "; ".join(p for p in (self.recorder.error, station) if p)
+        return "; ".join(p for p in (self.recorder.error, self.liveview.error, station) if p)
 
     def _on_diag_timer(self) -> None:
         """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
@@ -818,7 +825,8 @@ class SsiBridgeNode(Node):
             ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
             steps.append(("log replay", self.player.stop))
-        steps += [("recording", self.recorder.stop), ("bus", self.client.close)]
+        steps += [("recording", self.recorder.stop), ("live view", self.liveview.stop),
+                  ("bus", self.client.close)]
         if self.station is not None:
             steps.append(("simulated station", self.station.stop))
         for what, step in steps:

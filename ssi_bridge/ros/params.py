@@ -63,6 +63,9 @@ class NodeSettings:
     replay_rate: float = 1.0
     replay_exit_at_end: bool = False
     replay_wait_for_subscribers: float = 0.0
+    #: live view (ros/liveview.py): Foxglove WebSocket port, 0 = off; address it binds to
+    foxglove_port: int = 0
+    foxglove_address: str = "127.0.0.1"
 
     @property
     def listen_only(self) -> bool:
@@ -168,6 +171,13 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "Split a session into its next file once a message is more than this many seconds "
         "after the open file's first one (rosbag2 --max-bag-duration); 0: no split by time",
         read_only=True, int_range=(0, 7 * 86400))),
+    "foxglove.port": (0, _describe(
+        "Live view: TCP port of a Foxglove WebSocket server streaming every topic of the node "
+        "(ros2msg schemas, CDR); open Foxglove and connect to ws://localhost:<port>. 0: off",
+        read_only=True, int_range=(0, 65535))),
+    "foxglove.address": ("127.0.0.1", _describe(
+        "Address the live view server binds to: 127.0.0.1 accepts clients of this host only; "
+        "an interface address or 0.0.0.0 lets other hosts connect", read_only=True)),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
@@ -313,6 +323,9 @@ def declare_parameters(node: Node) -> NodeSettings:
     slots = [j.slot for j in joints]
     if len(set(slots)) != len(slots):
         raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
+    if values["foxglove.port"] and not str(values["foxglove.address"]).strip():
+        raise ConfigError("foxglove.address is empty: give the address the live view binds to "
+                          "(127.0.0.1: this host only)")
     if values["record.compression"] not in ("zstd", "lz4", "none"):
         raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
     if 0 < values["record.max_size"] < MIN_SPLIT_SIZE:
@@ -344,4 +357,6 @@ def declare_parameters(node: Node) -> NodeSettings:
         cpu_affinity=_cpus(values["cpu_affinity"]),
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
-        replay_wait_for_subscribers=values["replay.wait_for_subscribers"])
+        replay_wait_for_subscribers=values["replay.wait_for_subscribers"],
+        foxglove_port=values["foxglove.port"],
+        foxglove_address=str(values["foxglove.address"]).strip())
