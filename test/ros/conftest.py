@@ -18,9 +18,25 @@ from typing import Any
 
 import pytest
 import yaml
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
 REPO = Path(__file__).resolve().parents[2]
-NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
+
+
+def installed_executable(name: str) -> Path:
+    """``lib/ssi_bridge/<name>`` of the ssi_bridge the environment has sourced, found the way
+    ``ros2 run`` finds it (the ament index): this repository's install/ under `make test`,
+    the workspace's install/ under `colcon test`."""
+    try:
+        prefix = Path(get_package_prefix("ssi_bridge"))
+    except PackageNotFoundError:
+        pytest.fail("ssi_bridge is not installed in the sourced environment: run `make setup` "
+                    "and `source scripts/env.sh` (make test does both), or source a workspace's "
+                    "install/setup.bash")
+    exe = prefix / "lib" / "ssi_bridge" / name
+    if not exe.exists():
+        pytest.fail(f"{exe} missing: rebuild (make setup, or colcon build)")
+    return exe
 
 
 @dataclass
@@ -81,14 +97,13 @@ def domain_id(monkeypatch: pytest.MonkeyPatch, ros_domain: int) -> int:
 @pytest.fixture
 def start_node(tmp_path: Path, domain_id: int) -> Iterator[Callable[..., NodeProcess]]:
     """Factory: start the installed node with parameters; every started node is stopped."""
-    if not NODE_EXE.exists():
-        pytest.fail(f"{NODE_EXE} missing: run `make setup` (make test does it)")
+    node_exe = installed_executable("ssi_bridge_node")
     started: list[NodeProcess] = []
 
     def _start(params: dict[str, Any] | None = None, *, namespace: str = "",
                params_file: Path | None = None, args: tuple[str, ...] = ()) -> NodeProcess:
         index = len(started)
-        cmd = [str(NODE_EXE), "--ros-args"]
+        cmd = [str(node_exe), "--ros-args"]
         if params_file is not None:
             cmd += ["--params-file", str(params_file)]
         values = {"bus.channel": f"test_{domain_id}_{index}",
