@@ -1,4 +1,4 @@
-"""Benchmark (issue 6): ssi_bridge_node's joint_states at 1 kHz against a bare rclpy publisher.
+"""Benchmark: ssi_bridge_node's joint_states at 1 kHz against a bare rclpy publisher.
 
 For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs at
 ``publish_rate`` 1000 Hz, and a subscriber in another process (``bench/node_subscriber.py``)
