@@ -17,6 +17,8 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
+    # colcon test runs pytest (not unittest) only for packages that declare it as a test extra
+    extras_require={"test": ["pytest"]},
     zip_safe=True,
     maintainer="ssi_bridge maintainers",
     maintainer_email="ssi-bridge@example.com",

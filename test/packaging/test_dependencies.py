@@ -298,3 +298,19 @@ def test_keys_exist_in_rosdistro():
             known = key in jazzy or key in repository or any(
                 key in rosdistro(f"rosdep/{f}") for f in ("python.yaml", "base.yaml"))
             assert known, f"{path.relative_to(REPO)}: {key} is no rosdep key"
+
+
+def test_pytest_runs_with_the_repository_options(request: pytest.FixtureRequest):
+    """`make test` and `colcon test` (which starts pytest in the package's source directory)
+    both read setup.cfg: same import mode, same markers, same warnings filter."""
+    assert request.config.inipath == REPO / "setup.cfg"
+    assert request.config.getoption("importmode") == "importlib"
+
+
+def test_colcon_test_runs_pytest():
+    """colcon picks pytest for an ament_python package only when setup.py names it as a test
+    extra; otherwise `colcon test` runs unittest and finds no test."""
+    tree = ast.parse((REPO / "setup.py").read_text(encoding="utf-8"))
+    extras = [kw.value for node in ast.walk(tree) if isinstance(node, ast.Call)
+              for kw in node.keywords if kw.arg == "extras_require"]
+    assert len(extras) == 1 and "pytest" in ast.literal_eval(extras[0]).get("test", [])
