@@ -126,65 +126,67 @@ def test_every_import_of_the_tests_has_a_row():
     assert not both, f"{sorted(both)}: a run dependency covers the tests too (REP 149)"
 
 
+def rows() -> list[tuple[str, str, dict]]:
+    """``(what, scope, row)`` of every row: [run] and [test] per module, [extra] per key."""
+    out = [(f"import {m}", "run", r) for m, r in table()["run"].items()]
+    out += [(f"test import {m}", "test", r) for m, r in table()["test"].items()]
+    for key, row in table().get("extra", {}).items():
+        scope = {"exec_depend": "run", "depend": "run", "test_depend": "test"}[row["tag"]]
+        out.append((f"{key} ({row['uses']})", scope, {"pip": "", **row, "key": key}))
+    return out
+
+
 def test_package_xml_declares_exactly_the_table():
-    pkg = package(REPO / "package.xml")
-    deps = declared(pkg)
+    deps = declared(package(REPO / "package.xml"))
     expected: set[str] = set()
-    for module, row in table()["run"].items():
-        if row["key"]:
-            assert row["key"] in deps["exec"], \
-                f"import {module}: package.xml needs <exec_depend> or <depend> {row['key']}"
-            expected.add(row["key"])
-    for module, row in table()["test"].items():
-        if row["key"]:
-            assert row["key"] in deps["test"], \
-                f"test import {module}: package.xml needs <test_depend>{row['key']}"
-            expected.add(row["key"])
-    for key, row in table()["extra"].items():
-        tag = {"exec_depend": "exec", "depend": "exec", "test_depend": "test"}[row["tag"]]
-        assert key in deps[tag], f"package.xml needs <{row['tag']}>{key} ({row['uses']})"
-        expected.add(key)
+    for what, scope, row in rows():
+        if not row["key"]:
+            continue
+        tag = "<exec_depend> or <depend>" if scope == "run" else "<test_depend>"
+        assert row["key"] in deps["exec" if scope == "run" else "test"], \
+            f"{what}: package.xml needs {tag} {row['key']}"
+        expected.add(row["key"])
     undeclared = deps["all"] - expected
     assert not undeclared, \
         f"package.xml keys without a row in dependencies.toml: {sorted(undeclared)}"
 
 
 def test_rows_are_complete_and_pip_only_packages_go_to_the_workspace_files():
-    for section in ("run", "test"):
-        for module, row in table()[section].items():
-            assert row["source"] in {"python.yaml", "base.yaml", "jazzy", "repository", ""}, module
-            assert bool(row["key"]) == bool(row["source"]), module
-            if row["source"] in {"python.yaml", "base.yaml"}:
-                assert row.get("via") in {"apt", "pip"}, f"{module}: via = 'apt' or 'pip'"
-                assert row["pip"], f"{module}: a rosdep key of a Python package needs its pin"
-            if not row["key"] or row.get("via") == "pip":
-                assert row.get("workspace"), \
-                    f"{module}: rosdep does not install it from the system, so pip must " \
-                    f"(workspace = true)"
-            if row["source"] in {"jazzy", "repository"}:
-                assert not row["pip"] and not row.get("workspace"), \
-                    f"{module}: a ROS package comes from the ROS install, never from pip"
+    for what, _, row in rows():
+        assert row["source"] in {"python.yaml", "base.yaml", "jazzy", "repository", ""}, what
+        assert bool(row["key"]) == bool(row["source"]), what
+        if row["source"] in {"python.yaml", "base.yaml"}:
+            assert row.get("via") in {"apt", "pip"}, f"{what}: via = 'apt' or 'pip'"
+            assert row["pip"], f"{what}: a rosdep key of a Python package needs its pin"
+        if (not row["key"] or row.get("via") == "pip") and not row.get("optional"):
+            assert row.get("workspace"), \
+                f"{what}: rosdep does not install it from the system, so pip must " \
+                f"(workspace = true; or optional = true for a feature that is off by default)"
+        if not row["key"]:
+            assert row["pip"], f"{what}: without a rosdep key only its pin can install it"
+        if row["source"] in {"jazzy", "repository"}:
+            assert not row["pip"] and not row.get("workspace"), \
+                f"{what}: a ROS package comes from the ROS install, never from pip"
 
 
 def test_pins_agree_with_requirements_in_and_the_lock():
     direct = requirements(REPO / "requirements.in")
     lock = requirements(REPO / "requirements.lock")
-    for section in ("run", "test"):
-        for module, row in table()[section].items():
-            if not row["pip"]:
-                continue
-            pin = normalize(row["pip"])
-            assert pin in direct, f"{module}: {row['pip']} missing from requirements.in"
-            assert pin in lock, f"{module}: requirements.lock does not pin {row['pip']}"
+    for what, _, row in rows():
+        if not row["pip"]:
+            continue
+        pin = normalize(row["pip"])
+        assert pin in direct, f"{what}: {row['pip']} missing from requirements.in"
+        assert pin in lock, f"{what}: requirements.lock does not pin {row['pip']}"
 
 
-@pytest.mark.parametrize(("section", "name"), [
+@pytest.mark.parametrize(("scope", "name"), [
     ("run", "requirements-workspace.txt"), ("test", "requirements-workspace-test.txt")])
-def test_workspace_files_hold_exactly_the_pip_installs(section: str, name: str):
+def test_workspace_files_hold_exactly_the_pip_installs(scope: str, name: str):
     pins = requirements(REPO / name, follow=False)
-    wanted = {normalize(r["pip"]) for r in table()[section].values() if r.get("workspace")}
-    assert pins == wanted, f"{name} must pin exactly the [{section}] rows with workspace = true"
-    if section == "test":
+    wanted = {normalize(r["pip"]) for _, s, r in rows() if s == scope and r.get("workspace")}
+    assert pins == wanted, f"{name} must pin exactly the {scope} rows with workspace = true"
+    if scope == "test":
         assert "-r requirements-workspace.txt" in (REPO / name).read_text(encoding="utf-8")
 
 
@@ -246,8 +248,7 @@ def test_readme_rosdep_skips_exactly_the_pip_keys():
     those keys are skipped and come from the workspace files into the venv."""
     rosdep = next(c for c in readme_workspace_commands() if c[:2] == ["rosdep", "install"])
     skipped = set(rosdep[rosdep.index("--skip-keys") + 1].split())
-    pip_keys = {r["key"] for s in ("run", "test") for r in table()[s].values()
-                if r.get("via") == "pip"}
+    pip_keys = {r["key"] for _, _, r in rows() if r.get("via") == "pip"}
     assert skipped == pip_keys
 
 
@@ -279,9 +280,7 @@ def jazzy_packages() -> set[str]:
 
 def test_keys_exist_in_rosdistro():
     jazzy = jazzy_packages()
-    rows = [r for s in ("run", "test") for r in table()[s].values()]
-    rows += [{"key": k, "source": r["source"]} for k, r in table()["extra"].items()]
-    for row in rows:
+    for _, _, row in rows():
         if row["source"] == "jazzy":
             assert row["key"] in jazzy, f"{row['key']} is not a ROS 2 Jazzy package"
         elif row["source"] in {"python.yaml", "base.yaml"}:
