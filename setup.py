@@ -26,9 +26,9 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            f"ssi_bridge_node = {PACKAGE}.ros.main:main",
-            f"replay = {PACKAGE}.record.replay_cli:main",
-            f"plot = {PACKAGE}.record.plot_cli:main",
+            f"ssi_bridge_node = {PACKAGE}.tools.ssi_bridge_node:main",
+            f"replay = {PACKAGE}.tools.replay:main",
+            f"plot = {PACKAGE}.tools.plot:main",
         ],
     },
 )

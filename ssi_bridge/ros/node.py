@@ -27,7 +27,7 @@ from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.client.player import CanLogPlayer
+from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
@@ -37,13 +37,14 @@ from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
 from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.joint_scale import JointScale
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.station import SimStation, count_factor
-from ssi_bridge.ros.units import JointScale, VelocityEstimator
+from ssi_bridge.ros.velocity import VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
 NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)

@@ -16,7 +16,7 @@ from rclpy.qos import QoSProfile
 
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
 from ssi_bridge.module.registers import Reg, validate_para1
-from ssi_bridge.ros.units import to_int32
+from ssi_bridge.ros.joint_scale import to_int32
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,

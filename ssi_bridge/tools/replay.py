@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{summary.duration:.3f} s")
             return 0
         from ssi_bridge.record.reader import Bag
-        from ssi_bridge.record.replay import Player, ReplayOptions
+        from ssi_bridge.record.bag_replay import Player, ReplayOptions
         options = ReplayOptions(rate=args.rate, loop=args.loop, start_offset=args.start_offset,
                                 topics=args.topics, remap=_remaps(args.remap),
                                 clock_hz=args.clock,
