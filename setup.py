@@ -29,6 +29,7 @@ setup(
             f"ssi_bridge_node = {PACKAGE}.tools.ssi_bridge_node:main",
             f"replay = {PACKAGE}.tools.replay:main",
             f"plot = {PACKAGE}.tools.plot:main",
+            f"station = {PACKAGE}.gateway.station_cli:main",
         ],
     },
 )

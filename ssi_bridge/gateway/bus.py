@@ -57,6 +57,12 @@ class BusConfig:
 
 def open_bus(config: BusConfig) -> can.BusABC:
     """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it."""
+    if config.interface == "udp_multicast":  # our own-frame-free variant (gateway/multicast)
+        from ssi_bridge.gateway.multicast import open_udp_bus
+        try:
+            return open_udp_bus(str(config.channel))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
     kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
     if config.interface != "virtual":
         kwargs["bitrate"] = config.bitrate

@@ -13,7 +13,9 @@ Layout (see ``docs/canopen.md``):
 * 0x2000 / 0x2100: manufacturer ARRAYs of UNSIGNED64, the 8-byte process input / output
   image of each slot, image byte k in bits 8k..8k+7 (the CAN payload is the image in order);
 * the encoder objects of Table 16 as ARRAYs (sub 0 = number of slots), the data types,
-  access and PDO mapping of description Tables 17-49.
+  access and PDO mapping of description Tables 17-49;
+* 0x4000-0x4003: simulation only, fault injection into the simulated station (not in the
+  manual; a real gateway has no such objects).
 """
 
 from __future__ import annotations
@@ -52,6 +54,10 @@ MAP_ENTRIES = 8
 ERROR_HISTORY = 8
 
 TPDO_COM, TPDO_MAP, RPDO_COM, RPDO_MAP = 0x1800, 0x1A00, 0x1400, 0x1600
+#: simulation-only objects (manufacturer area; not on a real XN-GW-CANOPEN): fault injection
+#: rate (REAL32 0-1), duration (ms, 0 = until cleared), command (kind | slot << 8) and the
+#: kinds in force (bit mask); served by gateway/simulation.py
+SIM_RATE, SIM_DURATION, SIM_COMMAND, SIM_ACTIVE = 0x4000, 0x4001, 0x4002, 0x4003
 PROCESS_INPUT, PROCESS_OUTPUT = 0x2000, 0x2100
 
 
@@ -181,6 +187,23 @@ def _pdo_objects(d: od.ObjectDictionary, node_id: int) -> None:
             d.add_object(_record(mp + n, f"{kind}{pdo} mapping parameter", mapping))
 
 
+def _simulation_objects(d: od.ObjectDictionary) -> None:
+    """0x4000-0x4003: fault injection of the simulated station (simulation only)."""
+    for index, name, data_type, access, default, text in (
+            (SIM_RATE, "SIM fault rate", dt.REAL32, "rw", 0.0,
+             "rate 0-1 of the next BIT_NOISE / CAN_FRAME_LOSS command"),
+            (SIM_DURATION, "SIM fault duration ms", dt.UNSIGNED32, "rw", 0,
+             "duration of the next command in ms, 0 = until CLEAR_ALL; the station times it"),
+            (SIM_COMMAND, "SIM fault command", dt.UNSIGNED16, "rw", 0,
+             "write kind (bits 0-7, InjectFault numbers, 0 = CLEAR_ALL) | slot << 8 "
+             "(0 = bus faults) to inject"),
+            (SIM_ACTIVE, "SIM faults active", dt.UNSIGNED32, "ro", 0,
+             "bit k set while a fault of kind k is in force")):
+        var = _var(name, index, 0, data_type, access, default)
+        var.description = f"SIMULATION ONLY (no such object on a real gateway): {text}"
+        d.add_object(var)
+
+
 def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
     """Return the dictionary of a station with ``slots`` XN-1SSI modules at ``node_id``."""
     if not 1 <= slots <= MAX_SLOTS:
@@ -219,6 +242,7 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
                         True))
     d.add_object(_array(PROCESS_OUTPUT, "Process output image", slots, dt.UNSIGNED64, "rw",
                         True))
+    _simulation_objects(d)
     for obj in ENCODER_OBJECTS:
         if obj.array:
             d.add_object(_array(obj.index, obj.name, slots, obj.data_type, obj.access, obj.pdo,
@@ -232,6 +256,9 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
 def write_eds(path: str, slots: int = MAX_SLOTS) -> None:
     """Export the dictionary of a ``slots``-module station as an EDS file to ``path``."""
     d = build_dictionary(1, slots)
+    d.comments = ("Objects 0x4000-0x4003 exist only in the simulated station (ssi_bridge): "
+                  "fault injection.\nA real XN-GW-CANOPEN aborts access to them "
+                  "(0x06020000, object does not exist).")
     stamp = {"CreationDate": "01-01-2025", "CreationTime": "12:00AM",
              "ModificationDate": "01-01-2025", "ModificationTime": "12:00AM",
              "EdsVersion": "4.2", "Description": f"XN-GW-CANOPEN with {slots} XN-1SSI"}

@@ -107,6 +107,8 @@ def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,
         level, message = ERROR, "not connected to the gateway"
     elif not alive:
         level, message = ERROR, "gateway silent: no heartbeat / no TPDOs"
+        if extra_error:  # e.g. why: the simulated station's process ended
+            message += f"; {extra_error}"
     elif extra_error:
         level, message = ERROR, extra_error
     elif achieved_rate < 0.9 * publish_rate:

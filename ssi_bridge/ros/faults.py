@@ -1,8 +1,10 @@
 """Fault injection into the simulated station (the ``~/inject_fault`` service's backend).
 
-Each fault acts where a real one would: a broken wire or noise on the SSI line, an error or
-power-failure bit in the encoder, lost CAN frames or a silent gateway on the bus. Faults
-with a duration clear themselves; ``CLEAR_ALL`` clears everything. ROS-free.
+The node reaches its station only over CAN, faults included: a request becomes SDO writes
+of the station's simulation-only objects 0x4000 (rate), 0x4001 (duration, ms) and 0x4002
+(command = kind | slot << 8), served by :mod:`ssi_bridge.gateway.simulation`. The station
+times durations itself; this side keeps a mirror of what it asked for, to say when a fault
+ended and to refuse what a silent gateway cannot hear. ROS-free.
 """
 
 from __future__ import annotations
@@ -11,30 +13,27 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from enum import IntEnum
+from typing import Protocol
 
 from ssi_bridge.encoder.config import ERROR_BITS, SpecialBit
+from ssi_bridge.encoder.encoder import SsiEncoder
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.ros.station import SimStation
+from ssi_bridge.gateway.dictionary import SIM_COMMAND, SIM_DURATION, SIM_RATE
+from ssi_bridge.gateway.settings import JointSettings
+from ssi_bridge.gateway.simulation import BUS_FAULTS, RATE_FAULTS, FaultKind, command_word
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["ActiveFault", "BUS_FAULTS", "FaultInjector", "FaultKind"]
 
-class FaultKind(IntEnum):
-    """Fault kinds, numbered as the constants of ssi_bridge_msgs/srv/InjectFault."""
-
-    CLEAR_ALL = 0
-    DATA_WIRE_BREAK = 1
-    CLOCK_WIRE_BREAK = 2
-    ENCODER_ERROR = 3
-    POWER_FAILURE = 4
-    BIT_NOISE = 5
-    CAN_FRAME_LOSS = 6
-    GATEWAY_SILENT = 7
+#: largest duration 0x4001 holds (UNSIGNED32 ms)
+MAX_DURATION = (2**32 - 1) / 1000.0
 
 
-#: faults of the bus or gateway (the joint is ignored)
-BUS_FAULTS = (FaultKind.CAN_FRAME_LOSS, FaultKind.GATEWAY_SILENT)
+class ObjectWriter(Protocol):
+    """The master's SDO access (BridgeClient)."""
+
+    def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -47,11 +46,11 @@ class ActiveFault:
     until: float | None
 
 
-def _visibility_note(fault: FaultKind, channel: object) -> str:
+def _visibility_note(fault: FaultKind, encoder: SsiEncoder | None) -> str:
     """Say when the encoder's frame layout has no bit that could show the fault."""
-    if channel is None:
+    if encoder is None:
         return ""
-    cfg = channel.encoder.config  # type: ignore[attr-defined]
+    cfg = encoder.config
     bits = set(cfg.special_bits)
     if fault is FaultKind.POWER_FAILURE and SpecialBit.POWER_FAIL not in bits:
         return (f"the {cfg.name} frame has no power-fail bit (003), so nothing on the wire "
@@ -63,11 +62,19 @@ def _visibility_note(fault: FaultKind, channel: object) -> str:
 
 
 class FaultInjector:
-    """Applies and clears faults on a :class:`SimStation` and its gateway."""
+    """Sends faults to the simulated station over SDO and mirrors what is in force.
 
-    def __init__(self, station: SimStation, gateway: object, clock: Callable[[], float]) -> None:
-        self._station = station
-        self._gateway = gateway
+    :param client: the master's SDO access to the station
+    :param joints: the node's joints (name -> settings: the slot the fault goes to)
+    :param encoders: the joints' simulated encoder models (only their frame layout is read)
+    :param clock: the node's clock for the mirror of durations (s)
+    """
+
+    def __init__(self, client: ObjectWriter, joints: dict[str, JointSettings],
+                 encoders: dict[str, SsiEncoder], clock: Callable[[], float]) -> None:
+        self._client = client
+        self._joints = joints
+        self._encoders = encoders
         self._clock = clock
         self.active: list[ActiveFault] = []
 
@@ -79,60 +86,48 @@ class FaultInjector:
             raise ConfigError(
                 f"unknown fault kind {kind}; kinds: "
                 + ", ".join(f"{k.value}={k.name}" for k in FaultKind)) from None
-        if not math.isfinite(duration) or duration < 0:
-            raise ConfigError(f"duration {duration} s must be finite and >= 0 (0 = until cleared)")
-        if fault in (FaultKind.BIT_NOISE, FaultKind.CAN_FRAME_LOSS):
-            if not (math.isfinite(rate) and 0.0 < rate <= 1.0):
-                raise ConfigError(f"{fault.name} needs a rate in (0, 1], got {rate}")
+        if not math.isfinite(duration) or duration < 0 or duration > MAX_DURATION:
+            raise ConfigError(f"duration {duration} s must be finite and 0-{MAX_DURATION:g} "
+                              "(0 = until cleared)")
+        if fault in RATE_FAULTS and not (math.isfinite(rate) and 0.0 < rate <= 1.0):
+            raise ConfigError(f"{fault.name} needs a rate in (0, 1], got {rate}")
         if fault is FaultKind.CLEAR_ALL:
-            self.clear_all()
+            # one expedited write: a silent station applies it before it answers (and unmutes)
+            self._client.write_object(SIM_COMMAND, 0, command_word(FaultKind.CLEAR_ALL, 0))
+            self.active.clear()
             return "all faults cleared"
-        channel = None
+        slot = 0
         if fault not in BUS_FAULTS:
-            if joint not in self._station.channels:
-                raise ConfigError(f"unknown joint {joint!r}; joints: "
-                                  + ", ".join(self._station.channels))
-            channel = self._station.channels[joint]
-        self._apply(fault, channel, rate, on=True)
+            if joint not in self._joints:
+                raise ConfigError(f"unknown joint {joint!r}; joints: " + ", ".join(self._joints))
+            slot = self._joints[joint].slot
+        self.expire()
+        if any(f.kind is FaultKind.GATEWAY_SILENT for f in self.active):
+            raise ConfigError("the gateway is silent (GATEWAY_SILENT in force) and answers "
+                              "nothing: only CLEAR_ALL reaches it")
+        rate_value = float(rate) if fault in RATE_FAULTS else 0.0
+        duration_ms = max(1, round(duration * 1000)) if duration > 0 else 0
+        self._client.write_object(SIM_RATE, 0, rate_value)
+        self._client.write_object(SIM_DURATION, 0, duration_ms)
+        self._client.write_object(SIM_COMMAND, 0, command_word(fault, slot))
         until = self._clock() + duration if duration > 0 else None
-        self.active.append(ActiveFault(fault, joint if channel else "", rate, until))
-        where = f"joint {joint}" if channel else "the bus"
+        self.active.append(ActiveFault(fault, joint if slot else "", rate_value, until))
+        where = f"joint {joint}" if slot else "the bus"
         span = f"for {duration:g} s" if until is not None else "until CLEAR_ALL"
         logger.warning("fault injected: %s on %s %s", fault.name, where, span)
-        note = _visibility_note(fault, channel)
+        note = _visibility_note(fault, self._encoders.get(joint) if slot else None)
         return f"{fault.name} injected on {where} {span}" + (f"; {note}" if note else "")
 
     def expire(self) -> list[ActiveFault]:
-        """Clear faults whose duration has run out; returns the ones cleared."""
+        """Forget faults whose duration has run out (the station clears them itself)."""
         now = self._clock()
         done = [f for f in self.active if f.until is not None and now >= f.until]
         for fault in done:
             self.active.remove(fault)
-            channel = self._station.channels.get(fault.joint)
-            self._apply(fault.kind, channel, fault.rate, on=False)
             logger.info("fault %s on %s cleared after its duration", fault.kind.name,
                         fault.joint or "the bus")
         return done
 
     def clear_all(self) -> None:
-        """Remove every injected fault."""
-        for fault in list(self.active):
-            self._apply(fault.kind, self._station.channels.get(fault.joint), fault.rate, on=False)
-        self.active.clear()
-
-    def _apply(self, kind: FaultKind, channel: object, rate: float, *, on: bool) -> None:
-        gateway = self._gateway
-        if kind is FaultKind.GATEWAY_SILENT:
-            gateway.silent = on  # type: ignore[attr-defined]
-        elif kind is FaultKind.CAN_FRAME_LOSS:
-            gateway.bus.loss_rate = rate if on else 0.0  # type: ignore[attr-defined]
-        elif kind is FaultKind.DATA_WIRE_BREAK:
-            channel.line.faults.data_break = on  # type: ignore[attr-defined]
-        elif kind is FaultKind.CLOCK_WIRE_BREAK:
-            channel.line.faults.clock_break = on  # type: ignore[attr-defined]
-        elif kind is FaultKind.BIT_NOISE:
-            channel.line.faults.bit_error_rate = rate if on else 0.0  # type: ignore[attr-defined]
-        elif kind is FaultKind.ENCODER_ERROR:
-            channel.encoder.set_error(on)  # type: ignore[attr-defined]
-        elif kind is FaultKind.POWER_FAILURE:
-            channel.encoder.power_failure = on  # type: ignore[attr-defined]
+        """Remove every injected fault (CLEAR_ALL over the bus)."""
+        self.inject(FaultKind.CLEAR_ALL, "")

@@ -30,7 +30,7 @@ from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.gateway.station import count_factor, joint_encoder
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import validate_para1
 from ssi_bridge.ros import logbridge
@@ -43,7 +43,9 @@ from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
-from ssi_bridge.ros.station import SimStation, count_factor
+from ssi_bridge.ros.station import (
+    ChildStation, InProcessStation, start_station, with_station_bus,
+)
 from ssi_bridge.ros.velocity import VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
@@ -80,6 +82,9 @@ class SsiBridgeNode(Node):
             self.settings = dataclasses.replace(
                 self.settings, bus_interface="virtual",
                 bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
+        if self.settings.simulation:
+            # the node and its simulated station meet on this bus (ros/station.py)
+            self.settings = with_station_bus(self.settings)
         s = self.settings
         self._t0 = time.monotonic()
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
@@ -90,16 +95,18 @@ class SsiBridgeNode(Node):
         self._start(s)
 
     def _open_bus_side(self, s: NodeSettings) -> None:
-        """The simulated station (if any), the master or listener, and per-joint state."""
-        self.station: SimStation | None = None
-        self.gateway: XnGateway | None = None
+        """The simulated station (if any), the master or listener, and per-joint state.
+
+        The simulated station is a device of its own (a child process, or in-process on the
+        virtual bus as the fallback): the node starts it, waits for its boot-up, and from
+        then on reaches it only over CAN, fault injection included (SDO 0x4000-0x4002).
+        """
+        self.station: ChildStation | InProcessStation | None = None
         self.faults: FaultInjector | None = None
+        #: the simulated encoders' models (frame layout and resolution), built from the params
+        self.encoders = {j.name: joint_encoder(j) for j in s.joints} if s.simulation else {}
         if s.simulation:
-            self.station = SimStation(s)
-            self.gateway = XnGateway(self.bus_config, s.node_id, self.station.modules,
-                                     clock=self.sim_time)
-            self.gateway.start()
-            self.faults = FaultInjector(self.station, self.gateway, self.sim_time)
+            self.station = start_station(s)
         n_slots = max(j.slot for j in s.joints)
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient
@@ -110,7 +117,15 @@ class SsiBridgeNode(Node):
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
             self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
-            self.client.connect()
+            try:
+                self.client.connect()
+            except Exception:
+                if self.station is not None:
+                    self.station.stop()
+                raise
+            if self.station is not None:
+                self.faults = FaultInjector(self.client, self.joints, self.encoders,
+                                            self.sim_time)
             for joint in s.joints:
                 self._configure_para1(joint)
                 self.client.edit_output(joint.slot, idle_read)
@@ -222,8 +237,8 @@ class SsiBridgeNode(Node):
         resolution of REG_SSI_POS itself, as the user configured the module.
         """
         para1 = joint.para1 if para1 is None else para1
-        if self.station is not None:
-            enc = self.station.channels[joint.name].encoder
+        if joint.name in self.encoders:
+            enc = self.encoders[joint.name]
             factor = count_factor(enc, para1)
             if enc.linear:
                 return JointScale(linear=True, measuring_step_m=enc.measuring_step_m / factor,
@@ -383,7 +398,7 @@ class SsiBridgeNode(Node):
         limit = self.settings.stale_cycles
         levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
                   for c in self.counters.values()]
-        levels.append(int(self.client.gateway_alive) * 2 + int(bool(self.recorder.error)))
+        levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
     def _statuses(self) -> list:
@@ -400,8 +415,13 @@ class SsiBridgeNode(Node):
             "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self.recorder.error))
+            extra_error=self._bus_problem()))
         return out
+
+    def _bus_problem(self) -> str:
+        """An error beside the bus state: the recorder's, a simulated station that ended."""
+        station = self.station.problem() if self.station is not None else None
+        return "; ".join(p for p in (self.recorder.error, station) if p)
 
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
@@ -441,8 +461,8 @@ class SsiBridgeNode(Node):
             self.player.stop()
         self.recorder.stop()
         self.client.close()
-        if self.gateway is not None:
-            self.gateway.stop()
+        if self.station is not None:
+            self.station.stop()
 
 
 __all__ = ["SsiBridgeNode"]

@@ -8,7 +8,7 @@ Values are gathered into frozen settings dataclasses that the rest of the node r
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from rcl_interfaces.msg import (
@@ -17,45 +17,10 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
-
-DEFAULT_PARA1 = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary, ZERO test on
-
-
-@dataclass(frozen=True)
-class MotionSettings:
-    """Simulated shaft motion of one joint (revolutions or metres, on the node's clock)."""
-
-    #: "constant", "still" or "sine"
-    kind: str = "constant"
-    #: constant: speed in rev/s (rotary) or m/s (linear)
-    velocity: float = 0.25
-    #: sine: amplitude in rev or m
-    amplitude: float = 0.5
-    #: sine: frequency in Hz
-    frequency: float = 0.5
-    #: start position in rev or m
-    start: float = 0.0
-
-
-@dataclass(frozen=True)
-class JointSettings:
-    """One configured joint: which module slot, which encoder, how counts become units."""
-
-    name: str
-    slot: int
-    family: str = "GENERIC"
-    #: simulated encoder's transmit code: "" (family default), "binary" or "gray"
-    code: str = ""
-    #: simulated SSI cable length (m): sets the line delay and the 004 §2.7 bit-rate check
-    cable_length: float = 10.0
-    para1: int = DEFAULT_PARA1
-    #: 0: take it from the simulated encoder family
-    steps_per_rev: int = 0
-    revolutions: int = 0
-    measuring_step: float = 0.0
-    direction: int = 1
-    motion: MotionSettings = field(default_factory=MotionSettings)
-
+# the station's part of the settings lives with the station (gateway/), rclpy-free
+from ssi_bridge.gateway.settings import (  # noqa: F401 - re-exported
+    DEFAULT_PARA1, JointSettings, MotionSettings,
+)
 
 @dataclass(frozen=True)
 class NodeSettings:
@@ -66,6 +31,10 @@ class NodeSettings:
     diagnostics_period: float = 1.0
     frame_id: str = ""
     simulation: bool = True
+    #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
+    simulation_transport: str = "virtual"
+    #: seconds the node waits for the simulated station's boot-up at start
+    simulation_start_timeout: float = 10.0
     bus_interface: str = "virtual"
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
@@ -118,8 +87,18 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         float_range=(0.1, 60.0))),
     "frame_id": ("", _describe("header.frame_id of joint_states and ~/status")),
     "simulation": (True, _describe(
-        "true: run the simulated encoders, XN-1SSI modules and gateway in-process on the bus; "
+        "true: start the simulated encoders, XN-1SSI modules and gateway (a station of its "
+        "own, see simulation.transport) and drive it over CAN; "
         "false: talk to a real XN-GW-CANOPEN station", read_only=True)),
+    "simulation.transport": ("virtual", _describe(
+        "How the node reaches its simulated station, always over CAN only: udp_multicast "
+        "(the station runs as a child process on python-can's udp_multicast bus on loopback, "
+        "group and port derived from bus.channel) or virtual (the station runs in the node's "
+        "process on the virtual bus; also the fallback without multicast on loopback)",
+        read_only=True)),
+    "simulation.start_timeout": (10.0, _describe(
+        "Seconds the node waits for the simulated station's boot-up message at start",
+        read_only=True, float_range=(0.5, 120.0))),
     "bus.interface": ("virtual", _describe(
         "python-can interface (virtual, socketcan, pcan, kvaser, ...)", read_only=True)),
     "bus.channel": ("ssi_bridge", _describe(
@@ -214,6 +193,7 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
 
 MOTION_KINDS = ("constant", "still", "sine")
 CODES = ("", "binary", "gray")
+TRANSPORTS = ("udp_multicast", "virtual")
 
 
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
@@ -267,6 +247,9 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
     if values["record.compression"] not in ("zstd", "lz4", "none"):
         raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
+    if values["simulation.transport"] not in TRANSPORTS:
+        raise ConfigError(f"simulation.transport {values['simulation.transport']!r}: one of "
+                          f"{TRANSPORTS}")
     for flag in ("bus.listen_only", "replay.can_log"):
         if values[flag] and values["simulation"]:
             raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
@@ -274,7 +257,10 @@ def declare_parameters(node: Node) -> NodeSettings:
     return NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
-        simulation=values["simulation"], bus_interface=values["bus.interface"],
+        simulation=values["simulation"],
+        simulation_transport=values["simulation.transport"],
+        simulation_start_timeout=values["simulation.start_timeout"],
+        bus_interface=values["bus.interface"],
         bus_channel=values["bus.channel"], bus_bitrate=values["bus.bitrate"],
         node_id=values["bus.node_id"], storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],

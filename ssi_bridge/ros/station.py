@@ -1,125 +1,227 @@
-"""The simulated XI/ON station: per joint an encoder on its SSI line into an XN-1SSI module.
+"""The node's simulated station: started, watched and stopped by the node, reached over CAN only.
 
-ROS-free wiring of the stages left of the gateway, built from the node's settings. The
-gateway gets :attr:`SimStation.modules` (one per slot, slots without a joint hold a module
-with nothing connected) and runs them on SYNC; the node reaches the simulated hardware only
-through the bus, except for fault injection, which acts here like a hand on the cable.
+``simulation.transport: udp_multicast`` (default) runs the station as a child process (the
+``station`` program, :mod:`ssi_bridge.gateway.station_cli`) on python-can's udp_multicast
+bus on loopback, on a group and port derived from ``bus.channel``; ``virtual`` is the
+fallback for machines without multicast on loopback: the same station in the node's process
+on the in-process virtual bus. Either way the node talks to it only through the bus. The
+start waits for the station's boot-up message (bounded by ``simulation.start_timeout``).
+
+The child dies with the node: ``PR_SET_PDEATHSIG`` (SIGTERM when the thread that forked it
+ends; the node forks from its main thread, which lives as long as the node) and the child's
+own check of its parent process. ROS-free.
 """
 
 from __future__ import annotations
 
+import ctypes
+import dataclasses
 import logging
-from dataclasses import dataclass
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
 from typing import Any
-from pathlib import Path
 
-from ssi_bridge.encoder.encoder import SsiEncoder
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity, MotionProfile, Sine, Still
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.line.line import LineConfig, SsiLine
-from ssi_bridge.module.registers import Para1
-from ssi_bridge.module.store import MemoryStore, RetentiveStore
-from ssi_bridge.module.xn1ssi import Xn1Ssi
-from ssi_bridge.ros.params import JointSettings, MotionSettings, NodeSettings
+import yaml
+
+from ssi_bridge.client.boot import BootWatch
+from ssi_bridge.exceptions import GatewayUnavailable
+from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.multicast import derive_channel
+from ssi_bridge.gateway.settings import JOINT_DEFAULTS, JointSettings, StationSettings
+from ssi_bridge.gateway.station import Station
+from ssi_bridge.ros.params import NodeSettings
 
 logger = logging.getLogger(__name__)
 
-
-def make_motion(m: MotionSettings) -> MotionProfile:
-    """The motion profile a joint's simulated shaft follows (rev or m over seconds)."""
-    if m.kind == "still":
-        return Still(m.start)
-    if m.kind == "sine":
-        return Sine(m.amplitude, m.frequency, offset=m.start)
-    return ConstantVelocity(m.velocity, start=m.start)
+#: prctl(2) option: signal this process when its parent (thread) dies
+PR_SET_PDEATHSIG = 1
+_LIBC = ctypes.CDLL(None, use_errno=True)
 
 
-def encoder_overrides(joint: JointSettings) -> dict[str, Any]:
-    """EncoderConfig fields a joint's parameters set on top of its family preset."""
-    out: dict[str, Any] = {}
-    if joint.code:
-        out["code"] = Code.GRAY if joint.code == "gray" else Code.BINARY
-    if joint.steps_per_rev:
-        out["steps_per_rev"] = float(joint.steps_per_rev)
-    if joint.revolutions:
-        out["revolutions_numerator"] = int(joint.revolutions)
-    if joint.measuring_step:
-        out["measuring_step_m"] = float(joint.measuring_step)
-    return out
+def with_station_bus(s: NodeSettings) -> NodeSettings:
+    """``s`` with the bus the node shares with its simulated station.
 
-
-def count_factor(encoder: SsiEncoder, para1: int) -> float:
-    """REG_SSI_POS counts per encoder step for a REG_PARA1 reading this encoder.
-
-    The encoder's position LSB sits ``frame_bits - position_bits`` bits before the end of its
-    frame (special and filler bits follow, 004 §2.3; SSI-SHIFT-RIGHT loses one more). The
-    module clocks SSI_FRAME_LEN bits — fewer cut the frame's end, more read 0s after it
-    (004 §3.6) — then shifts INVALID_BITS_LSB out (000 Table 19). So the step lands at bit
-    ``SSI_FRAME_LEN - frame_bits + lsb - INVALID_BITS_LSB`` of REG_SSI_POS.
+    udp_multicast: the user's udp_multicast channel, else a group and port of their own
+    derived from ``bus.channel`` on loopback; virtual: the bus as configured. The node's
+    client, CAN log sniffer and diagnostics all use the result.
     """
-    cfg = encoder.config
-    p = Para1.decode(para1)
-    lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
-    return 2.0 ** (p.ssi_frame_len - cfg.frame_bits + lsb - p.invalid_bits_lsb)
+    if s.simulation_transport == "udp_multicast" and s.bus_interface != "udp_multicast":
+        return dataclasses.replace(s, bus_interface="udp_multicast",
+                                   bus_channel=derive_channel(s.bus_channel))
+    return s
 
 
-def para1_mismatch(encoder: SsiEncoder, para1: int) -> str | None:
-    """Why REG_PARA1 does not fit the simulated encoder (a start-up warning), or None."""
-    cfg = encoder.config
-    p = Para1.decode(para1)
-    problems = []
-    if p.ssi_frame_len != cfg.frame_bits:
-        problems.append(f"SSI_FRAME_LEN {p.ssi_frame_len} but the encoder sends {cfg.frame_bits} bits")
-    if p.ssi_code_gray != (cfg.code is Code.GRAY):
-        problems.append(f"SSI_CODE_G/D {'Gray' if p.ssi_code_gray else 'binary'} but the encoder sends "
-                        f"{cfg.code.name.lower()}")
-    return "; ".join(problems) or None
+def station_bus(s: NodeSettings) -> BusConfig:
+    """The bus config of ``s`` (after :func:`with_station_bus`)."""
+    return BusConfig(interface=s.bus_interface, channel=s.bus_channel, bitrate=s.bus_bitrate,
+                     node_id=s.node_id)
 
 
-@dataclass
-class SimChannel:
-    """One simulated joint: the encoder, its SSI line and the module it is wired to."""
+def station_params(s: NodeSettings, bus: BusConfig) -> dict[str, Any]:
+    """The node's station parameters as a ROS 2 params file document for the ``station``."""
+    values: dict[str, Any] = {
+        "joints": [j.name for j in s.joints], "storage_path": s.storage_path,
+        "bus.interface": bus.interface, "bus.channel": str(bus.channel),
+        "bus.bitrate": bus.bitrate, "bus.node_id": bus.node_id}
+    for joint in s.joints:
+        values.update({f"{joint.name}.{key}": value
+                       for key, value in _joint_values(joint).items()})
+    return {"/**": {"ros__parameters": values}}
 
-    joint: JointSettings
-    encoder: SsiEncoder
-    line: SsiLine
-    module: Xn1Ssi
+
+def _joint_values(joint: JointSettings) -> dict[str, Any]:
+    m = joint.motion
+    values = {"slot": joint.slot, "family": joint.family, "code": joint.code,
+              "cable_length": joint.cable_length, "para1": joint.para1,
+              "steps_per_rev": joint.steps_per_rev, "revolutions": joint.revolutions,
+              "measuring_step": joint.measuring_step, "direction": joint.direction,
+              "motion.kind": m.kind, "motion.velocity": m.velocity,
+              "motion.amplitude": m.amplitude, "motion.frequency": m.frequency,
+              "motion.start": m.start}
+    assert values.keys() == JOINT_DEFAULTS.keys()
+    return values
 
 
-class SimStation:
-    """All simulated modules of one gateway station; ``modules[slot - 1]`` sits in slot 1-8."""
+def _die_with_parent() -> None:
+    """preexec_fn of the child: SIGTERM when the forking thread (the node's main) ends."""
+    _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
 
-    def __init__(self, settings: NodeSettings) -> None:
-        n_slots = max(j.slot for j in settings.joints)
-        self.channels: dict[str, SimChannel] = {}
-        self.modules: list[Xn1Ssi] = []
-        by_slot = {j.slot: j for j in settings.joints}
-        for slot in range(1, n_slots + 1):
-            store = self._store(settings.storage_path, slot)
-            joint = by_slot.get(slot)
-            if joint is None:
-                self.modules.append(Xn1Ssi(None, store=store, slot=slot))
+
+class ChildStation:
+    """The ``station`` program as a child process of the node, on the given bus."""
+
+    def __init__(self, s: NodeSettings, bus: BusConfig) -> None:
+        self.settings = s
+        self.bus = bus
+        self.proc: subprocess.Popen[bytes] | None = None
+        self._stderr: deque[str] = deque(maxlen=20)
+        self._stopping = False
+        #: exit code once the child has ended, else None
+        self.exit_code: int | None = None
+        #: seconds from spawn to the station's boot-up message
+        self.start_time = 0.0
+
+    @property
+    def pid(self) -> int | None:
+        """Process id of the station (None before start)."""
+        return self.proc.pid if self.proc is not None else None
+
+    def start(self, timeout: float) -> None:
+        """Spawn the station and wait for its boot-up (GatewayUnavailable with the reason)."""
+        cmd = [sys.executable, "-m", "ssi_bridge.gateway.station_cli", "--params-file", "-",
+               "--parent-pid", str(os.getpid())]
+        watch = open_bus(self.bus)  # listening before the station can send its boot-up
+        try:
+            t0 = time.monotonic()
+            self.proc = subprocess.Popen(
+                cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                preexec_fn=_die_with_parent, start_new_session=True, close_fds=True)
+            assert self.proc.stdin is not None
+            self.proc.stdin.write(yaml.safe_dump(station_params(self.settings, self.bus))
+                                  .encode())
+            self.proc.stdin.close()
+            threading.Thread(target=self._forward_log, name="station-log", daemon=True).start()
+            threading.Thread(target=self._reap, name="station-reaper", daemon=True).start()
+            BootWatch(watch, self.bus.node_id).wait(timeout, self.problem)
+            self.start_time = time.monotonic() - t0
+        except GatewayUnavailable as err:
+            self.stop()
+            detail = f": {self._stderr[-1]}" if self._stderr else ""
+            raise GatewayUnavailable(f"simulated station did not start ({err}){detail}") \
+                from None
+        finally:
+            watch.shutdown()
+        logger.info("simulated station up as process %d on %s:%s after %.2f s", self.proc.pid,
+                    self.bus.interface, self.bus.channel, self.start_time)
+
+    def _forward_log(self) -> None:
+        """The child's log lines into the node's log (and the last ones for errors)."""
+        assert self.proc is not None and self.proc.stderr is not None
+        for raw in self.proc.stderr:
+            line = raw.decode(errors="replace").rstrip()
+            if not line:
                 continue
-            encoder = make_encoder(joint.family, make_motion(joint.motion),
-                                   **encoder_overrides(joint))
-            line = SsiLine(encoder, LineConfig(cable_length_m=joint.cable_length))
-            module = Xn1Ssi(line, store=store, slot=slot)
-            self.modules.append(module)
-            self.channels[joint.name] = SimChannel(joint, encoder, line, module)
-            logger.info("slot %d: %s encoder (%d-bit %s frame) for joint %s", slot,
-                        joint.family, encoder.frame_bits, encoder.config.code.name.lower(),
-                        joint.name)
-            mismatch = para1_mismatch(encoder, joint.para1)
-            if mismatch:
-                logger.warning("joint %s: REG_PARA1 0x%08X does not match the simulated %s "
-                               "encoder: %s", joint.name, joint.para1, joint.family, mismatch)
+            self._stderr.append(line)
+            level = logging.INFO
+            for name in ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"):
+                if line.startswith(f"[{name}] "):
+                    level, line = getattr(logging, name), line[len(name) + 3:]
+                    break
+            else:
+                if line.startswith("Traceback") or "Error" in line:
+                    level = logging.ERROR
+            logger.log(level, "station: %s", line)
 
-    @staticmethod
-    def _store(storage_path: str, slot: int) -> RetentiveStore | MemoryStore:
-        """One retentive bank file per slot next to ``storage_path`` (or memory only)."""
-        if not storage_path:
-            return MemoryStore()
-        path = Path(storage_path).expanduser()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return RetentiveStore(path.with_name(f"{path.stem}.slot{slot}{path.suffix or '.bank'}"))
+    def _reap(self) -> None:
+        """Wait for the child's end (stdout closes with it) and keep its exit code."""
+        assert self.proc is not None and self.proc.stdout is not None
+        for _ in self.proc.stdout:
+            pass
+        self.exit_code = self.proc.wait()
+        if not self._stopping:
+            logger.error("%s", self.problem())
+
+    def problem(self) -> str | None:
+        """Why the station is not running (its process ended), or None while it runs."""
+        if self.exit_code is None or self._stopping:
+            return None
+        last = f"; last output: {self._stderr[-1]}" if self._stderr else ""
+        return f"simulated station process exited with code {self.exit_code}{last}"
+
+    def stop(self) -> None:
+        """SIGTERM, then SIGKILL after 3 s; waits for the child (idempotent)."""
+        self._stopping = True
+        proc = self.proc
+        if proc is None or proc.poll() is not None:
+            return
+        proc.terminate()
+        try:
+            proc.wait(3.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(2.0)
+
+
+class InProcessStation:
+    """The fallback: the same station in the node's process, reached over the bus only."""
+
+    def __init__(self, s: NodeSettings, bus: BusConfig) -> None:
+        self.bus = bus
+        self.station = Station(StationSettings(joints=s.joints, bus=bus,
+                                               storage_path=s.storage_path))
+        self.pid: int | None = None
+        self.start_time = 0.0
+
+    def start(self, timeout: float) -> None:
+        """Start the station and wait for its boot-up on the bus."""
+        watch = open_bus(self.bus)
+        try:
+            t0 = time.monotonic()
+            self.station.start()
+            BootWatch(watch, self.bus.node_id).wait(timeout)
+            self.start_time = time.monotonic() - t0
+        finally:
+            watch.shutdown()
+
+    def problem(self) -> str | None:
+        """Never gone while the node runs."""
+        return None
+
+    def stop(self) -> None:
+        """Stop the station (idempotent)."""
+        self.station.stop()
+
+
+def start_station(s: NodeSettings) -> ChildStation | InProcessStation:
+    """Start the node's simulated station per ``simulation.transport`` and wait for it."""
+    bus = station_bus(s)
+    station: ChildStation | InProcessStation = (
+        ChildStation(s, bus) if s.simulation_transport == "udp_multicast"
+        else InProcessStation(s, bus))
+    station.start(s.simulation_start_timeout)
+    return station

@@ -1,0 +1,161 @@
+"""What a simulated station is made of: joints (encoder, cable, motion, REG_PARA1), storage, bus.
+
+The same values the node declares as ROS parameters (``<joint>.family``, ``bus.channel``, ...),
+as frozen dataclasses without rclpy, so the station can run as a process of its own and read
+the node's params file (:func:`load_params_file`, :func:`station_settings`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import IO, Any
+
+import yaml
+
+from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.gateway.bus import BusConfig
+
+DEFAULT_PARA1 = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary, ZERO test on
+MOTION_KINDS = ("constant", "still", "sine")
+CODES = ("", "binary", "gray")
+#: the station reads these node-wide parameters (defaults as the node declares them)
+STATION_DEFAULTS: dict[str, Any] = {
+    "joints": ["joint1"], "storage_path": "", "bus.interface": "virtual",
+    "bus.channel": "ssi_bridge", "bus.bitrate": 500_000, "bus.node_id": 1,
+}
+#: per-joint parameters the station reads ('<joint>.<name>'), with the node's defaults
+JOINT_DEFAULTS: dict[str, Any] = {
+    "slot": 0, "family": "GENERIC", "code": "", "cable_length": 10.0, "para1": DEFAULT_PARA1,
+    "steps_per_rev": 0, "revolutions": 0, "measuring_step": 0.0, "direction": 1,
+    "motion.kind": "constant", "motion.velocity": 0.25, "motion.amplitude": 0.5,
+    "motion.frequency": 0.5, "motion.start": 0.0,
+}
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """Simulated shaft motion of one joint (revolutions or metres, on the station's clock)."""
+
+    #: "constant", "still" or "sine"
+    kind: str = "constant"
+    #: constant: speed in rev/s (rotary) or m/s (linear)
+    velocity: float = 0.25
+    #: sine: amplitude in rev or m
+    amplitude: float = 0.5
+    #: sine: frequency in Hz
+    frequency: float = 0.5
+    #: start position in rev or m
+    start: float = 0.0
+
+
+@dataclass(frozen=True)
+class JointSettings:
+    """One configured joint: which module slot, which encoder, how counts become units."""
+
+    name: str
+    slot: int
+    family: str = "GENERIC"
+    #: simulated encoder's transmit code: "" (family default), "binary" or "gray"
+    code: str = ""
+    #: simulated SSI cable length (m): sets the line delay and the 004 §2.7 bit-rate check
+    cable_length: float = 10.0
+    para1: int = DEFAULT_PARA1
+    #: 0: take it from the simulated encoder family
+    steps_per_rev: int = 0
+    revolutions: int = 0
+    measuring_step: float = 0.0
+    direction: int = 1
+    motion: MotionSettings = field(default_factory=MotionSettings)
+
+
+def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSettings, ...]:
+    """Joints from ``names`` and per-joint values ``{"<joint>.<key>": value}`` (checked)."""
+    if not names or len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"joints {names} must be non-empty, unique names")
+    if len(names) > 8:
+        raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")
+    joints = []
+    for index, joint in enumerate(names):
+        jv = {key: values.get(f"{joint}.{key}", default) for key, default in JOINT_DEFAULTS.items()}
+        if jv["motion.kind"] not in MOTION_KINDS:
+            raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
+        if jv["code"] not in CODES:
+            raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
+        if jv["direction"] not in (1, -1):
+            raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
+        if not 0 <= int(jv["slot"]) <= 8:
+            raise ConfigError(f"{joint}.slot {jv['slot']}: 1-8 (0: position in joints + 1)")
+        joints.append(JointSettings(
+            name=joint, slot=int(jv["slot"]) or index + 1, family=str(jv["family"]),
+            code=str(jv["code"]), cable_length=float(jv["cable_length"]),
+            para1=int(jv["para1"]), steps_per_rev=int(jv["steps_per_rev"]),
+            revolutions=int(jv["revolutions"]), measuring_step=float(jv["measuring_step"]),
+            direction=int(jv["direction"]),
+            motion=MotionSettings(kind=str(jv["motion.kind"]),
+                                  velocity=float(jv["motion.velocity"]),
+                                  amplitude=float(jv["motion.amplitude"]),
+                                  frequency=float(jv["motion.frequency"]),
+                                  start=float(jv["motion.start"]))))
+    slots = [j.slot for j in joints]
+    if len(set(slots)) != len(slots):
+        raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
+    return tuple(joints)
+
+
+@dataclass(frozen=True)
+class StationSettings:
+    """A whole simulated station: its joints, where retentive registers live, its bus."""
+
+    joints: tuple[JointSettings, ...]
+    bus: BusConfig = field(default_factory=BusConfig)
+    #: file of the modules' retentive registers ('' = memory only)
+    storage_path: str = ""
+
+
+def _flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(_flatten(value, f"{name}."))
+        else:
+            out[name] = value
+    return out
+
+
+def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str, Any]:
+    """The ``ros__parameters`` a ROS 2 params file gives a node named ``node_name``.
+
+    Sections apply in file order: ``/**``, ``<node_name>``, ``/<node_name>`` and
+    ``/<namespace>/<node_name>`` all match; nested keys become dotted names (``bus.channel``).
+    """
+    try:
+        doc = yaml.safe_load(stream) or {}
+    except yaml.YAMLError as err:
+        raise ConfigError(f"params file is not YAML: {err}") from None
+    if not isinstance(doc, Mapping):
+        raise ConfigError("params file: expected '<node>: {ros__parameters: {...}}' sections")
+    values: dict[str, Any] = {}
+    for section, body in doc.items():
+        name = str(section)
+        match = name in ("/**", node_name, f"/{node_name}") or name.endswith(f"/{node_name}")
+        if match and isinstance(body, Mapping) and isinstance(body.get("ros__parameters"),
+                                                              Mapping):
+            values.update(_flatten(body["ros__parameters"]))
+    return values
+
+
+def station_settings(values: Mapping[str, Any]) -> StationSettings:
+    """StationSettings from node parameter values (dotted names; absent ones take defaults)."""
+    v = {**STATION_DEFAULTS, **values}
+    names = v["joints"]
+    if not isinstance(names, list):
+        raise ConfigError(f"joints {names!r} must be a list of names")
+    joints = make_joints([str(n) for n in names], v)
+    try:
+        bus = BusConfig(interface=str(v["bus.interface"]), channel=str(v["bus.channel"]),
+                        bitrate=int(v["bus.bitrate"]), node_id=int(v["bus.node_id"]))
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"bus parameters: {err}") from None
+    return StationSettings(joints=joints, bus=bus, storage_path=str(v["storage_path"]))

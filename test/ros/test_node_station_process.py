@@ -1,0 +1,234 @@
+"""The simulated station as its own device: a child process of the node, reached over CAN only.
+
+Checks the life cycle a user relies on: the child dies with the node (also after ``kill -9``),
+a crashed station is an ERROR in the bus diagnostics while the node keeps publishing, the
+``station`` program runs on its own and a node with ``simulation:=false`` drives it as real
+hardware, and the in-process ``virtual`` fallback still reaches the station only by bus.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from sensor_msgs.msg import JointState
+from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
+
+from ssi_bridge.gateway.multicast import derive_channel
+
+from .conftest import REPO, dds_env
+
+STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
+REG_LOWER_LIMIT = 48
+PERIOD = 0.5
+#: the station as a child process of the node
+CHILD = {"simulation.transport": "udp_multicast"}
+
+
+def _children(pid: int) -> list[int]:
+    """Child processes of ``pid`` (forked by any of its threads)."""
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            out += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    return out
+
+
+def _station_of(node) -> int:
+    kids = [k for k in _children(node.proc.pid)
+            if b"station_cli" in Path(f"/proc/{k}/cmdline").read_bytes()]
+    assert len(kids) == 1, f"expected one station child of the node, got {kids}"
+    return kids[0]
+
+
+def _gone(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return True
+    return state in ("Z", "X")  # ended (a zombie waits only for its reaper)
+
+
+def _wait(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.02)
+
+
+def _bus_status(diags):
+    for _, arr in reversed(diags):
+        for st in arr.status:
+            if st.name == "ssi_bridge: bus":
+                return st
+    return None
+
+
+def test_kill_9_of_the_node_leaves_no_station_behind(running):
+    node = running(CHILD)
+    station = _station_of(node)
+    assert not _gone(station)
+    os.kill(node.proc.pid, signal.SIGKILL)
+    node.proc.wait(10)
+    _wait(lambda: _gone(station), 10.0, f"station process {station} to end after kill -9 "
+          "of the node")
+
+
+def test_a_clean_stop_of_the_node_stops_the_station(running):
+    node = running(CHILD)
+    station = _station_of(node)
+    assert node.stop() == 0
+    _wait(lambda: _gone(station), 10.0, "station process to end with the node")
+
+
+def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running, probe):
+    node = running({"diagnostics_period": PERIOD, **CHILD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    joints = probe.subscribe(JointState, node.topic("joint_states"))
+    probe.wait_for(lambda: (st := _bus_status(diags)) is not None
+                   and st.level == DiagnosticStatus.OK, 10.0, "bus OK", node)
+    os.kill(_station_of(node), signal.SIGKILL)
+    probe.wait_for(lambda: (st := _bus_status(diags)) is not None
+                   and st.level == DiagnosticStatus.ERROR
+                   and "simulated station process exited" in st.message,
+                   2 * PERIOD + 3, "bus ERROR naming the ended station", node)
+    before = len(joints)
+    probe.wait_for(lambda: len(joints) > before + 10, 5.0, "joint_states after the crash", node)
+    assert node.proc.poll() is None
+
+
+def test_faults_reach_the_child_station_over_the_bus(running, probe):
+    node = running({"diagnostics_period": PERIOD, **CHILD})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+
+    def level(name):
+        for _, arr in reversed(diags):
+            for st in arr.status:
+                if st.name == name:
+                    return st.level
+        return None
+    K = InjectFault.Request
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK, 10.0,
+                   "joint1 OK", node)
+    res = probe.call(InjectFault, node.topic("~/inject_fault"),
+                     K(kind=K.DATA_WIRE_BREAK, duration=1.0))
+    assert res.success and "for 1 s" in res.message, res.message
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.ERROR,
+                   2 * PERIOD + 2, "joint1 ERROR from the wire break", node)
+    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK,
+                   1.0 + 2 * PERIOD + 3, "joint1 OK once the station ended the fault", node)
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.GATEWAY_SILENT))
+    assert res.success, res.message
+    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.ERROR,
+                   2 * PERIOD + 2, "bus ERROR while the station is silent", node)
+    refused = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.ENCODER_ERROR))
+    assert not refused.success and "only CLEAR_ALL" in refused.message, refused.message
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.CLEAR_ALL))
+    assert res.success, res.message  # the silent station applied the clear, then answered
+    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.OK,
+                   3 * PERIOD + 3, "bus OK with the heartbeat back", node)
+
+
+def test_a_station_that_cannot_start_is_one_line_and_exit_1(start_node, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    node = start_node({"storage_path": str(blocker / "sub" / "bank.json"),
+                       "simulation.start_timeout": 20.0, **CHILD})
+    assert node.proc.wait(60) == 1, node.log()
+    lines = [ln for ln in node.log().splitlines() if "cannot start" in ln]
+    assert len(lines) == 1 and "simulated station" in lines[0] and "exited" in lines[0], \
+        node.log()
+
+
+def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(running, probe):
+    node = running({"simulation.transport": "virtual", "diagnostics_period": PERIOD})
+    assert not [k for k in _children(node.proc.pid)
+                if b"station_cli" in Path(f"/proc/{k}/cmdline").read_bytes()]
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    res = probe.call(InjectFault, node.topic("~/inject_fault"),
+                     InjectFault.Request(kind=InjectFault.Request.DATA_WIRE_BREAK))
+    assert res.success, res.message
+
+    def joint_level():
+        for _, arr in reversed(diags):
+            for st in arr.status:
+                if st.name == "ssi_bridge: joint1":
+                    return st.level
+        return None
+    probe.wait_for(lambda: joint_level() == DiagnosticStatus.ERROR, 2 * PERIOD + 2,
+                   "joint1 ERROR from the injected wire break", node)
+
+
+def _start_station(tmp_path: Path, params: dict, *extra: str) -> subprocess.Popen:
+    pfile = tmp_path / "station.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    return subprocess.Popen([str(STATION_EXE), "--params-file", str(pfile), *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+
+
+def _ready(proc: subprocess.Popen) -> str:
+    line = proc.stdout.readline().decode()
+    assert line.startswith("station ready"), (line, proc.stderr.read().decode()[-2000:])
+    return line
+
+
+def test_node_with_simulation_false_drives_a_separately_started_station(
+        start_node, probe, tmp_path, domain_id):
+    channel = derive_channel(f"standalone_{domain_id}_{os.getpid()}")
+    bus = {"bus.interface": "udp_multicast", "bus.channel": channel}
+    station = _start_station(tmp_path, {"joints": ["joint1"], **bus,
+                                        "storage_path": str(tmp_path / "st" / "bank.json")})
+    try:
+        _ready(station)
+        node = start_node({"simulation": False, **bus})
+        joints = probe.subscribe(JointState, node.topic("joint_states"))
+        probe.wait_for(lambda: len(joints) > 20, 30.0, "joint_states from the station", node)
+        w = probe.call(WriteRegister, node.topic("~/write_register"),
+                       WriteRegister.Request(address=REG_LOWER_LIMIT, value=1234))
+        assert w.success, w.message
+        r = probe.call(ReadRegister, node.topic("~/read_register"),
+                       ReadRegister.Request(address=REG_LOWER_LIMIT))
+        assert r.success and r.value == 1234, r.message
+        assert node.stop() == 0
+    finally:
+        station.send_signal(signal.SIGINT)
+        code = station.wait(10)
+    assert code == 0, station.stderr.read().decode()[-2000:]
+
+
+def test_station_sigterm_is_a_clean_exit(tmp_path, domain_id):
+    channel = derive_channel(f"sigterm_{domain_id}_{os.getpid()}")
+    station = _start_station(tmp_path, {"bus.interface": "udp_multicast",
+                                        "bus.channel": channel})
+    try:
+        _ready(station)
+    finally:
+        station.terminate()
+    assert station.wait(10) == 0
+
+
+def test_station_help_is_plain_text():
+    out = subprocess.run([str(STATION_EXE), "--help"], capture_output=True, text=True,
+                         env=dds_env(0), timeout=30)
+    assert out.returncode == 0
+    for word in ("--params-file", "udp_multicast", "simulation:=false", "0x4000"):
+        assert word in out.stdout
+    for markup in ("``", ":param", ":class:", ".. "):
+        assert markup not in out.stdout, markup
+
+
+def test_station_bad_parameters_exit_2_in_one_line(tmp_path):
+    station = _start_station(tmp_path, {"joints": ["a"], "a.motion.kind": "wobble"})
+    assert station.wait(30) == 2
+    err = station.stderr.read().decode().strip().splitlines()
+    assert len(err) == 1 and "a.motion.kind" in err[0], err
