@@ -1,4 +1,4 @@
-"""Benchmark (issues 6, 10): ssi_bridge_node's joint_states against a bare rclpy publisher.
+"""Benchmark: ssi_bridge_node's joint_states against a bare rclpy publisher.
 
 For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs on a
 simulated 1 Mbit/s CAN wire at 1 kHz (1 encoder) or at the highest rate that wire allows for

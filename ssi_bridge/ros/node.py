@@ -31,7 +31,7 @@ from ssi_bridge_msgs.msg import Status
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.samples import ChannelSample
-from ssi_bridge.client.player import CanLogPlayer
+from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.encoder.config import EncoderConfig
 from ssi_bridge.encoder.families import family_config
 from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
@@ -50,6 +50,7 @@ from ssi_bridge.ros.diagnostics import (
 )
 from ssi_bridge.ros.faults import FaultInjector
 from ssi_bridge.ros.liveview import LiveView
+from ssi_bridge.ros.joint_scale import JointScale
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
@@ -59,7 +60,7 @@ from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import (
     ChildStation, InProcessStation, start_station, with_station_bus,
 )
-from ssi_bridge.ros.units import JointScale, VelocityEstimator
+from ssi_bridge.ros.velocity import VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
 NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)

@@ -18,10 +18,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault
 
-from ssi_bridge.ros.monitor import MonitorState, build_parser, joint_states_topic
+from ssi_bridge.tools.monitor import MonitorState, build_parser, joint_states_topic
+
+from .conftest import installed_executable
 
 REPO = Path(__file__).resolve().parents[2]
-MONITOR_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "monitor"
 
 
 def _status(name: str, level: bytes, message: str, hw: str, **values: str) -> DiagnosticStatus:
@@ -85,7 +86,7 @@ def test_monitor_prints_the_running_bridge_and_stops_cleanly_on_ctrl_c(start_nod
                      InjectFault.Request(joint="tilt", kind=InjectFault.Request.DATA_WIRE_BREAK))
     assert res.success, res.message
 
-    mon = subprocess.Popen([str(MONITOR_EXE), "--namespace", "station_a"], env=node.env,
+    mon = subprocess.Popen([str(installed_executable("monitor")), "--namespace", "station_a"], env=node.env,
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                            start_new_session=True)
     out: list[str] = []

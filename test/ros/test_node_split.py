@@ -24,7 +24,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import StartRecording, StopRecording
 
 from ..conftest import claim_domain
-from .conftest import NODE_EXE, NodeProcess, RosProbe, dds_env
+from .conftest import NodeProcess, RosProbe, dds_env, installed_executable
 
 SESSION_S = 20.0
 SPLIT_S = 5
@@ -50,7 +50,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]
         mp.setenv("ROS_DOMAIN_ID", str(dom))
         mp.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
         with open(log_path, "wb") as log:
-            proc = subprocess.Popen([str(NODE_EXE), "--ros-args", "--params-file", str(pfile)],
+            proc = subprocess.Popen([str(installed_executable("ssi_bridge_node")), "--ros-args", "--params-file", str(pfile)],
                                     stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
                                     start_new_session=True)
         node = NodeProcess(proc, dom, "", log_path, env=env)
@@ -134,7 +134,7 @@ def test_replay_of_the_split_bag_delivers_every_message_in_order(session) -> Non
     topic = node.topic("joint_states")
     got = probe.subscribe(JointState, "/replayed_split", qos=QoSProfile(
         depth=1000, reliability=ReliabilityPolicy.RELIABLE))
-    proc = subprocess.Popen([sys.executable, "-m", "ssi_bridge.record.replay_cli",
+    proc = subprocess.Popen([sys.executable, "-m", "ssi_bridge.tools.replay",
                              str(session["bag"]), "--topics", topic, "--remap",
                              f"{topic}:=/replayed_split", "--rate", "4", "--quiet",
                              "--wait-for-subscribers", "20"], env=session["env"],
@@ -169,7 +169,7 @@ def test_kill_9_in_the_third_file_then_replay_recover(start_node, probe, tmp_pat
     bag = root / "cut"
     assert not (bag / "metadata.yaml").exists()
     closed = {name: digest(bag / name) for name in ("cut_0.mcap", "cut_1.mcap")}
-    out = subprocess.run([sys.executable, "-m", "ssi_bridge.record.replay_cli", "--recover",
+    out = subprocess.run([sys.executable, "-m", "ssi_bridge.tools.replay", "--recover",
                           str(bag)], capture_output=True, text=True, timeout=120, check=False)
     assert out.returncode == 0, out.stderr
     assert {name: digest(bag / name) for name in closed} == closed, "closed files untouched"
