@@ -1,4 +1,4 @@
-"""Soak benchmark (issue 14): hours of recording must not cost memory or messages.
+"""Soak benchmark: hours of recording must not cost memory or messages.
 
 ``make bench ONLY=soak`` (or ``python bench/bench_soak.py --minutes 3``) runs the installed
 ``ssi_bridge_node`` with the two-encoder station of ``config/ssi_bridge.yaml`` at 1 kHz for

@@ -1,4 +1,4 @@
-"""Acceptance of issue 14: a node session split with ``record.max_duration`` reads back whole.
+"""A node session split with ``record.max_duration`` reads back whole.
 
 One 20 s session (100 Hz, split every 5 s) is recorded once per module and checked against
 metadata.yaml, rosbags, mcap-ros2-support, a live subscriber and a replay; a second node is
