@@ -17,7 +17,7 @@ import time
 from collections import deque
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -26,7 +26,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
-from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.player import CanLogPlayer
 from ssi_bridge.exceptions import ConfigError, RecordingError
 from ssi_bridge.gateway.bus import BusConfig
@@ -35,15 +35,17 @@ from ssi_bridge.module.images import ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
-from ssi_bridge.ros.diagnostics import ChannelCounters, bus_status, channel_level, channel_status
-from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.diagnostics import (
+    ChannelCounters, bus_status, channel_level, channel_status, station_status,
+)
+from ssi_bridge.ros.faults import FaultInjector, StationFaults
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.station import (
-    ChildStation, InProcessStation, start_station, with_station_bus,
+    ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
 )
 from ssi_bridge.ros.units import JointScale, VelocityEstimator
 
@@ -100,34 +102,47 @@ class SsiBridgeNode(Node):
         virtual bus as the fallback): the node starts it, waits for its boot-up, and from
         then on reaches it only over CAN, fault injection included (SDO 0x4000-0x4002).
         """
-        self.station: ChildStation | InProcessStation | None = None
-        self.faults: FaultInjector | None = None
+        self.station: ChildStation | InProcessStation | StationGroup | None = None
+        self.faults: FaultInjector | StationFaults | None = None
         #: the simulated encoders' models (frame layout and resolution), built from the params
         self.encoders = {j.name: joint_encoder(j) for j in s.joints} if s.simulation else {}
         if s.simulation:
-            self.station = start_station(s)
+            self.station = start_stations(s)
         n_slots = max(j.slot for j in s.joints)
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient
+        #: one client per station (node id -> client), all on one master: one SYNC per cycle
+        self.station_clients: dict[int, BridgeClient] = {}
+        self.master: CanMaster | None = None
         if s.listen_only:
             self.client = ListenOnlyClient(self.bus_config, s.node_id, n_slots)
             self.client.connect()
             if s.replay_can_log:
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
-            self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
+            self.master = CanMaster(self.bus_config)
             try:
-                self.client.connect()
+                for sid in s.station_ids:
+                    slots = max(j.slot for j in s.station_joints(sid))
+                    self.station_clients[sid] = BridgeClient(self.master, sid, slots)
+                    self.station_clients[sid].connect()
             except Exception:
+                for client in self.station_clients.values():
+                    client.close()
+                self.master.close()
                 if self.station is not None:
                     self.station.stop()
                 raise
+            self.client = self.station_clients[s.station_ids[0]]
             if self.station is not None:
-                self.faults = FaultInjector(self.client, self.joints, self.encoders,
-                                            self.sim_time)
+                injectors = {sid: FaultInjector(
+                    client, {j.name: j for j in s.station_joints(sid)}, self.encoders,
+                    self.sim_time) for sid, client in self.station_clients.items()}
+                self.faults = (injectors[s.node_id] if len(injectors) == 1
+                               else StationFaults(injectors, self.joints))
             for joint in s.joints:
                 self._configure_para1(joint)
-                self.client.edit_output(joint.slot, idle_read)
+                self.client_of(joint.name).edit_output(joint.slot, idle_read)
         self.scales = {j.name: self._scale(j) for j in s.joints}
         self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
                          for j in s.joints}
@@ -202,19 +217,25 @@ class SsiBridgeNode(Node):
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
 
+    def client_of(self, joint: str) -> BridgeClient | ListenOnlyClient:
+        """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
+        settings = self.joints[joint]
+        return self.station_clients.get(settings.station, self.client) if self.station_clients else self.client
+
     def _configure_para1(self, joint: JointSettings) -> None:
         """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
 
         This is what a CANopen master does at start-up; an invalid set is refused by the
         gateway with an SDO abort, which stops the node with the module's reason.
         """
-        current = int(self.client.read_object(ENCODER_CONFIG, joint.slot))
+        client = self.client_of(joint.name)
+        current = int(client.read_object(ENCODER_CONFIG, joint.slot))
         if current == joint.para1:
             return
         reason = validate_para1(joint.para1)
         if reason:
             raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
-        self.client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
+        client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
         self.get_logger().info(f"{joint.name}: REG_PARA1 0x{current:08X} -> 0x{joint.para1:08X} "
                                f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
 
@@ -267,8 +288,10 @@ class SsiBridgeNode(Node):
             for done in self.faults.expire():
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
-        t_sync = self.client.sync()
-        self.client.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
+        t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
+        deadline = time.monotonic() + min(0.5 / self.settings.publish_rate, 0.05)
+        for client in self.station_clients.values():
+            client.wait_cycle(max(0.0, deadline - time.monotonic()))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
@@ -332,7 +355,7 @@ class SsiBridgeNode(Node):
                       status: Status | None) -> None:
         name = joint.name
         counters = self.counters[name]
-        sample = self.client.latest(joint.slot)
+        sample = self.client_of(name).latest(joint.slot)
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
@@ -397,6 +420,7 @@ class SsiBridgeNode(Node):
         limit = self.settings.stale_cycles
         levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
                   for c in self.counters.values()]
+        levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
@@ -404,10 +428,12 @@ class SsiBridgeNode(Node):
         s = self.settings
         out = []
         for joint in s.joints:
-            hw = (f"{s.bus_interface}:{s.bus_channel} node {s.node_id} slot {joint.slot} "
-                  f"XN-1SSI")
+            hw = (f"{s.bus_interface}:{s.bus_channel} node {joint.station or s.node_id} "
+                  f"slot {joint.slot} XN-1SSI")
             out.append(channel_status(joint.name, hw, self.counters[joint.name],
                                       s.stale_cycles, self.positions[joint.name]))
+        if len(self.station_clients) > 1:
+            return out + self._station_statuses()
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         out.append(bus_status(
@@ -415,6 +441,34 @@ class SsiBridgeNode(Node):
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self._bus_problem()))
+        return out
+
+    def _station_statuses(self) -> list:
+        """Several stations: one bus status (master, SYNC, rate) and one per station."""
+        s = self.settings
+        assert self.master is not None
+        counters = dataclasses.asdict(self.master.counters)
+        counters.update(self.recorder.counters())
+        silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
+        out = [bus_status(
+            "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} master of stations "
+            f"{list(self.station_clients)}", alive=True, connected=self.master.network is not None,
+            achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
+            extra_error=self._bus_problem())]
+        if silent:
+            out[0].values.append(KeyValue(key="silent_stations", value=str(silent)))
+        for sid, client in self.station_clients.items():
+            node = client.node
+            nmt = node.nmt.state if node is not None else "UNKNOWN"
+            emcy = ([f"0x{e.code:04X} reg 0x{e.register:02X} {e.get_desc()}".strip()
+                     for e in node.emcy.log] if node is not None else [])
+            station_counters = {k: v for k, v in dataclasses.asdict(client.counters).items()
+                                if k not in ("frames", "syncs")}
+            out.append(station_status(
+                f"ssi_bridge: station {sid}",
+                f"{s.bus_interface}:{s.bus_channel} node {sid} XN-GW-CANOPEN",
+                alive=client.gateway_alive, nmt_state=str(nmt), emcy=emcy,
+                counters=station_counters))
         return out
 
     def _bus_problem(self) -> str:
@@ -459,7 +513,11 @@ class SsiBridgeNode(Node):
         if self.player is not None:
             self.player.stop()
         self.recorder.stop()
+        for client in self.station_clients.values():
+            client.close()
         self.client.close()
+        if self.master is not None:
+            self.master.close()
         if self.station is not None:
             self.station.stop()
 

@@ -114,7 +114,7 @@ class BridgeServices:
         """~/read_register: REG_RD_ADR handshake; REG_RD_ABORT becomes a refusal."""
         def body(joint: str) -> str:
             _check_address(request.address)
-            response.value = self.node.client.read_register(self._slot(joint), request.address)
+            response.value = self.node.client_of(joint).read_register(self._slot(joint), request.address)
             return f"{_reg_name(request.address)} = 0x{response.value:08X} ({response.value})"
         return self._run("read_register", request, response, body,
                          f"address={request.address}", _reg_name(request.address))
@@ -127,7 +127,7 @@ class BridgeServices:
                 reason = validate_para1(request.value)
                 if reason:
                     raise ConfigError(f"REG_PARA1 0x{request.value:08X} refused: {reason}")
-            self.node.client.write_register(self._slot(joint), request.address, request.value)
+            self.node.client_of(joint).write_register(self._slot(joint), request.address, request.value)
             return f"{_reg_name(request.address)} <- 0x{request.value:08X} accepted"
         return self._run("write_register", request, response, body,
                          f"address={request.address} value=0x{request.value:08X}",
@@ -146,7 +146,7 @@ class BridgeServices:
             if not -(1 << 31) <= target < (1 << 31):
                 raise ConfigError(f"position {request.position} is {target} counts, outside "
                                   "the Integer32 range of REG_SSI_POS")
-            client, slot = self.node.client, self._slot(joint)
+            client, slot = self.node.client_of(joint), self._slot(joint)
             old_offset = client.read_register(slot, Reg.REG_OFFSET)
             pos = client.read_register(slot, Reg.REG_SSI_POS)
             encoder = (pos + old_offset) & 0xFFFF_FFFF
@@ -173,7 +173,7 @@ class BridgeServices:
             estimator = self.node.velocity[joint]
             estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
             try:
-                self.node.client.write_register(self._slot(joint), Reg.REG_SF, value)
+                self.node.client_of(joint).write_register(self._slot(joint), Reg.REG_SF, value)
             finally:
                 estimator.reset(after=time.monotonic() + 0.05, hold=True)
             which = "LD20: retentive registers incl. REG_PARA1" if request.include_parameters \
@@ -185,7 +185,7 @@ class BridgeServices:
     def set_control(self, request: Any, response: Any) -> Any:
         """~/set_control: STOP, EN_CMPx and one-cycle CLR_CMPx pulses of the process output."""
         def body(joint: str) -> str:
-            self.node.client.set_control(
+            self.node.client_of(joint).set_control(
                 self._slot(joint), stop=request.stop, enable_cmp1=request.enable_cmp1,
                 enable_cmp2=request.enable_cmp2, clear_cmp1=request.clear_cmp1,
                 clear_cmp2=request.clear_cmp2)
@@ -211,7 +211,7 @@ class BridgeServices:
         if reason:
             return f"{joint}.para1 0x{value:08X} refused (would raise ERR_PARA): {reason}"
         try:
-            self.node.client.write_register(self._slot(joint), Reg.REG_PARA1, value)
+            self.node.client_of(joint).write_register(self._slot(joint), Reg.REG_PARA1, value)
         except SsiBridgeError as err:
             return f"{joint}.para1 0x{value:08X} not written: {err}"
         self.log_event("set_parameters", joint, f"para1=0x{value:08X}", True, "REG_PARA1 written")
