@@ -18,7 +18,7 @@ import can
 import canopen
 
 from ssi_bridge.client.receive import FrameListener
-from ssi_bridge.client.samples import ClientCounters
+from ssi_bridge.client.samples import ClientCounters, CycleGate
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus
 
@@ -45,6 +45,8 @@ class CanMaster:
         #: one sender at a time on the network (SYNC, RPDOs of every station)
         self.send_lock = threading.Lock()
         self.clients: list[BridgeClient] = []
+        #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
+        self.gate = CycleGate()
 
     def connect(self) -> None:
         """Open the bus and start canopen's network (idempotent)."""
@@ -78,8 +80,10 @@ class CanMaster:
         if self.network is None:
             raise BusError("master not connected")
         t = time.monotonic()
-        for client in self.clients:
-            client.table.on_sync(t)
+        with self.gate.cond:
+            self.gate.open(len(self.clients))
+            for client in self.clients:
+                client.table.on_sync(t)
         try:
             with self.send_lock:
                 self.network.send_message(SYNC_COB_ID, b"")
@@ -91,6 +95,10 @@ class CanMaster:
             if client.counters is not self.counters:
                 client.counters.syncs += 1
         return t
+
+    def wait_cycle(self, timeout: float) -> bool:
+        """True once every station's images and positions arrived since the last SYNC."""
+        return self.gate.wait(timeout)
 
     def send(self, cob_id: int, data: bytes) -> None:
         """Send one frame under the send lock (raises can.CanError)."""

@@ -83,7 +83,7 @@ class BridgeClient:
         #: the bus' master; a private one (counting into this client) unless one was given
         self._owns_master = not isinstance(bus, CanMaster)
         self.master = CanMaster(bus, self.counters) if not isinstance(bus, CanMaster) else bus
-        self.table = SlotTable(slots)
+        self.table = SlotTable(slots, self.master.gate)
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
@@ -167,7 +167,11 @@ class BridgeClient:
         return self.table.latest(slot)
 
     def wait_cycle(self, timeout: float) -> bool:
-        """True once every slot's image and position arrived since the last :meth:`sync`."""
+        """True once every slot's image and position arrived since the last :meth:`sync`.
+
+        On a master shared by several stations the wake-up comes when every station's cycle
+        is complete (one per cycle); use ``master.wait_cycle`` to wait for all of them.
+        """
         return self.table.wait_cycle(timeout)
 
     @property

@@ -289,9 +289,8 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
-        deadline = time.monotonic() + min(0.5 / self.settings.publish_rate, 0.05)
-        for client in self.station_clients.values():
-            client.wait_cycle(max(0.0, deadline - time.monotonic()))
+        assert self.master is not None
+        self.master.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
