@@ -97,8 +97,9 @@ def test_register_write_reaches_only_the_joints_station(running, probe):
     assert after["a"].value == before["a"].value and after["b"].value == before["b"].value
 
 
-def test_a_silent_station_stales_only_its_joints(running, probe):
-    node = running(_params())
+@pytest.mark.parametrize("transport", ["virtual", "udp_multicast"])
+def test_a_silent_station_stales_only_its_joints(running, probe, transport):
+    node = running(_params({"simulation.transport": transport}))
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     for name in ("ssi_bridge: station 1", "ssi_bridge: station 3", "ssi_bridge: a",
