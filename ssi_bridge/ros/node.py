@@ -219,8 +219,8 @@ class SsiBridgeNode(Node):
 
     def client_of(self, joint: str) -> BridgeClient | ListenOnlyClient:
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
-        settings = self.joints[joint]
-        return self.station_clients.get(settings.station, self.client) if self.station_clients else self.client
+        station = self.joints[joint].station
+        return self.station_clients.get(station, self.client)
 
     def _configure_para1(self, joint: JointSettings) -> None:
         """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
