@@ -268,7 +268,8 @@ def declare_parameters(node: Node) -> NodeSettings:
             raise ConfigError(f"station {station}: more than 8 joints; a station holds at most "
                               "8 XN-1SSI modules")
         joints.append(JointSettings(
-            name=joint, station=station, slot=jv["slot"] or index, family=jv["family"], code=jv["code"],
+            name=joint, station=station, slot=jv["slot"] or index, family=jv["family"],
+            code=jv["code"],
             cable_length=jv["cable_length"],
             para1=jv["para1"], steps_per_rev=jv["steps_per_rev"],
             revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],

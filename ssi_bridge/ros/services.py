@@ -114,7 +114,8 @@ class BridgeServices:
         """~/read_register: REG_RD_ADR handshake; REG_RD_ABORT becomes a refusal."""
         def body(joint: str) -> str:
             _check_address(request.address)
-            response.value = self.node.client_of(joint).read_register(self._slot(joint), request.address)
+            response.value = self.node.client_of(joint).read_register(self._slot(joint),
+                                                                      request.address)
             return f"{_reg_name(request.address)} = 0x{response.value:08X} ({response.value})"
         return self._run("read_register", request, response, body,
                          f"address={request.address}", _reg_name(request.address))
@@ -127,7 +128,8 @@ class BridgeServices:
                 reason = validate_para1(request.value)
                 if reason:
                     raise ConfigError(f"REG_PARA1 0x{request.value:08X} refused: {reason}")
-            self.node.client_of(joint).write_register(self._slot(joint), request.address, request.value)
+            self.node.client_of(joint).write_register(self._slot(joint), request.address,
+                                                      request.value)
             return f"{_reg_name(request.address)} <- 0x{request.value:08X} accepted"
         return self._run("write_register", request, response, body,
                          f"address={request.address} value=0x{request.value:08X}",
