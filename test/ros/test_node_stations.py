@@ -173,3 +173,26 @@ def test_shipped_two_station_config(running, probe):
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(msgs) > 20, 10.0, "joint_states of the two-station config", node)
     assert list(msgs[-1][1].name) == ["shoulder", "carriage", "wrist"]
+
+
+def _value(status, key):
+    return next(kv.value for kv in status.values if kv.key == key)
+
+
+def test_emcy_is_kept_per_station(running, probe):
+    # a broken data wire on c raises ERR_SSI in station 3's module -> EMCY 0x7000 from node 3
+    # only (000 "Error detection / messages", CiA 301 EMCY 0x080 + node id)
+    node = running(_params())
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    _wait_level(probe, node, diags, "ssi_bridge: station 3", DiagnosticStatus.OK, 5.0)
+    res = probe.call(InjectFault, node.topic("~/inject_fault"),
+                     InjectFault.Request(kind=InjectFault.Request.DATA_WIRE_BREAK, joint="c"))
+    assert res.success, res.message
+    _wait_level(probe, node, diags, "ssi_bridge: station 3", DiagnosticStatus.WARN,
+                2 * PERIOD + 1)
+    st3 = _status(diags, "ssi_bridge: station 3")
+    assert "0x7000" in st3.message and "0x7000" in _value(st3, "emcy_history"), st3
+    st1 = _status(diags, "ssi_bridge: station 1")
+    assert st1.level == DiagnosticStatus.OK and _value(st1, "emcy_count") == "0", st1
+    assert _status(diags, "ssi_bridge: c").level == DiagnosticStatus.ERROR
+    assert _status(diags, "ssi_bridge: a").level == DiagnosticStatus.OK
