@@ -1,7 +1,8 @@
-"""Benchmark (issue 6): ssi_bridge_node's joint_states at 1 kHz against a bare rclpy publisher.
+"""Benchmark (issues 6, 10): ssi_bridge_node's joint_states against a bare rclpy publisher.
 
-For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs at
-``publish_rate`` 1000 Hz, and a subscriber in another process (``bench/node_subscriber.py``)
+For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs on a
+simulated 1 Mbit/s CAN wire at 1 kHz (1 encoder) or at the highest rate that wire allows for
+8 slots (docs/canopen.md table: 480 Hz), and a subscriber in another process (``bench/node_subscriber.py``)
 records the receive wall time and ``header.stamp`` of every JointState. The same subscriber
 program then measures a bare rclpy timer publisher (this file with ``--bare``) of an equally
 sized JointState (same joint names, position and velocity arrays) at the same rate, in the
@@ -15,6 +16,13 @@ same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per p
 * ``cpu_s_per_s``: utime+stime of the publisher process (/proc/<pid>/stat) over the window per
   second; the node's includes its simulated station, gateway and CAN bus (lower is better)
 
+* ``latency_beyond_wire_p50_us`` / ``_p99_us`` (issue 10): receive - header.stamp minus the
+  computed SYNC -> last TPDO wire time (the TPDOs of one cycle, worst-case stuffed) against
+  the bare publisher's latency (goal p99 <= 1.2x)
+* loaded run (1 encoder, 1 kHz, two CPU-burning processes beside it, killed by PID at the
+  end): ``cycles_missed_fraction``, ``spurious_faults`` (EMCY / "silent" in the node log),
+  ``stamp_inversions``
+
 QoS on both sides is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID.
 
@@ -24,6 +32,7 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import random
@@ -43,6 +52,8 @@ SUBSCRIBER = HERE / "node_subscriber.py"
 
 RATE_HZ = 1000.0
 CASES = (1, 8)
+#: the simulated wire's bit rate of every case (docs/canopen.md rate table)
+BITRATE = 1_000_000
 WARMUP_S = 2.0
 MEASURE_S = 5.0
 STARTUP_TIMEOUT_S = 20.0
@@ -134,6 +145,21 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+_prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
+PR_SET_PDEATHSIG = 1
+_BENCH_PID = os.getpid()
+
+
+def _die_with_parent() -> None:
+    """preexec_fn of every process started here: SIGKILLed when this benchmark dies (a killed
+    run leaves no publisher behind); SIGINT back to default (a background job of a
+    non-interactive shell starts with it ignored) so that _stop's SIGINT is handled."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != _BENCH_PID:
+        os._exit(1)  # the benchmark died before prctl took effect
+
+
 def _stop(proc: subprocess.Popen, timeout: float = 8.0) -> None:
     """SIGINT, then SIGKILL after ``timeout``; only this PID."""
     if proc.poll() is not None:
@@ -155,6 +181,24 @@ def _tail(path: Path, n: int = 1500) -> str:
         return ""
 
 
+def case_rate(n_joints: int) -> float:
+    """1 kHz, or the highest rate the wire allows for ``n_joints`` slots at BITRATE."""
+    from ssi_bridge.gateway import wire
+    return min(RATE_HZ, wire.max_cycle_rate(n_joints, BITRATE))
+
+
+def after_sync_wire_s(n_joints: int) -> float:
+    """Computed SYNC -> last TPDO wire time (s): the TPDOs of one cycle, worst-case stuffed."""
+    from ssi_bridge.gateway import wire
+    return sum(wire.worst_frame_bits(b) for b in wire.cycle_payloads(n_joints)[1:]) / BITRATE
+
+
+def burners(n: int) -> list[subprocess.Popen]:
+    """``n`` CPU-burning processes (stopped by PID with :func:`_stop`)."""
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"],
+                             start_new_session=True) for _ in range(n)]
+
+
 def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path,
             rate: float = RATE_HZ) -> dict:
     """Run ``cmd`` (the publisher) and the subscriber; return the window's figures."""
@@ -169,11 +213,13 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
         with open(sub_log, "wb") as log:
             sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out), str(ready)],
                                    stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True)
+                                   start_new_session=True,
+                                   preexec_fn=_die_with_parent)
         procs.append(sub)
         with open(pub_log, "wb") as log:
             pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True)
+                                   start_new_session=True,
+                                   preexec_fn=_die_with_parent)
         procs.append(pub)
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         while not ready.exists():
@@ -207,7 +253,13 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
     period_us = 1e6 / rate
     jitter = np.abs(np.diff(recv) / 1e3 - period_us)
     latency = (recv - stamp) / 1e3
+    log = _tail(pub_log, 200_000)
     return {
+        "latency": latency,
+        "received": len(recv),
+        "expected": rate * window,
+        "stamp_inversions": int(np.sum(np.diff(stamp) <= 0)),
+        "spurious_faults": log.count("EMCY") + log.count("silent"),
         "rate_hz": len(recv) / window,
         "jitter_p99_us": float(np.percentile(jitter, 99)),
         "latency_p50_us": float(np.percentile(latency, 50)),
@@ -218,11 +270,12 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
 
 def node_cmd(n_joints: int, domain_id: int, work: Path,
              extra: dict | None = None) -> list[str]:
-    """The installed node with ``n_joints`` simulated encoders at RATE_HZ (+ ``extra`` params)."""
+    """The installed node with ``n_joints`` simulated encoders at their case rate."""
     import yaml
 
     names = [f"j{i + 1}" for i in range(n_joints)]
-    params: dict = {"publish_rate": RATE_HZ, "joints": names,
+    params: dict = {"publish_rate": case_rate(n_joints), "bus.bitrate": BITRATE,
+                    "joints": names,
                     "bus.channel": f"bench_node_{domain_id}_{n_joints}",
                     "storage_path": str(work / f"bank{n_joints}" / "retentive.json")}
     for i, name in enumerate(names):
@@ -236,7 +289,7 @@ def node_cmd(n_joints: int, domain_id: int, work: Path,
 
 def bare_cmd(n_joints: int) -> list[str]:
     return [sys.executable, str(Path(__file__).resolve()), "--bare", str(n_joints),
-            str(RATE_HZ), BARE_TOPIC]
+            str(case_rate(n_joints)), BARE_TOPIC]
 
 
 def emit(records: list[dict], rec: dict) -> None:
@@ -256,9 +309,42 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
             rec["goal"] = f"ratio {op} {goal}"
             rec["goal_met"] = bool(rec["ratio"] >= goal if op == ">=" else rec["ratio"] <= goal)
         pinned = ", node pinned to one CPU (cpu_affinity)" if label else ""
-        rec["note"] = (f"{note}; {n_joints} encoder(s) at {RATE_HZ:g} Hz{pinned}, baseline = bare "
+        rec["note"] = (f"{note}; {n_joints} encoder(s) at {case_rate(n_joints):g} Hz, "
+                       f"{BITRATE} bit/s{pinned}, baseline = bare "
                        f"rclpy timer publisher of a {n_joints}-joint JointState, same subscriber")
         emit(records, rec)
+    if label:
+        return
+    import numpy as np
+    wire_us = after_sync_wire_s(n_joints) * 1e6
+    beyond = node["latency"] - wire_us
+    for q in (50, 99):
+        value, base = float(np.percentile(beyond, q)), float(np.percentile(bare["latency"], q))
+        rec = {"metric": f"node_{n_joints}enc_latency_beyond_wire_p{q}_us", "value": round(value, 1),
+               "unit": "us", "baseline": round(base, 1), "ratio": round(value / base, 3),
+               "note": f"receive - header.stamp - computed SYNC->last TPDO wire time "
+                       f"({wire_us:.0f} us, {n_joints} slot(s) at {BITRATE} bit/s, "
+                       f"{case_rate(n_joints):g} Hz); baseline = bare publisher's latency"}
+        if q == 99:
+            rec["goal"] = "ratio <= 1.2"
+            rec["goal_met"] = rec["ratio"] <= 1.2
+        emit(records, rec)
+
+
+def report_loaded(records: list[dict], n_joints: int, node: dict) -> None:
+    """The loaded-machine run: what two CPU burners cost the node (no baseline: counts)."""
+    rate = case_rate(n_joints)
+    missed = max(0.0, 1.0 - node["received"] / node["expected"])
+    for metric, value, unit, note in (
+            ("cycles_missed_fraction", round(missed, 4), "fraction",
+             "1 - received / (rate x window): SYNC cycles skipped or not published"),
+            ("spurious_faults", node["spurious_faults"], "count",
+             "EMCY or 'silent' lines in the node's log, no fault injected"),
+            ("stamp_inversions", node["stamp_inversions"], "count",
+             "non-increasing header.stamp among received messages")):
+        emit(records, {"metric": f"node_{n_joints}enc_loaded_{metric}", "value": value,
+                       "unit": unit, "note": f"{note}; {n_joints} encoder(s) at {rate:g} Hz, "
+                       f"{BITRATE} bit/s, beside two CPU-burning processes (one per core)"})
 
 
 def stations_cmd(n_stations: int, slots: int, domain_id: int, work: Path,
@@ -328,12 +414,14 @@ def run(records: list[dict]) -> None:
         for n in CASES:
             try:
                 node = measure(f"node{n}", node_cmd(n, domain_id, work),
-                               f"{NODE_NS}/joint_states", env, work)
-                bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work)
+                               f"{NODE_NS}/joint_states", env, work, case_rate(n))
+                bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work,
+                               case_rate(n))
                 report(records, n, node, bare)
                 if n == max(CASES):
                     pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
-                        "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work)
+                        "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work,
+                        case_rate(n))
                     report(records, n, pinned, bare, "_pinned")
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
@@ -343,6 +431,17 @@ def run(records: list[dict]) -> None:
         except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
             emit(records, {"metric": "node_stations", "error": f"{type(err).__name__}: {err}",
                            "note": traceback.format_exc(limit=3)[-800:]})
+        load = burners(2)
+        try:
+            node = measure("node1loaded", node_cmd(1, domain_id, work), f"{NODE_NS}/joint_states",
+                           env, work, case_rate(1))
+            report_loaded(records, 1, node)
+        except Exception as err:  # noqa: BLE001
+            emit(records, {"metric": "node_1enc_loaded", "error": f"{type(err).__name__}: {err}"})
+        finally:
+            for p in load:
+                p.kill()
+                p.wait(5)
 
 
 def main() -> int:
@@ -351,6 +450,13 @@ def main() -> int:
         run(records)
     except Exception as err:  # noqa: BLE001
         emit(records, {"metric": "node", "error": f"{type(err).__name__}: {err}"})
+    try:  # the service-burst part (issue 11); `python bench/service_burst.py` runs it alone
+        sys.path.insert(0, str(HERE))
+        import service_burst
+
+        service_burst.run(records)
+    except Exception as err:  # noqa: BLE001
+        emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}"})
     try:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         with open(RESULTS, "a") as f:

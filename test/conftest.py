@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import os
 import random
-from collections.abc import Iterator
+import signal
+import subprocess
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -14,6 +18,57 @@ import pytest
 #: users). Claims are flock()ed files, so parallel test runs on one machine never share one.
 DOMAIN_IDS = range(1, 233)
 CLAIMS = Path(os.environ.get("TMPDIR", "/tmp")) / "ssi_bridge_test_domains"
+#: prctl(2) option: the signal a child gets when the thread that started it ends
+PR_SET_PDEATHSIG = 1
+_prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
+
+
+def dies_with_this_process() -> Callable[[], None]:
+    """A ``preexec_fn`` that makes the child die with the calling (test) process.
+
+    PR_SET_PDEATHSIG sends SIGKILL to the child when the thread that forked it ends (pytest
+    starts children from its main thread), so a killed test run leaves no node behind. SIGINT
+    is set back to its default: a background job of a non-interactive shell starts with SIGINT
+    ignored, Python keeps it so, and a test that stops its child with SIGINT needs it handled.
+    """
+    parent = os.getpid()
+
+    def preexec() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        if os.getppid() != parent:
+            os._exit(1)  # the parent died before prctl took effect
+
+    preexec.dies_with_parent = True  # type: ignore[attr-defined]
+    return preexec
+
+
+@pytest.fixture
+def child_preexec() -> Callable[[], None]:
+    """The ``preexec_fn`` a test passes to Popen/run: see :func:`dies_with_this_process`."""
+    return dies_with_this_process()
+
+
+@pytest.fixture(autouse=True)
+def _children_die_with_the_test(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every process a test starts (Popen, subprocess.run) dies with the test process: its
+    ``preexec_fn`` runs :func:`dies_with_this_process`'s first, then the test's own."""
+    original = subprocess.Popen.__init__
+
+    def init(self: subprocess.Popen, *args: Any, **kwargs: Any) -> None:
+        own = kwargs.get("preexec_fn")
+        if not getattr(own, "dies_with_parent", False):
+            first = dies_with_this_process()
+
+            def both() -> None:
+                first()
+                if own is not None:
+                    own()
+
+            kwargs["preexec_fn"] = both
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", init)
 
 
 def claim_domain() -> tuple[int, int]:
@@ -43,3 +98,45 @@ def ros_domain() -> Iterator[int]:
         yield dom
     finally:
         os.close(fd)
+
+
+@pytest.fixture
+def small_fs(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
+    """Factory: a tmpfs of ``size`` bytes mounted under tmp_path (root only), unmounted after.
+
+    A real file system that runs full (ENOSPC), for the write-error paths of the recorders.
+    """
+    if os.geteuid() != 0:
+        pytest.skip("mounting a small file system needs root")
+    mounted: list[Path] = []
+
+    def _mount(size: int) -> Path:
+        point = tmp_path / f"small_fs{len(mounted)}"
+        point.mkdir()
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size},mode=0777", "tmpfs",
+                               str(point)], capture_output=True, text=True)
+        if done.returncode != 0:
+            pytest.skip(f"cannot mount a tmpfs: {done.stderr.strip()}")
+        mounted.append(point)
+        return point
+
+    _mount.fill = fill_up  # type: ignore[attr-defined]
+    yield _mount
+    for point in mounted:
+        subprocess.run(["umount", "-l", str(point)], check=False)
+
+
+def fill_up(directory: Path) -> Path:
+    """Write a filler file until ``directory``'s file system is full (ENOSPC)."""
+    filler = directory / "filler"
+    fd = os.open(filler, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        for block in (65536, 4096, 512, 1):
+            try:
+                while True:
+                    os.write(fd, b"\0" * block)
+            except OSError:
+                pass  # ENOSPC: go on with smaller blocks down to the last byte
+    finally:
+        os.close(fd)
+    return filler

@@ -11,16 +11,17 @@ follows the number of slots (one table update per station, no extra frame).
 from __future__ import annotations
 
 import threading
-import time
 from typing import TYPE_CHECKING
 
 import can
 import canopen
 
+from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import FrameListener
 from ssi_bridge.client.samples import ClientCounters, CycleGate
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus
+from ssi_bridge.gateway.timebase import wire_now
 
 if TYPE_CHECKING:
     from ssi_bridge.client.master import BridgeClient
@@ -40,6 +41,8 @@ class CanMaster:
                  counters: ClientCounters | None = None) -> None:
         self._source: BusConfig | can.BusABC | None = bus
         self.counters = counters if counters is not None else ClientCounters()
+        #: bus load from frame timestamps (one bus, so one figure for every station)
+        self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         #: one sender at a time on the network (SYNC, RPDOs of every station)
@@ -57,7 +60,8 @@ class CanMaster:
             self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        self.network.listeners[:] = [FrameListener(self.network, self.counters)]
+        self.network.listeners[:] = [FrameListener(self.network, self.counters, self.load)]
+        self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
 
@@ -76,17 +80,21 @@ class CanMaster:
             self.network.nodes.pop(client.node_id, None)
 
     def sync(self) -> float:
-        """Send one SYNC for every station; return its ``time.monotonic()`` send time."""
+        """Send one SYNC for every station; return its wire time (``gateway/timebase``).
+
+        On a simulated wire that is the SYNC frame's end-of-frame timestamp, where the modules
+        of every station latch; on a real interface the instant it was handed to the driver.
+        """
         if self.network is None:
             raise BusError("master not connected")
-        t = time.monotonic()
+        t = wire_now()
         with self.gate.cond:
             self.gate.open(len(self.clients))
             for client in self.clients:
                 client.table.on_sync(t)
         try:
             with self.send_lock:
-                self.network.send_message(SYNC_COB_ID, b"")
+                frame = self.network.send_message(SYNC_COB_ID, b"")
         except can.CanError as err:
             self.counters.can_errors += 1
             raise BusError(f"could not send SYNC: {err}") from err
@@ -94,6 +102,10 @@ class CanMaster:
         for client in self.clients:
             if client.counters is not self.counters:
                 client.counters.syncs += 1
+        if frame is not None and frame.timestamp:
+            with self.gate.cond:
+                for client in self.clients:
+                    t = client.table.set_sync_time(frame.timestamp)
         return t
 
     def wait_cycle(self, timeout: float) -> bool:

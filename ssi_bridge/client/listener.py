@@ -10,12 +10,12 @@ pairs, SYNC on 0x080. It fills the same :class:`~ssi_bridge.client.samples.SlotT
 
 Each observed SYNC opens a cycle; it is reported once through :meth:`next_cycle`, as
 complete when every slot's image and position arrived, or as incomplete when the next SYNC
-comes first. Times: a frame's python-can timestamp (``time.time()`` base, the time it was on
-the wire; a replayed log carries its own) is moved into the ``time.monotonic()`` base of
-``ChannelSample.sync_time`` by subtracting its age when it is handled.
+comes first. Times: a frame's python-can timestamp (the time it was on the wire, wire time of
+``gateway/timebase``; a replayed log carries its own) *is* ``ChannelSample.sync_time``: no
+clock is read to stamp a cycle.
 
 Liveness: the gateway counts as alive while a heartbeat (0x700 + id) or one of its TPDOs
-was seen within ``heartbeat_timeout``. Every operation that would send is refused with
+arrived (frame timestamp) within ``heartbeat_timeout`` of the newest frame handled or of now. Every operation that would send is refused with
 :data:`LISTEN_ONLY`.
 """
 
@@ -29,11 +29,13 @@ from dataclasses import dataclass
 
 import can
 
+from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.bus import BusConfig, take_bus
 from ssi_bridge.gateway.dictionary import MAX_SLOTS
+from ssi_bridge.gateway.timebase import wire_now
 
 logger = logging.getLogger(__name__)
 
@@ -53,7 +55,7 @@ class ObservedCycle:
 
     #: running number of the SYNC (1 = first observed)
     seq: int
-    #: time.monotonic() instant the SYNC was on the wire (s): the latch time
+    #: wire time the SYNC was on the wire (its frame timestamp, s): the latch time
     sync_time: float
     #: True when every slot's image and position arrived before the next SYNC
     complete: bool
@@ -87,7 +89,9 @@ class ListenOnlyClient(can.Listener):
         self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions).routes
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
+        self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         self._last_seen = -float("inf")
+        self._newest = -float("inf")  # newest frame timestamp handled
         self._open: tuple[int, float] | None = None  # (seq, time) of a cycle not yet reported
         self._cycles: deque[ObservedCycle] = deque(maxlen=KEEP_CYCLES)
         self._cycles_cond = threading.Condition()
@@ -147,8 +151,10 @@ class ListenOnlyClient(can.Listener):
     @property
     def gateway_alive(self) -> bool:
         """True while a heartbeat or TPDO of the gateway was seen within the timeout."""
-        return (self._bus is not None
-                and time.monotonic() - self._last_seen <= self.heartbeat_timeout)
+        if self._bus is None:
+            return False
+        last, timeout = self._last_seen, self.heartbeat_timeout
+        return wire_now() - last <= timeout or self._newest - last <= timeout
 
     # -- refused: a listener never sends -----------------------------------------------------
     def _refuse(self, what: str) -> BusError:
@@ -191,6 +197,9 @@ class ListenOnlyClient(can.Listener):
         """Dispatch one frame (notifier thread): SYNC, TPDOs, heartbeat, EMCY."""
         counters = self.counters
         counters.frames += 1
+        stamp = msg.timestamp or wire_now()
+        if stamp > self._newest:
+            self._newest = stamp
         if msg.is_error_frame:
             counters.can_errors += 1
             return
@@ -202,16 +211,18 @@ class ListenOnlyClient(can.Listener):
             return
         handler = self._routes.get(can_id)
         if handler is not None:
-            self._last_seen = time.monotonic()
+            self._last_seen = stamp
             handler(can_id, msg.data, msg.timestamp)
             if self._open is not None and self.table.cycle_complete():
                 self._report(*self._open, True)
             return
         if can_id == self._heartbeat_id and msg.dlc >= 1:
-            self._last_seen = time.monotonic()
+            self._last_seen = stamp
             self.nmt_state = msg.data[0] & 0x7F
         elif can_id == self._emcy_id:
             counters.emergencies += 1
+            if msg.dlc >= 3:
+                self._emcy_log.on_emcy(msg.data[0] | msg.data[1] << 8, bytes(msg.data[3:8]))
 
     def on_error(self, exc: Exception) -> None:
         """A receive error of the bus: counted, the listener keeps going."""
@@ -221,8 +232,7 @@ class ListenOnlyClient(can.Listener):
     def _on_sync(self, timestamp: float) -> None:
         if self._open is not None:
             self._report(*self._open, False)
-        now = time.monotonic()
-        at = now - (time.time() - timestamp) if timestamp else now
+        at = timestamp or wire_now()
         self.counters.syncs += 1
         self._open = (self.table.sync_seq + 1, self.table.on_sync(at))
 
@@ -233,8 +243,8 @@ class ListenOnlyClient(can.Listener):
             self._cycles_cond.notify_all()
 
     def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        self.table.on_image(slot, data)
+        self.table.on_image(slot, data, timestamp)
 
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
-        self.table.on_positions(slots, data)
+        self.table.on_positions(slots, data, timestamp)

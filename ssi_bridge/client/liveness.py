@@ -17,6 +17,7 @@ import time
 from typing import TYPE_CHECKING
 
 from ssi_bridge.exceptions import SsiBridgeError
+from ssi_bridge.gateway.timebase import wire_now
 
 if TYPE_CHECKING:
     from ssi_bridge.client.master import BridgeClient
@@ -32,7 +33,7 @@ class Liveness:
 
     def __init__(self, client: BridgeClient) -> None:
         self._client = client
-        #: time.monotonic() of the last heartbeat (or of the last configuration)
+        #: wire time of the last heartbeat frame (its receive timestamp) or configuration
         self.last_heartbeat = 0.0
         #: NMT state of the last heartbeat, None before the first
         self.state: int | None = None
@@ -44,8 +45,28 @@ class Liveness:
         self._was_alive = False
 
     def alive(self) -> bool:
-        """True while the last heartbeat is younger than the client's heartbeat timeout."""
-        return time.monotonic() - self.last_heartbeat <= self._client.heartbeat_timeout
+        """True unless the wire was watched for a heartbeat timeout without a heartbeat.
+
+        Measured on the bus, not on the scheduler: the heartbeat's time is its frame
+        timestamp (when it arrived), and silence counts only up to the wire time this side
+        has handled (``LossyBus.seen_until``). A stalled process whose receive queue still
+        holds heartbeats is not "gateway silent"; a real silence shows once the receive
+        thread finds the queue empty (within its 0.05 s wake-up) past the timeout.
+        """
+        timeout = self._client.heartbeat_timeout
+        last = self.last_heartbeat
+        if wire_now() - last <= timeout:
+            return True
+        bus = self._client.bus
+        seen = bus.seen_until() if bus is not None else wire_now()
+        return seen - last <= timeout
+
+    def on_heartbeat_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """The heartbeat frame (network thread): its receive time, then the NMT state."""
+        if data:
+            if timestamp > self.last_heartbeat:
+                self.last_heartbeat = timestamp
+            self.on_heartbeat(data[0] & 0x7F, at=timestamp)
 
     def start(self) -> None:
         """Start the supervisor thread (after the first configuration)."""
@@ -62,9 +83,11 @@ class Liveness:
             self._thread.join(timeout=timeout)
         self._thread = None
 
-    def on_heartbeat(self, state: int) -> None:
-        """canopen heartbeat callback (network thread)."""
-        self.last_heartbeat = time.monotonic()
+    def on_heartbeat(self, state: int, at: float | None = None) -> None:
+        """A heartbeat in NMT ``state`` arrived at wire time ``at`` (network thread)."""
+        at = wire_now() if not at else at
+        if at > self.last_heartbeat:
+            self.last_heartbeat = at
         self.state = state
         if state == NMT_BOOTUP:
             self._client.counters.restarts += 1
@@ -84,8 +107,8 @@ class Liveness:
                 logger.warning("gateway node %d silent: no heartbeat for %.3f s",
                                client.node_id, client.heartbeat_timeout)
             self._was_alive = alive
-            if not alive and time.monotonic() >= next_probe and not self._reconfigure.is_set():
-                next_probe = time.monotonic() + 5 * period
+            if not alive and wire_now() >= next_probe and not self._reconfigure.is_set():
+                next_probe = wire_now() + 5 * period
                 try:
                     client.read_object(HEARTBEAT_OBJECT)
                     self._reconfigure.set()  # it answers but sends no heartbeat: restarted

@@ -27,8 +27,10 @@ import can
 import canopen
 
 from ssi_bridge.client.bus_master import SYNC_COB_ID, CanMaster
+from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
+from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
@@ -36,12 +38,19 @@ from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
 from ssi_bridge.gateway.bus import BusConfig, LossyBus
+from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
 )
-from ssi_bridge.module.images import CmpControl, Control, ProcessInput
+from ssi_bridge.module.images import CmpControl, CmpStatus, Control, ProcessInput
 
 logger = logging.getLogger(__name__)
+#: how often a clear pulse is sent again when the next image shows it never arrived
+PULSE_RESENDS = 3
+#: (CLR_CMPx, FLAG_CMPx, STS_CMPx) per comparator
+_PULSE_CHECKS = tuple((int(c), int(f), int(s_)) for c, f, s_ in (
+    (CmpControl.CLR_CMP1, CmpStatus.FLAG_CMP1, CmpStatus.STS_CMP1),
+    (CmpControl.CLR_CMP2, CmpStatus.FLAG_CMP2, CmpStatus.STS_CMP2)))
 
 __all__ = ["SYNC_COB_ID", "BridgeClient", "CanMaster"]
 
@@ -80,10 +89,13 @@ class BridgeClient:
         self.transport = transport
         self.assist_after = assist_after
         self.counters = ClientCounters()
+        self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         #: the bus' master; a private one (counting into this client) unless one was given
         self._owns_master = not isinstance(bus, CanMaster)
         self.master = CanMaster(bus, self.counters) if not isinstance(bus, CanMaster) else bus
         self.table = SlotTable(slots, self.master.gate)
+        #: bus load from frame timestamps (for the bus diagnostics): the master's, one bus
+        self.load: BusLoad = self.master.load
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
@@ -107,7 +119,7 @@ class BridgeClient:
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
         self.network.add_node(self.node)
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
-        self.node.nmt.add_heartbeat_callback(self._liveness.on_heartbeat)
+        self.network.subscribe(0x700 + self.node_id, self._liveness.on_heartbeat_frame)
         self.node.emcy.add_callback(self._on_emcy)
         self._routes.attach(self.network)
         try:
@@ -148,7 +160,7 @@ class BridgeClient:
                 self.node.nmt.state = "OPERATIONAL"
             finally:
                 self._liveness.configuring = False
-            self._liveness.last_heartbeat = time.monotonic()
+            self._liveness.last_heartbeat = wire_now()
             self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))
@@ -157,7 +169,12 @@ class BridgeClient:
 
     # -- cyclic data ------------------------------------------------------------------------
     def sync(self) -> float:
-        """Send one SYNC (one module cycle); return its ``time.monotonic()`` send time."""
+        """Send one SYNC (one module cycle); return its wire time (``gateway/timebase``).
+
+        On a simulated wire that is the instant the SYNC's last bit was on the wire, where
+        the modules latch (the frame's own timestamp); on a real interface the instant it was
+        handed to the driver. One clock, no conversion.
+        """
         if self.network is None:
             raise BusError("client not connected")
         return self.master.sync()
@@ -208,6 +225,7 @@ class BridgeClient:
             st.output[6] = int(bits)
             st.output[7] = int(Control.STOP) if stop else 0
             st.pulse_seq = self.table.sync_seq if clear_cmp1 or clear_cmp2 else None
+            st.pulse_resends, st.release_seq = 0, None
             data = bytes(st.output)
         self._send_output(slot, data)
 
@@ -262,7 +280,7 @@ class BridgeClient:
             image = self.table.next_input(slot, min(left, self.assist_after))
             if image is not None:
                 return image
-            if time.monotonic() - self.table.last_sync_monotonic >= self.assist_after:
+            if wire_now() - self.table.last_sync_time >= self.assist_after:
                 self.sync()
         return None
 
@@ -301,20 +319,45 @@ class BridgeClient:
     # TPDOs arrive raw on their COB-IDs (client/receive.py), not through canopen's PdoMaps
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
-        self.table.on_positions(slots, data)
+        self.table.on_positions(slots, data, timestamp)
 
     def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        st = self.table.on_image(slot, data)
-        if st.pulse_seq is None:  # re-checked under the lock; set_control arms it there
+        st = self.table.on_image(slot, data, timestamp)
+        if st.pulse_seq is None and st.release_seq is None:  # re-checked under the lock
             return
         with self.table.cond:
-            if st.pulse_seq is None or self.table.sync_seq <= st.pulse_seq:
+            seq = self.table.sync_seq
+            if st.release_seq is not None and seq > st.release_seq:
+                # the release is sent once more: a lost release RPDO would leave CLR_CMPx
+                # set, and a flag that can never latch again (000 comparator table)
+                st.release_seq = None
+                out = bytes(st.output)
+            elif st.pulse_seq is None or seq <= st.pulse_seq:
                 return
-            st.pulse_seq = None
-            st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
-            out = bytes(st.output)
+            elif self._pulse_lost(st.output[6], data[6]) and st.pulse_resends < PULSE_RESENDS:
+                # the image of a cycle after the pulse still shows FLAG_CMPx = 1 with the
+                # values not matching (a clear that the module would have carried out): the
+                # pulse RPDO never arrived, so send it again for one more cycle
+                st.pulse_resends += 1
+                st.pulse_seq = seq
+                self.counters.pulse_resends += 1
+                out = bytes(st.output)
+                logger.info("slot %d: clear pulse not applied (lost RPDO?), sent again (%d)",
+                            slot, st.pulse_resends)
+            else:
+                st.pulse_seq = None
+                st.release_seq = seq
+                st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
+                out = bytes(st.output)
         self._send_output(slot, out)
+
+    @staticmethod
+    def _pulse_lost(control: int, cmp: int) -> bool:
+        """A requested CLR_CMPx whose FLAG_CMPx is still 1 while STS_CMPx = 0 (000 comparator
+        table: "Reset of FLAG_CMPx not possible when values match", else CLR resets it)."""
+        return any(control & clr and cmp & flag and not cmp & sts
+                   for clr, flag, sts in _PULSE_CHECKS)
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1
-        logger.info("gateway node %d EMCY %s data %s", self.node_id, error, error.data.hex())
+        self._emcy_log.on_emcy(error.code, bytes(error.data))

@@ -20,6 +20,7 @@ import can
 import canopen
 from canopen.network import MessageListener
 
+from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
 from ssi_bridge.gateway.dictionary import tpdo_cob_base
@@ -41,9 +42,11 @@ class FrameListener(MessageListener):
     each listener for each frame of the bus.
     """
 
-    def __init__(self, network: canopen.Network, counters: ClientCounters) -> None:
+    def __init__(self, network: canopen.Network, counters: ClientCounters,
+                 load: BusLoad | None = None) -> None:
         super().__init__(network)
         self._counters = counters
+        self._load = load
 
     def on_message_received(self, msg: can.Message) -> None:
         """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
@@ -51,6 +54,8 @@ class FrameListener(MessageListener):
         counters.frames += 1
         if msg.is_error_frame:
             counters.can_errors += 1
+        if self._load is not None:
+            self._load.add(msg)
         MessageListener.on_message_received(self, msg)
 
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import struct
 import threading
-import time
 from dataclasses import dataclass, field
 
+from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.module.images import ProcessInput
 
 #: two Integer32 positions in one encoder default PDO (000 Table 15, object 0x6820)
@@ -30,7 +30,7 @@ class ChannelSample:
     position: int
     #: the 8-byte process input image (000 "Process input")
     process_input: bytes
-    #: time.monotonic() of the SYNC that produced this sample (s)
+    #: wire time (``gateway/timebase``) of the SYNC that produced this sample (s)
     sync_time: float
     #: number of process input images received for this slot
     counter: int
@@ -46,6 +46,8 @@ class ClientCounters:
     can_errors: int = 0
     #: register handshakes that failed (refusal, timeout, silent gateway)
     handshake_failures: int = 0
+    #: clear pulses (CLR_CMPx) sent again because the image showed they never arrived
+    pulse_resends: int = 0
     #: handshake steps or SDO transfers that timed out
     timeouts: int = 0
     #: SYNC frames sent
@@ -62,12 +64,16 @@ class ClientCounters:
 class _Slot:
     image: bytes | None = None
     image_seq: int = -1
+    image_time: float = 0.0  # wire time (frame timestamp) of the image
     image_count: int = 0
     position: int | None = None
     position_seq: int = -1
+    position_time: float = 0.0
     output: bytearray = field(default_factory=lambda: bytearray(8))
     edit_seq: int = 0  # sync sequence at the last output edit
     pulse_seq: int | None = None  # clear pulse armed at this sync sequence
+    pulse_resends: int = 0  # times the current clear pulse was sent again (lost RPDO)
+    release_seq: int | None = None  # CLR released at this sync sequence: sent once more
 
 
 class CycleGate:
@@ -108,11 +114,13 @@ class SlotTable:
         self.cond = gate.cond if gate is not None else threading.Condition()
         self.sync_seq = 0
         self.sync_time = 0.0
-        self.last_sync_monotonic = 0.0
+        self.last_sync_time = 0.0
         self._slots = {s: _Slot() for s in range(1, slots + 1)}
         self._times: dict[int, float] = {}
         self._due = 2 * slots
         self._input_waiters = 0
+        #: TPDOs that answered an older SYNC than the current one (not counted for it)
+        self.late_frames = 0
 
     def slot(self, slot: int) -> _Slot:
         """The state of ``slot`` (raises KeyError with the valid range)."""
@@ -124,48 +132,88 @@ class SlotTable:
     def on_sync(self, at: float | None = None) -> float:
         """Record a SYNC about to be sent (or, with ``at``, one observed then); return its time.
 
-        ``at`` is a ``time.monotonic()`` instant: a listen-only master stamps the cycle with
-        the time the SYNC of another master was on the wire, not with when it handled it.
+        ``at`` is a wire time: a listen-only master stamps the cycle with the time the SYNC
+        of another master was on the wire (its frame timestamp), not with when it handled it.
         """
         with self.cond:
             self.sync_seq += 1
             self._due = 2 * self.slots
-            self.sync_time = self.last_sync_monotonic = time.monotonic() if at is None else at
+            self.sync_time = self.last_sync_time = wire_now() if at is None else at
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
             return self.sync_time
 
-    def on_image(self, slot: int, data: bytes) -> _Slot:
-        """Store a received process input image; return the slot's state."""
+    def set_sync_time(self, at: float) -> float:
+        """The current SYNC's wire time, once the wire has given it (its end of frame).
+
+        A TPDO handled meanwhile that ended on the wire before this SYNC answered the one
+        before: it no longer counts for this cycle.
+        """
+        with self.cond:
+            self.sync_time = self.last_sync_time = at
+            seq = self.sync_seq
+            self._times[seq] = at
+            was_complete = self._due == 0
+            for st in self._slots.values():
+                if st.image_seq == seq and 0.0 < st.image_time < at:
+                    st.image_seq = seq - 1
+                    self._due += 1
+                if st.position_seq == seq and 0.0 < st.position_time < at:
+                    st.position_seq = seq - 1
+                    self._due += 1
+            if was_complete and self._due and self._gate is not None:
+                self._gate.pending += 1  # counted as complete too early: not any more
+            return at
+
+    def _late(self, timestamp: float) -> bool:
+        """True for a frame that was on the wire before the current SYNC (a late answer)."""
+        if 0.0 < timestamp < self.sync_time:
+            self.late_frames += 1
+            return True
+        return False
+
+    def on_image(self, slot: int, data: bytes, timestamp: float = 0.0) -> _Slot:
+        """Store a received process input image (wire time ``timestamp``); return the slot.
+
+        A SYNC's TPDOs follow it on the wire, so an image that ended before the current
+        SYNC belongs to an older cycle: kept as the newest image, not counted for this one.
+        """
         with self.cond:
             st = self._slots[slot]
             completed = False
-            if st.image_seq != self.sync_seq:
+            if self._late(timestamp):
+                st.image_seq = max(st.image_seq, self.sync_seq - 1)
+            elif st.image_seq != self.sync_seq:
                 st.image_seq = self.sync_seq
                 self._due -= 1
                 completed = self._due == 0
             st.image = data if type(data) is bytes else bytes(data)
+            st.image_time = timestamp
             st.image_count += 1
             if self._completes(completed) or self._input_waiters:
                 self.cond.notify_all()
             return st
 
-    def on_positions(self, slots: list[int], data: bytes) -> None:
-        """Store the positions of an encoder default PDO."""
+    def on_positions(self, slots: list[int], data: bytes, timestamp: float = 0.0) -> None:
+        """Store the positions of an encoder default PDO (wire time ``timestamp``)."""
         if len(data) == POSITION_PAIR.size:
             values = POSITION_PAIR.unpack(data)
         else:
             values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
         with self.cond:
+            late = self._late(timestamp)
             seq = self.sync_seq
             completed = False
             for slot, value in zip(slots, values):
                 st = self._slots[slot]
-                if st.position_seq != seq:
+                if late:
+                    st.position_seq = max(st.position_seq, seq - 1)
+                elif st.position_seq != seq:
                     st.position_seq = seq
                     self._due -= 1
                     completed = completed or self._due == 0
                 st.position = value
+                st.position_time = timestamp
             if self._completes(completed):
                 self.cond.notify_all()
 
@@ -184,8 +232,10 @@ class SlotTable:
             st = self.slot(slot)
             if st.image is None or st.position is None:
                 return None
-            return ChannelSample(slot, st.position, st.image,
-                                 self._times.get(st.image_seq, 0.0), st.image_count)
+            # the sample is as old as the older of its two frames
+            seq = min(st.image_seq, st.position_seq)
+            return ChannelSample(slot, st.position, st.image, self._times.get(seq, 0.0),
+                                 st.image_count)
 
     def cycle_complete(self) -> bool:
         """True when every slot's image and position arrived since the last SYNC."""

@@ -38,15 +38,17 @@ def _is_binary(steps: float) -> bool:
     return s == steps and s > 0 and not s & (s - 1)
 
 
-def _st_bits(steps: float) -> int:
-    return max(1, (int(steps) - 1).bit_length())
+def _st_bits(steps: float, code: Code = Code.BINARY) -> int:
+    """Bits a singleturn value of ``steps`` steps needs (BCD: four per decimal digit)."""
+    top = max(int(steps) - 1, 1)
+    return 4 * len(str(top)) if code is Code.BCD else top.bit_length()
 
 
 def _directly_added(cfg: Any, given: dict[str, Any], turn_bits: int = 0) -> dict[str, Any]:
     """data_bits = position bits of the resolution (004 §3.2 example, §3.3 note)."""
     if "data_bits" in given:
         return {}
-    return {"data_bits": turn_bits + _st_bits(cfg.steps_per_rev)}
+    return {"data_bits": turn_bits + _st_bits(cfg.steps_per_rev, cfg.code)}
 
 
 def _multiturn_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
@@ -150,6 +152,14 @@ FAMILIES: dict[str, Family] = {
     "TR_PROGRAMMABLE": Family(
         dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24),
         doc="001 §5: programmable scaling, code, data bits, formats, special bits"),
+    "SSI25_POWERFAIL": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.POWER_FAIL,)),
+        doc="003: a 25-bit frame whose last data bit is a PowerFail bit (24 position bits)"),
+    "TR_PARITY": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.ENCODER_ERROR, SpecialBit.EVEN_PARITY)),
+        doc="001 §5.5.6/§5.5.7: 24 data bits + encoder error + even parity (26 bits)"),
 }
 FAMILIES["ATM90"] = FAMILIES["ATM60"]
 
@@ -166,7 +176,8 @@ def family_config(family: str, **overrides: Any) -> EncoderConfig:
     fields.update(overrides)
     # the fix-ups need the resolution and mode, so build once permissively, then fix
     probe = SimpleNamespace(steps_per_rev=fields.get("steps_per_rev", 8192.0),
-                            ssi_mode=fields.get("ssi_mode", SsiMode.ASYNC))
+                            ssi_mode=fields.get("ssi_mode", SsiMode.ASYNC),
+                            code=fields.get("code", Code.BINARY))
     for fix in fam.fixes:
         for k, v in fix(probe, overrides).items():
             if k not in overrides:

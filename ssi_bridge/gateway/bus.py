@@ -5,14 +5,19 @@ default in-process ``virtual`` interface every bus sees the frames the others se
 real wire). :class:`LossyBus` wraps any bus to drop a seeded fraction of frames ("CAN frame
 loss" fault) or to go quiet entirely ("gateway silent"). :class:`BridgeNetwork` is the
 canopen ``Network`` both sides use; its frames are cheap to deep-copy (:class:`WireMessage`).
+On a simulated interface (``virtual``, ``udp_multicast``) :func:`open_bus` returns a
+:class:`WireBus`: frames take their real time on the wire at the bit rate, one at a time, and
+carry their end-of-frame wire time (``gateway/wire.py``, ``gateway/timebase.py``).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import random
 import threading
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from copy import deepcopy
 from dataclasses import dataclass
 from typing import Any
@@ -21,12 +26,18 @@ import can
 import canopen
 
 from ssi_bridge.exceptions import BusError, ConfigError
+from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.wire import frame_bits
 
 logger = logging.getLogger(__name__)
 
 #: bit rates a CANopen device must support or may support (CiA 301 / CiA 102), bit/s
 #: receive-thread wake-up period (s): bounds how long stopping a canopen Network takes
 NOTIFIER_CYCLE = 0.05
+#: python-can interfaces that are simulated wires: they get :class:`WireBus` (frame timing)
+SIMULATED_INTERFACES = ("virtual", "udp_multicast")
+#: CiA 301 SYNC COB-ID (the wire remembers the newest SYNC for the synchronous window)
+SYNC_COB_ID = 0x080
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 
 
@@ -38,7 +49,7 @@ class BusConfig:
     interface: str = "virtual"
     #: python-can channel (virtual: any string; every bus on the same string is one wire)
     channel: str = "ssi_bridge"
-    #: bit rate in bit/s, one of :data:`CIA_BITRATES` (ignored by the virtual interface)
+    #: bit rate in bit/s, one of :data:`CIA_BITRATES` (the simulated wire times frames at it)
     bitrate: int = 500_000
     #: CANopen node id of the XN-GW-CANOPEN (1-127)
     node_id: int = 1
@@ -56,15 +67,21 @@ class BusConfig:
 
 
 def open_bus(config: BusConfig) -> can.BusABC:
-    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it."""
+    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
+
+    A simulated interface (:data:`SIMULATED_INTERFACES`) comes wrapped in :class:`WireBus`, so
+    its frames take their real time on the wire at ``config.bitrate``.
+    """
     if config.interface == "udp_multicast":  # our own-frame-free variant (gateway/multicast)
         from ssi_bridge.gateway.multicast import open_udp_bus
         try:
-            return open_udp_bus(str(config.channel))
+            return WireBus(open_udp_bus(str(config.channel)), wire_for(config))
         except (can.CanError, OSError) as err:
             raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
     kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
-    if config.interface != "virtual":
+    if config.interface == "virtual":
+        kwargs["preserve_timestamps"] = True  # receivers see the WireBus end-of-frame time
+    elif config.interface != "udp_multicast":
         kwargs["bitrate"] = config.bitrate
     try:
         bus = can.Bus(**kwargs)
@@ -73,7 +90,164 @@ def open_bus(config: BusConfig) -> can.BusABC:
             f"cannot open CAN bus {config.interface}:{config.channel} "
             f"at {config.bitrate} bit/s: {err}") from err
     logger.debug("opened %s:%s", config.interface, config.channel)
+    if config.interface in SIMULATED_INTERFACES:
+        return WireBus(bus, wire_for(config))
     return bus
+
+
+class Wire:
+    """The time line of one simulated CAN wire: busy until the end of the last frame on it.
+
+    Shared by every :class:`WireBus` of one channel in a process (the gateway's and the
+    master's), so their frames never overlap; frames from another process (udp_multicast)
+    are learnt when they arrive (their timestamp is their end on the wire).
+    """
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.lock = threading.Lock()
+        #: wire time (s) at which the last frame known to this process ends
+        self.busy_until = 0.0
+        #: end (s) of the newest SYNC (COB-ID 0x080) put on this wire in this process
+        self.last_sync = 0.0
+        # frames on the wire not yet handed to the receivers (id -> end): a sender thread
+        # that stalls after its frame ended delays the frame, not the wire's time line
+        self._pending: dict[int, float] = {}
+
+    def claim(self, bits: int, ready: float) -> float:
+        """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
+        with self.lock:
+            start = ready if ready > self.busy_until else self.busy_until
+            end = start + bits / self.bitrate
+            self.busy_until = end
+            return end
+
+    def claim_all(self, frames: Sequence[can.Message], ready: float,
+                  answering: float | None = None) -> bool:
+        """Stamp ``frames`` back to back from ``ready`` with their ends; all or nothing.
+
+        ``answering`` is the wire time of the SYNC these frames answer: when a newer SYNC is
+        already on the wire they are not sent (False). A CANopen device sends synchronous
+        TPDOs inside the cycle of their SYNC (CiA 301 synchronous window), so a master can
+        tell which SYNC a TPDO belongs to by its order on the wire.
+        """
+        with self.lock:
+            if answering is not None and self.last_sync > answering:
+                return False
+            at = ready if ready > self.busy_until else self.busy_until
+            rate = self.bitrate
+            for msg in frames:
+                at += frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
+                                 msg.dlc) / rate
+                msg.timestamp = at
+                self._pending[id(msg)] = at
+                if msg.arbitration_id == SYNC_COB_ID:
+                    self.last_sync = at
+            self.busy_until = at
+            return True
+
+    def delivered(self, msg: can.Message) -> None:
+        """``msg`` (claimed here) has been handed to the receivers, or never will be."""
+        with self.lock:
+            self._pending.pop(id(msg), None)
+
+    def undelivered_since(self) -> float:
+        """End of the oldest frame claimed in this process and not yet handed over (inf: none).
+
+        A receiver has seen the wire only up to just before it: a frame with that time stamp
+        may still arrive (its sender's thread did not get to hand it over yet).
+        """
+        with self.lock:
+            return min(self._pending.values(), default=math.inf)
+
+    def observe(self, end: float, sync: bool = False) -> None:
+        """A frame of another process ended at ``end``: the wire was busy until then."""
+        if sync and end > self.last_sync:
+            self.last_sync = end
+        if end > self.busy_until:
+            with self.lock:
+                if end > self.busy_until:
+                    self.busy_until = end
+
+
+_wires: dict[tuple[str, str, int], Wire] = {}
+_wires_lock = threading.Lock()
+
+
+def wire_for(config: BusConfig) -> Wire:
+    """The process's :class:`Wire` of ``config``'s interface, channel and bit rate."""
+    key = (config.interface, str(config.channel), config.bitrate)
+    with _wires_lock:
+        wire = _wires.get(key)
+        if wire is None:
+            wire = _wires[key] = Wire(config.bitrate)
+        return wire
+
+
+class WireBus(can.BusABC):
+    """A simulated bus whose frames take their real time on the wire (CAN 2.0A at the bit rate).
+
+    ``send`` puts the frame on the :class:`Wire` after whatever is on it (SOF to IFS with its
+    actual stuff bits, ``gateway/wire.py``), stamps it with its end and hands it to the
+    receivers only then (sleeping, not spinning: Python sleeps ~0.05-0.1 ms late, which does
+    not add up over a burst because every frame's end is computed, not measured).
+    :meth:`send_batch` sends frames that are ready together in arbitration order (lowest
+    identifier first), as CAN arbitration would. Frames two nodes make ready within the same
+    bit time are sent in the order they were handed over (first come), not arbitrated.
+    Received frames extend the wire's busy time (frames of other processes).
+    """
+
+    def __init__(self, inner: can.BusABC, wire: Wire) -> None:
+        self._inner = inner
+        self.wire = wire
+        self._inner_steps = type(inner).recv is can.BusABC.recv
+        super().__init__(channel=getattr(inner, "channel_info", "wire"))
+        self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send one frame; returns when its last bit is on the wire."""
+        self.send_batch([msg], timeout=timeout)
+
+    def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None,
+                   timeout: float | None = None) -> bool:
+        """Send frames ready at the same instant, lowest identifier first.
+
+        ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
+        the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
+        """
+        ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
+        if not self.wire.claim_all(ordered, wire_now(), answering):
+            return False
+        delivered = self.wire.delivered
+        try:
+            for msg in ordered:
+                wait = msg.timestamp - wire_now()
+                if wait > 0:
+                    time.sleep(wait)
+                if self._is_shutdown:
+                    return False  # shut down while the frame was on the wire: nobody gets it
+                self._inner.send(msg, timeout)
+                delivered(msg)
+        finally:
+            for msg in ordered:
+                delivered(msg)
+        return True
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._inner_steps:
+            msg, filtered = self._inner._recv_internal(timeout)
+            if msg is not None and not filtered and not self._inner._matches_filters(msg):
+                return None, False
+        else:
+            msg = self._inner.recv(timeout)
+        if msg is not None and msg.timestamp:
+            self.wire.observe(msg.timestamp, msg.arbitration_id == SYNC_COB_ID)
+        return msg, False
+
+    def shutdown(self) -> None:
+        """Shut the wrapped bus down too."""
+        super().shutdown()
+        self._inner.shutdown()
 
 
 def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
@@ -108,6 +282,10 @@ class LossyBus(can.BusABC):
         self.muted = False
         #: frames dropped so far (sent + received)
         self.dropped = 0
+        #: newest timestamp of a frame this side has handled, and the wire time at which a
+        #: receive last found nothing waiting: what the receive path has seen of the wire
+        self.rx_latest = 0.0
+        self.rx_idle_at = 0.0
         # an inner bus with python-can's own recv() loop is read one receive step at a time
         # (its _recv_internal plus its filters): this wrapper's recv() is that same loop
         self._inner_steps = type(inner).recv is can.BusABC.recv
@@ -140,6 +318,19 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
+    def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None) -> bool:
+        """Send frames ready together (the wire orders them) minus those muted or dropped."""
+        if self.muted:
+            return True
+        if self._loss_rate > 0.0:
+            msgs = [m for m in msgs if not self._drop()]
+        batch = getattr(self._inner, "send_batch", None)
+        if batch is not None:
+            return batch(msgs, answering)
+        for msg in msgs:
+            self._inner.send(msg)
+        return True
+
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """Receive one frame, as python-can's ``BusABC.recv``; None when ``timeout`` passed.
 
@@ -150,8 +341,26 @@ class LossyBus(can.BusABC):
         """
         if (self._inner_steps and not self.drop_received and self._filters is None
                 and self._inner.filters is None):
-            return self._inner._recv_internal(timeout)[0]
-        return super().recv(timeout)
+            msg = self._inner._recv_internal(timeout)[0]
+        else:
+            msg = super().recv(timeout)
+        if msg is None:
+            self.rx_idle_at = wire_now()
+        elif msg.timestamp > self.rx_latest:
+            self.rx_latest = msg.timestamp
+        return msg
+
+    def seen_until(self) -> float:
+        """Wire time up to which every frame on the wire has been handled by this side.
+
+        Never past a frame of this process that is on the wire but not handed over yet
+        (:meth:`Wire.undelivered_since`): its sender's thread may be the one stalled.
+        """
+        seen = max(self.rx_latest, self.rx_idle_at)
+        wire = getattr(self._inner, "wire", None)
+        if wire is not None:
+            seen = min(seen, wire.undelivered_since())
+        return seen
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inner = self._inner
@@ -241,16 +450,26 @@ class BridgeNetwork(canopen.Network):
     the same lock and the same check of the receive thread.
     """
 
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> None:
-        """Send one frame (raises ``can.CanError``, RuntimeError when not connected)."""
+    #: called with every frame :meth:`send_message` sent (the master's bus load)
+    on_sent: Callable[[can.Message], None] | None = None
+    #: TPDO bursts not sent because a newer SYNC was already on the wire
+    window_missed = 0
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> WireMessage:
+        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
+        connected). On a simulated wire its ``timestamp`` is then its end on the wire."""
         if not self.bus:
             raise RuntimeError("Not connected to CAN bus")
         frame = WireMessage.frame(can_id, data, remote)
         with self.send_lock:
             self.bus.send(frame)
         self.check()
+        if self.on_sent is not None:
+            self.on_sent(frame)
+        return frame
 
-    def send_messages(self, frames: Sequence[tuple[int, bytes]]) -> list[tuple[int, can.CanError]]:
+    def send_messages(self, frames: Sequence[tuple[int, bytes]], answering: float | None = None
+                      ) -> list[tuple[int, can.CanError]]:
         """Send data frames back to back under one lock; return those that failed.
 
         The same frames as :meth:`send_message` for each, in order, with nothing of another
@@ -262,12 +481,20 @@ class BridgeNetwork(canopen.Network):
         if not bus:
             raise RuntimeError("Not connected to CAN bus")
         failed: list[tuple[int, can.CanError]] = []
-        send, frame = bus.send, WireMessage.frame
+        frame = WireMessage.frame
+        batch = getattr(bus, "send_batch", None)
         with self.send_lock:
-            for can_id, data in frames:
+            if batch is not None:
                 try:
-                    send(frame(can_id, data))
+                    if not batch([frame(can_id, data) for can_id, data in frames], answering):
+                        self.window_missed += 1
                 except can.CanError as err:
-                    failed.append((can_id, err))
+                    failed = [(frames[0][0], err)]
+            else:
+                for can_id, data in frames:
+                    try:
+                        bus.send(frame(can_id, data))
+                    except can.CanError as err:
+                        failed.append((can_id, err))
         self.check()
         return failed

@@ -35,11 +35,20 @@ DEVICE_TYPE = 0x0000_0191
 #: 0x6FFF device type of the second profile: DS406, multi-sensor encoder interface (Table 49)
 ENCODER_DEVICE_TYPE = 0x000A_0196
 DEVICE_NAME = "XN-GW-CANOPEN"
-#: 0x1018 identity. Simulation values, not Eaton's CiA vendor assignment.
+#: 0x1018 identity. 000 gives no Vendor-ID, product code or serial number: those three are
+#: simulation values (named so in the dictionary and the EDS), not Eaton's assignments. The
+#: revision number is the one figure the manual gives: "The support of XN-1SSI modules has
+#: been implemented from firmware version V3.00 of XN-GW-CANOPEN" (000 ch. 4), as CiA 301
+#: major.minor in the upper / lower 16 bits.
 VENDOR_ID = 0x0000_0000
 PRODUCT_CODE = 0x0000_6811
 SERIAL = 0x0000_0001
-REVISION = 0x0003_0000  # gateway firmware V3.00: first with XN-1SSI support (000 ch. 4)
+REVISION = 0x0003_0000
+SIMULATION = " (simulation value)"
+IDENTITY_COMMENT = (
+    "0x1018: Vendor-ID, Product code and Serial number are simulation values: the XN-1SSI "
+    "manual does not give them.\nRevision number 0x00030000 = firmware V3.00, from which "
+    "XN-GW-CANOPEN supports XN-1SSI modules (manual ch. 4).")
 #: CiA 301 PDO COB-ID bit 31: PDO does not exist / is not valid
 PDO_INVALID = 0x8000_0000
 #: CiA 301 PDO COB-ID bit 30: no RTR allowed on this PDO
@@ -233,10 +242,10 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
     d.add_object(_var("Producer heartbeat time", 0x1017, 0, dt.UNSIGNED16, "rw", 0))
     d.add_object(_record(0x1018, "Identity object", [
         _var("Highest sub-index supported", 0x1018, 0, dt.UNSIGNED8, "const", 4),
-        _var("Vendor-ID", 0x1018, 1, dt.UNSIGNED32, "ro", VENDOR_ID),
-        _var("Product code", 0x1018, 2, dt.UNSIGNED32, "ro", PRODUCT_CODE),
+        _var("Vendor-ID" + SIMULATION, 0x1018, 1, dt.UNSIGNED32, "ro", VENDOR_ID),
+        _var("Product code" + SIMULATION, 0x1018, 2, dt.UNSIGNED32, "ro", PRODUCT_CODE),
         _var("Revision number", 0x1018, 3, dt.UNSIGNED32, "ro", REVISION),
-        _var("Serial number", 0x1018, 4, dt.UNSIGNED32, "ro", SERIAL)]))
+        _var("Serial number" + SIMULATION, 0x1018, 4, dt.UNSIGNED32, "ro", SERIAL)]))
     _pdo_objects(d, node_id)
     d.add_object(_array(PROCESS_INPUT, "Process input image", slots, dt.UNSIGNED64, "ro",
                         True))
@@ -258,7 +267,7 @@ def write_eds(path: str, slots: int = MAX_SLOTS) -> None:
     d = build_dictionary(1, slots)
     d.comments = ("Objects 0x4000-0x4003 exist only in the simulated station (ssi_bridge): "
                   "fault injection.\nA real XN-GW-CANOPEN aborts access to them "
-                  "(0x06020000, object does not exist).")
+                  "(0x06020000, object does not exist).\n" + IDENTITY_COMMENT)
     stamp = {"CreationDate": "01-01-2025", "CreationTime": "12:00AM",
              "ModificationDate": "01-01-2025", "ModificationTime": "12:00AM",
              "EdsVersion": "4.2", "Description": f"XN-GW-CANOPEN with {slots} XN-1SSI"}

@@ -60,14 +60,15 @@ class Emergencies:
                 info = edge.slot << 8 | edge.emcy_value
                 self.history = ([info << 16 | EMCY_ADDITIONAL_MODULES] + self.history)[
                     :ERROR_HISTORY]
-                logger.info("slot %d: %s -> EMCY 0x%04X", edge.slot, edge.text,
-                            EMCY_ADDITIONAL_MODULES)
+                # DEBUG: the master side logs the EMCYs it receives, summarised
+                logger.debug("slot %d: %s -> EMCY 0x%04X", edge.slot, edge.text,
+                             EMCY_ADDITIONAL_MODULES)
                 if may_send:
                     self._send(EMCY_ADDITIONAL_MODULES, self.error_register,
                                EMCY_DATA.pack(edge.slot, EMCY_CHANNEL, edge.emcy_value))
         if was_active and all(not t.current for t in self._trackers):
             self.error_register = 0
-            logger.info("all module diagnostics clear -> error reset EMCY")
+            logger.debug("all module diagnostics clear -> error reset EMCY")
             if may_send:
                 self._send(0x0000, 0, bytes(5))
 

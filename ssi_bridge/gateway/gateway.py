@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -39,6 +38,7 @@ from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
 from ssi_bridge.gateway.objects import EncoderObjects
 from ssi_bridge.gateway.pdo import PdoEngine
+from ssi_bridge.gateway.timebase import ModelClock
 
 if TYPE_CHECKING:
     from ssi_bridge.module.xn1ssi import Xn1Ssi
@@ -88,17 +88,18 @@ class XnGateway:
         python-can bus (the gateway takes it over and shuts it down in :meth:`stop`)
     :param node_id: CANopen node id 1-127
     :param modules: the XN-1SSI modules in slots 1..n (1-8)
-    :param clock: time source passed to ``module.cycle`` (s)
+    :param clock: the station's model clock (wire time minus its start, ``gateway/timebase``):
+        a SYNC latches the modules at ``clock.at(frame timestamp)``
     """
 
     def __init__(self, bus: BusConfig | can.BusABC, node_id: int, modules: Sequence[Xn1Ssi],
-                 *, clock: Callable[[], float] = time.monotonic) -> None:
+                 *, clock: ModelClock | None = None) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} outside 1-127")
         self._source = bus
         self.node_id = node_id
         self.modules = list(modules)
-        self.clock = clock
+        self.clock = clock if clock is not None else ModelClock()
         self.od = build_dictionary(node_id, len(self.modules))
         self.objects = EncoderObjects(self.modules)
         self.emergencies = Emergencies(len(self.modules), self._send_emcy)
@@ -112,10 +113,11 @@ class XnGateway:
         self.node.add_write_callback(self.emergencies.on_write)
         self.node.add_write_callback(self.objects.on_write)
         self.pdo = PdoEngine(self.node, self._send_frames, self.objects.pdo_reader,
-                             self.objects.pdo_packer)
+                             self.objects.pdo_packer, lock=self._lock)
         self.bus: LossyBus | None = None
         self.network: BridgeNetwork | None = None
         self._sync_cob: int | None = None
+        self._answering: float | None = None  # wire time of the SYNC being answered
         #: SYNC cycles run so far
         self.cycles = 0
 
@@ -223,7 +225,7 @@ class XnGateway:
         """Send one SYNC cycle's TPDOs (a frame the bus refuses is logged, the rest go)."""
         if self.network is None:
             return
-        for cob_id, err in self.network.send_messages(frames):
+        for cob_id, err in self.network.send_messages(frames, self._answering):
             logger.warning("gateway could not send 0x%03X: %s", cob_id, err)
 
     def _send_emcy(self, code: int, register: int, data: bytes) -> None:
@@ -242,18 +244,17 @@ class XnGateway:
                 self._boot(reset_application=data[0] == NMT_CMD_RESET_NODE)
 
     def _acquisition_time(self, timestamp: float) -> float:
-        """Station time at which the SYNC frame was on the wire: every module latches then.
+        """Model time at which the SYNC frame was on the wire: every module latches then.
 
-        A real XN-1SSI latches on the SYNC's arrival, microseconds after it was sent; this
-        model's notifier thread may handle the frame much later (and two SYNCs back to back),
-        so the frame's receive timestamp (``time.time()`` base, set by python-can) is moved
-        into the ``clock`` base by subtracting the frame's age. Without a timestamp: now.
+        A real XN-1SSI latches on the SYNC's arrival. The frame's timestamp is the wire time
+        its last bit was on the wire (``gateway/bus.py``; on udp_multicast and socketcan the
+        kernel's receive time), so the latch is that instant in the model clock: one
+        subtraction of a constant, no clock read, whenever this thread gets to run. (It used
+        to read the model clock and ``time.time()`` in two statements: a thread switch between
+        them moved the latch back by the switch, into the previous burst's monoflop time, and
+        the module saw a line held low: a false ERR_SSI, issue 10.) Without a timestamp: now.
         """
-        now = self.clock()
-        if not timestamp:
-            return now
-        age = time.time() - timestamp
-        return now - age if 0.0 <= age < 1.0 else now
+        return self.clock.at(timestamp) if timestamp else self.clock()
 
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._lock:
@@ -270,4 +271,9 @@ class XnGateway:
             self.cycles += 1
             self.emergencies.update([m.diag for m in self.modules], may_send=True)
             if operational:
-                self.pdo.on_sync()
+                # synchronous TPDOs answer this SYNC only: not once a newer one is on the wire
+                self._answering = timestamp or None
+                try:
+                    self.pdo.on_sync()
+                finally:
+                    self._answering = None

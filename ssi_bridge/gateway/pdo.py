@@ -6,7 +6,13 @@ objects, checks writes to them as CiA 301 requires (mapping only while the PDO i
 mapped objects must exist and be mappable, at most 64 bits) and moves data:
 
 * TPDOs: transmission type 1-240 = every n-th SYNC, 254/255 = event driven: sent after a
-  SYNC cycle when the mapped data changed (000 Table 15, "normally 255");
+  SYNC cycle when the mapped data changed (000 Table 15, "normally 255"). CiA 301 sub 3
+  inhibit time (x 100 µs): an event-driven TPDO is not sent again before it has passed since
+  the last transmission; a change meanwhile goes out when it ends. Sub 5 event timer (ms,
+  0 = off): an event-driven TPDO is also sent when that long passed without a transmission
+  (its timer restarts with every transmission). The inhibit time may only be written while
+  the TPDO is invalid (CiA 301); both act through a timer thread that runs only while some
+  TPDO needs it;
 * RPDOs: 0-240 = applied at the next SYNC, 254/255 = applied on reception.
 PDOs move only in NMT OPERATIONAL (the gateway checks the state before calling in).
 
@@ -22,6 +28,8 @@ from __future__ import annotations
 
 import logging
 import struct
+import threading
+import time
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
@@ -64,6 +72,13 @@ class _Pdo:
     entries: list[tuple[int, int, int]]  # (index, subindex, bits)
     last: bytes | None = None
     pending: bytes | None = None
+    #: CiA 301 sub 3 inhibit time (s) and sub 5 event timer (s, 0 = off); TPDOs only
+    inhibit_s: float = 0.0
+    event_s: float = 0.0
+    #: clock time of the last transmission (None: never sent)
+    sent_at: float | None = None
+    #: a change held back by the inhibit time, sent when it ends
+    held: bytes | None = None
     #: one reader per entry (TPDOs), fixed until the parameters are reloaded
     readers: list[Reader] = field(default_factory=list)
     #: reader of the whole payload (TPDOs): a packer, the only entry's reader or
@@ -84,11 +99,21 @@ class PdoEngine:
 
     def __init__(self, node: canopen.LocalNode, send: SendMany,
                  fast_reader: FastReader | None = None,
-                 fast_packer: FastPacker | None = None) -> None:
+                 fast_packer: FastPacker | None = None, *,
+                 lock: threading.RLock | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._node = node
         self._send = send
         self._fast_reader = fast_reader
         self._fast_packer = fast_packer
+        #: held while the timer thread reads and sends (the gateway's lock: no module cycle
+        #: runs meanwhile)
+        self._lock = lock if lock is not None else threading.RLock()
+        self._clock = clock
+        self._timed: list[_Pdo] = []  # event-driven TPDOs with an inhibit time or event timer
+        self._timer: threading.Thread | None = None
+        self._wake = threading.Event()
+        self._stopping = False
         self.tpdos: list[_Pdo] = []
         self.rpdos: list[_Pdo] = []
         self._active: list[_Pdo] = []  # the valid, mapped TPDOs
@@ -106,7 +131,11 @@ class PdoEngine:
         for sub in range(1, self._u(mapping, 0) + 1):
             value = self._u(mapping, sub)
             entries.append((value >> 16, (value >> 8) & 0xFF, value & 0xFF))
-        return _Pdo(number, cob & 0x7FF, not cob & PDO_INVALID, self._u(com, 2), entries)
+        pdo = _Pdo(number, cob & 0x7FF, not cob & PDO_INVALID, self._u(com, 2), entries)
+        if com >= TPDO_COM:
+            pdo.inhibit_s = self._u(com, 3) / 10_000   # CiA 301: multiples of 100 µs
+            pdo.event_s = self._u(com, 5) / 1_000      # CiA 301: ms
+        return pdo
 
     def _reader(self, index: int, subindex: int) -> Reader:
         fast = self._fast_reader(index, subindex) if self._fast_reader else None
@@ -124,6 +153,11 @@ class PdoEngine:
             else:
                 pdo.read = pdo.readers[0] if len(pdo.readers) == 1 else pdo.joined
         self._active = [pdo for pdo in self.tpdos if pdo.valid and pdo.entries]
+        self._timed = [pdo for pdo in self._active
+                       if pdo.trans_type >= 254 and (pdo.inhibit_s > 0 or pdo.event_s > 0)]
+        if self._timed:
+            self._start_timer()
+        self._wake.set()
         self.rpdos = [self._load(RPDO_COM + n, RPDO_MAP + n, n + 1) for n in range(N_PDOS)]
         network = self._node.network
         for cob, callback in self._subscribed.items():
@@ -136,10 +170,70 @@ class PdoEngine:
                 self._subscribed[pdo.cob_id] = callback
 
     def detach(self) -> None:
-        """Unsubscribe every RPDO (gateway stop)."""
+        """Unsubscribe every RPDO and end the timer thread (gateway stop)."""
         for cob, callback in self._subscribed.items():
             self._node.network.unsubscribe(cob, callback)
         self._subscribed = {}
+        timer, self._timer = self._timer, None
+        if timer is not None:
+            self._stopping = True
+            self._wake.set()
+            if timer is not threading.current_thread():
+                timer.join(2.0)
+            self._stopping = False
+
+    # -- inhibit time and event timer (CiA 301 sub 3 / sub 5) --------------------------------
+    def _start_timer(self) -> None:
+        if self._timer is None or not self._timer.is_alive():
+            self._timer = threading.Thread(target=self._run_timer, name="tpdo_timer",
+                                           daemon=True)
+            self._timer.start()
+
+    def _run_timer(self) -> None:
+        while not self._stopping:
+            delay = 0.05
+            self._wake.clear()  # before the tick: a wake-up during it is not lost
+            # a timed acquire: stop() holds the lock while it waits for this thread to end
+            if not self._lock.acquire(timeout=0.05):
+                continue
+            try:
+                if self._stopping:
+                    break
+                delay = self.tick()
+            except Exception:  # noqa: BLE001 - the timer must outlive one bad read
+                logger.exception("TPDO timer failed")
+            finally:
+                self._lock.release()
+            self._wake.wait(max(delay, 0.0005))
+
+    def tick(self) -> float:
+        """Send what the inhibit time held back or an event timer calls for; next wait (s)."""
+        if not self._timed or self._node.nmt.state != "OPERATIONAL":
+            return 0.05
+        now = self._clock()
+        frames: list[tuple[int, bytes]] = []
+        due = 0.05
+        for pdo in self._timed:
+            since = now - pdo.sent_at if pdo.sent_at is not None else None
+            if pdo.held is not None:
+                if since is None or since >= pdo.inhibit_s:
+                    frames.append(self._sent(pdo, pdo.held, now))
+                    since = 0.0
+                else:
+                    due = min(due, pdo.inhibit_s - since)
+            if pdo.event_s > 0:
+                if since is None or since >= pdo.event_s:
+                    frames.append(self._sent(pdo, pdo.read(), now))
+                    since = 0.0
+                due = min(due, pdo.event_s - since)
+        if frames:
+            self._send(frames)
+        return due
+
+    @staticmethod
+    def _sent(pdo: _Pdo, data: bytes, now: float) -> tuple[int, bytes]:
+        pdo.last, pdo.held, pdo.sent_at = data, None, now
+        return pdo.cob_id, data
 
     def check_write(self, index: int, subindex: int, data: bytes) -> None:
         """Refuse a PDO parameter write CiA 301 forbids (raises ``SdoAbortedError``)."""
@@ -160,6 +254,9 @@ class PdoEngine:
                     raise SdoAbortedError(SdoAbort.INVALID_VALUE)  # 29-bit ids not supported
             elif subindex == 2 and 240 < data[0] < 252:
                 raise SdoAbortedError(SdoAbort.INVALID_VALUE)
+            elif subindex == 3 and valid and is_tx:
+                # CiA 301: the inhibit time shall not be changed while the PDO exists
+                raise SdoAbortedError(SdoAbort.CANNOT_STORE_STATE)
             return
         if valid:
             raise SdoAbortedError(SdoAbort.CANNOT_STORE_STATE)
@@ -206,8 +303,19 @@ class PdoEngine:
                 elif trans >= 254:
                     data = pdo.read()
                     if data != pdo.last:
-                        pdo.last = data
-                        frames.append((pdo.cob_id, data))
+                        if pdo.inhibit_s > 0 or pdo.event_s > 0:
+                            now = self._clock()
+                            if (pdo.inhibit_s > 0 and pdo.sent_at is not None
+                                    and now - pdo.sent_at < pdo.inhibit_s):
+                                pdo.held = data  # goes out when the inhibit time ends
+                                self._wake.set()
+                                continue
+                            frames.append(self._sent(pdo, data, now))
+                        else:
+                            pdo.last = data
+                            frames.append((pdo.cob_id, data))
+                    elif pdo.held is not None:
+                        pdo.held = None  # changed back within the inhibit time: no change
         finally:  # a reader that raises still lets the TPDOs before it go, as frame by frame
             if frames:
                 self._send(frames)

@@ -16,7 +16,11 @@ import yaml
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.gateway.bus import BusConfig
 
-DEFAULT_PARA1 = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary, ZERO test on
+#: REG_PARA1 the node writes unless told otherwise: 25-bit binary frame, ZERO test on (the
+#: module's factory values, 000 Table 19) at 250 kbit/s instead of the factory 500 kbit/s:
+#: 004 §2.7 recommends < 400 kHz even for the shortest cables (< 50 m), and the default
+#: simulated cable is 10 m. A default the manuals call fine, so it starts without a warning.
+DEFAULT_PARA1 = 0x19020000
 MOTION_KINDS = ("constant", "still", "sine")
 CODES = ("", "binary", "gray")
 #: the station reads these node-wide parameters (defaults as the node declares them)
@@ -61,6 +65,8 @@ class JointSettings:
     #: simulated SSI cable length (m): sets the line delay and the 004 §2.7 bit-rate check
     cable_length: float = 10.0
     para1: int = DEFAULT_PARA1
+    #: REG_SSI_MASK written at start-up (000 Table 3, object 0x5840); -1: leave it as stored
+    ssi_mask: int = -1
     #: 0: take it from the simulated encoder family
     steps_per_rev: int = 0
     revolutions: int = 0

@@ -3,8 +3,9 @@
 A master injects a fault by writing 0x4000 (rate), 0x4001 (duration in ms) and then
 0x4002 (command: kind in bits 0-7, slot in bits 8-15, slot 0 = the bus); 0x4003 reads the
 kinds in force as a bit mask. Each fault acts where a real one would: a broken wire or noise
-on a slot's SSI line, an error or power-failure bit in its encoder, lost CAN frames or a
-silent gateway on the bus. Objects in ``docs/canopen.md`` and ``config/xn_gw_canopen.eds``.
+on a slot's SSI line, an error or power-failure bit in its encoder, an invalid REG_PARA1 set
+at its module's parameter interface (ERR_PARA), lost CAN frames or a silent gateway on the
+bus. Objects in ``docs/canopen.md`` and ``config/xn_gw_canopen.eds``.
 
 The station keeps the time itself: a fault with a duration is cleared on the station's clock,
 also while the gateway is silent, so nothing depends on a master reaching it. A clear
@@ -47,6 +48,7 @@ class FaultKind(IntEnum):
     BIT_NOISE = 5
     CAN_FRAME_LOSS = 6
     GATEWAY_SILENT = 7
+    INVALID_PARA1 = 8
 
 
 #: faults of the bus or gateway (slot 0 in the command)
@@ -236,3 +238,10 @@ class SimulationControl:
             channel.encoder.set_error(on)
         elif kind is FaultKind.POWER_FAILURE:
             channel.encoder.power_failure = on
+        elif kind is FaultKind.INVALID_PARA1:
+            # an invalid set reaches the module's parameter interface (ERR_PARA, EMCY 0x7000 /
+            # 0x10), past the master's own check; the clear sends the valid set again
+            if on:
+                channel.module.inject_parameter_error()
+            else:
+                channel.module.clear_parameter_error()

@@ -11,7 +11,6 @@ process or in one of its own (``station`` executable, :mod:`ssi_bridge.gateway.s
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ from ssi_bridge.encoder.families import make_encoder
 from ssi_bridge.encoder.motion import ConstantVelocity, MotionProfile, Sine, Still
 from ssi_bridge.gateway.bus import BusConfig
 from ssi_bridge.gateway.gateway import XnGateway
+from ssi_bridge.gateway.timebase import ModelClock
 from ssi_bridge.gateway.settings import JointSettings, MotionSettings, StationSettings
 from ssi_bridge.gateway.simulation import SimulationControl
 from ssi_bridge.line.line import LineConfig, SsiLine
@@ -153,16 +153,18 @@ class Station:
 
     def __init__(self, settings: StationSettings, bus: can.BusABC | None = None) -> None:
         self.settings = settings
-        self._t0 = time.monotonic()
+        #: the model clock: wire time since the station was built (gateway/timebase), the
+        #: base its SYNC frames' timestamps latch the modules in
+        self.model_clock = ModelClock()
         self.sim = SimStation(settings.joints, settings.storage_path)
         source: BusConfig | can.BusABC = settings.bus if bus is None else bus
         self.gateway = XnGateway(source, settings.bus.node_id, self.sim.modules,
-                                 clock=self.clock)
+                                 clock=self.model_clock)
         self.control = SimulationControl(self.sim, self.gateway)
 
     def clock(self) -> float:
         """Seconds since the station was built: the time the simulated shafts move on."""
-        return time.monotonic() - self._t0
+        return self.model_clock()
 
     def start(self) -> None:
         """Join the bus and boot (boot-up message, PRE-OPERATIONAL); serve the fault objects."""

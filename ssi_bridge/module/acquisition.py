@@ -7,10 +7,12 @@
 * :func:`limits` - STS_OFLW / STS_UFLW (Tables 1 and 2).
 * :func:`direction` - STS_UP / STS_DN (process input byte 6).
 
-32-bit register values are compared as Integer32 (two's complement): object 0x6820, which
-*is* REG_SSI_POS, and the CAM limits 0x6B10/0x6B20 (= REG_CMP2/REG_CMP1) are Integer32, and
-REG_SSI_POS = encoder - REG_OFFSET goes negative below the offset.  The limit defaults
-0xFFFFFFFF / 0 are sentinels that switch monitoring off (Tables 1, 2), not compared values.
+The comparators compare as Integer32 (two's complement): object 0x6820, which *is*
+REG_SSI_POS, and the CAM limits 0x6B10/0x6B20 (= REG_CMP2/REG_CMP1) are Integer32.  The
+limits compare as Unsigned32: "The limit values are set by default to the maximum and
+minimum value" (000 "Lower limit, upper limit") with defaults 0xFFFFFFFF and 0, and Table 1
+"Register content of REG_UPPER_LIMIT less than FFFFFFFF hex", Table 2 "greater than 0" -
+maximum and minimum only as unsigned numbers; no statement of the manual makes them signed.
 """
 
 from __future__ import annotations
@@ -22,7 +24,6 @@ from ssi_bridge.line.decode import XN_MAX_FRAME_BITS, MasterStatus, check_readou
 from ssi_bridge.line.readout import LineReadout
 from ssi_bridge.module.diagnostics import to_int32
 from ssi_bridge.module.para1 import Para1
-from ssi_bridge.module.registers import VALUE_MAX
 
 
 __all__ = ["Acquired", "bin_to_gray", "compare", "direction", "extract", "gray_to_bin",
@@ -103,13 +104,13 @@ def compare(pos: int, cmp_value: int, *, enabled: bool, clear: bool,
 
 
 def limits(pos: int, lower: int, upper: int) -> tuple[bool, bool]:
-    """(STS_OFLW, STS_UFLW) per 000 Tables 1 and 2: active only off the default values."""
-    if upper == VALUE_MAX and lower == 0:
-        return False, False  # both limits at their defaults: monitoring off, nothing to read
-    p = to_int32(pos)
-    oflw = upper != VALUE_MAX and p > to_int32(upper)
-    uflw = lower != 0 and p < to_int32(lower)
-    return oflw, uflw
+    """(STS_OFLW, STS_UFLW) per 000 Tables 1 and 2, compared as Unsigned32.
+
+    At the defaults (upper 0xFFFFFFFF, lower 0) no unsigned value can be above / below them,
+    which is why the tables give STS_OFLW = STS_UFLW = 0 there.  A REG_SSI_POS that went
+    "negative" below REG_OFFSET is a large unsigned number: above an active upper limit.
+    """
+    return pos > upper, pos < lower
 
 
 def direction(previous: int | None, current: int, width: int) -> tuple[bool, bool]:

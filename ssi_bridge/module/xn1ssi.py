@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from ssi_bridge.exceptions import RegisterReadError, RegisterWriteError
+from ssi_bridge.exceptions import ParameterError, RegisterReadError, RegisterWriteError
 from ssi_bridge.line.readout import LineReadout, SsiReader
 from ssi_bridge.module import acquisition
 from ssi_bridge.module.bank import Endurance, RegisterBank
@@ -270,6 +270,30 @@ class Xn1Ssi:
         a "non-retentive error message, and rejected parameter set with it").
         """
         self.bank.write_para1(value)
+
+    def inject_parameter_error(self, value: int | None = None) -> str:
+        """Simulation: an invalid REG_PARA1 set reaches the parameter interface; the reason.
+
+        Bypasses every master-side check, so ERR_PARA = 1 (and STS_STOP = 1, diagnostics bit
+        4, EMCY 0x7000 byte 5 = 0x10 "Parameter error", 000 "Additional emergencies") can be
+        exercised end to end.  Default: the set in force with the reserved SSI_BIT_RATE 8
+        (000 Table 19: 8..15 reserved).  REG_PARA1 keeps its valid value, as the manual says
+        of a rejected set; :meth:`clear_parameter_error` sends that valid set again.
+        """
+        if value is None:
+            value = (self.bank.para.encode() & ~0x000F0000) | (8 << 16)
+        reason = validate_para1(value)
+        if reason is None:
+            raise ValueError(f"REG_PARA1 0x{value:08X} is valid: it cannot raise ERR_PARA")
+        try:
+            self.bank.write_para1(value)
+        except ParameterError:
+            pass
+        return reason
+
+    def clear_parameter_error(self) -> None:
+        """Simulation: send the REG_PARA1 set in force again, which clears ERR_PARA (000)."""
+        self.bank.write_para1(self.bank.para.encode())
 
     @staticmethod
     def validate_para1(value: int) -> str | None:

@@ -105,7 +105,7 @@ def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
                 t1 = points[i + 1][0] if i + 1 < len(points) else data.end_s
                 ax.broken_barh([(t0, max(t1 - t0, 1e-6))], (y - 0.4, 0.8),
                                color=LEVEL_COLOURS.get(level, "black"), lw=0)
-        ax.set_yticks(range(len(names)), [n.replace("ssi_bridge: ", "") for n in names],
+        ax.set_yticks(range(len(names)), [n.split(": ", 1)[-1] for n in names],
                       fontsize=7)
         ax.set_ylim(-0.6, len(names) - 0.4)
         ax.set_ylabel("diagnostics", fontsize=8)

@@ -4,7 +4,9 @@ The recorder closes a chunk and flushes the file every half second, so everythin
 last flush is a sequence of complete MCAP records. Recovery reads records sequentially up to
 the first incomplete or corrupt one, then rewrites the file with the same schemas, channels
 and messages plus chunk indexes, message indexes, statistics and summary, and writes
-metadata.yaml. The original file is replaced only after the new one is complete.
+metadata.yaml. The original file is replaced only after the new one and metadata.yaml are
+complete; a write error (disk full) removes the partial files and leaves the bag as it was
+(RecordingError).
 Documented command: ``ros2 run ssi_bridge replay --recover DIR``.
 """
 
@@ -24,11 +26,11 @@ from mcap.writer import CompressionType, Writer
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record.bag import BagSummary
 from ssi_bridge.record.metadata import (
+    METADATA_FILE,
     ROS_DISTRO,
     BagInfo,
     TopicInfo,
     metadata_text,
-    write_metadata,
 )
 
 logger = logging.getLogger(__name__)
@@ -84,12 +86,38 @@ def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
         raise RecordingError(f"{source}: no channel record survived; nothing to recover")
     messages.sort(key=lambda m: m.log_time)
     tmp = source.with_name(source.name + ".recovering")
+    meta_tmp = directory / f".{METADATA_FILE}.recovering"
     kind = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4}.get(
         compression, CompressionType.NONE)
     topics = {c.id: TopicInfo(c.topic, next((s.name for s in schemas if s.id == c.schema_id), ""),
                               c.metadata.get("offered_qos_profiles", ""),
                               c.metadata.get("topic_type_hash", "")) for c in channels}
     info = BagInfo(source.name, list(topics.values()))
+    try:
+        _write(tmp, kind, schemas, channels, messages, metadata, topics, info)
+        with open(meta_tmp, "w", encoding="utf-8") as meta:
+            meta.write(metadata_text(info))
+            meta.flush()
+            os.fsync(meta.fileno())
+    except OSError as err:
+        # a full disk: leave nothing behind (no 0-byte .recovering), the bag as it was
+        for leftover in (tmp, meta_tmp):
+            leftover.unlink(missing_ok=True)
+        raise RecordingError(
+            f"{directory}: writing the recovered bag failed: {err.strerror or err}"
+            f" (errno {err.errno}); nothing was changed, the bag is as it was") from err
+    os.replace(tmp, source)
+    os.replace(meta_tmp, directory / METADATA_FILE)
+    logger.info("recovered %s: %d messages (%s)", directory, info.message_count,
+                "file was complete" if complete else "file was truncated")
+    return BagSummary(directory, info.message_count, info.duration_ns / 1e9,
+                      {t.name: t.message_count for t in info.topics})
+
+
+def _write(tmp: Path, kind: CompressionType, schemas: list[Schema], channels: list[Channel],
+           messages: list[Message], metadata: list[Metadata], topics: dict[int, TopicInfo],
+           info: BagInfo) -> None:
+    """Write the rebuilt MCAP file to ``tmp`` (fsync'd); OSError on a write error."""
     with open(tmp, "wb") as out:
         writer = Writer(out, compression=kind)
         writer.start(profile="ros2", library="ssi_bridge recover")
@@ -113,9 +141,3 @@ def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
         writer.finish()
         out.flush()
         os.fsync(out.fileno())
-    os.replace(tmp, source)
-    write_metadata(directory, info)
-    logger.info("recovered %s: %d messages (%s)", directory, info.message_count,
-                "file was complete" if complete else "file was truncated")
-    return BagSummary(directory, info.message_count, info.duration_ns / 1e9,
-                      {t.name: t.message_count for t in info.topics})

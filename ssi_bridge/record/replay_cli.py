@@ -75,7 +75,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.recover:
             from ssi_bridge.record.recover import recover_bag
-            summary = recover_bag(args.bag)
+            try:
+                summary = recover_bag(args.bag)
+            except OSError as err:  # unreadable file or directory: say which, no traceback
+                raise RecordingError(f"--recover {args.bag}: {err}") from err
             print(f"recovered {summary.directory}: {summary.message_count} messages, "
                   f"{summary.duration:.3f} s")
             return 0

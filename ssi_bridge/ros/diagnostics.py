@@ -6,17 +6,27 @@ Level mapping (docs/node.md has the table):
 condition                                           level
 =================================================  =========
 no fresh sample for ``stale_cycles`` cycles          STALE
+>= 50 % of the cycles of the last 0.5 s stale        ERROR
 ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
+>= 10 % of the cycles of the last 0.5 s stale        WARN
+a jump beyond ``max_speed`` in the last 0.5 s        WARN
 STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
 otherwise                                           OK
 gateway silent (no heartbeat) / not connected       ERROR (bus)
 achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 =================================================  =========
+
+A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
+has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
+so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
+better level held CLEAR_AFTER_S.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
@@ -35,9 +45,15 @@ class ChannelCounters:
     consecutive_stale: int = 0
     error_cycles: int = 0
     handshake_failures: int = 0
+    #: samples whose step from the previous one exceeded ``<joint>.max_speed``
+    implausible: int = 0
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0
+    #: cycles whose frame failed the parity / filler check, and the latest verdict
+    #: (a ``FrameVerdict``, None when the latest image carried no checked frame)
+    frame_errors: int = 0
+    frame: Any = None
 
     @property
     def last_input(self) -> ProcessInput | None:
@@ -79,23 +95,169 @@ def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
     return OK, "reading"
 
 
-def channel_status(joint: str, hardware_id: str, counters: ChannelCounters, stale_limit: int,
-                   position: float) -> DiagnosticStatus:
-    """The DiagnosticStatus ``ssi_bridge: <joint>`` with every status bit as a key/value."""
+#: window (s) over which the stale ratio and implausible jumps are counted
+RATIO_WINDOW_S = 0.5
+#: stale ratio (stale cycles / cycles in the window) at or above which a joint is WARN / ERROR
+STALE_RATIO_WARN = 0.10
+STALE_RATIO_ERROR = 0.50
+#: the ratio counts only over at least this many cycles, and from 2 windows after the first
+#: sample on (the cycles of the start-up say little about the link)
+MIN_WINDOW_CYCLES = 10
+#: a worse level is published once it held this long; a better one once it held this long
+RAISE_AFTER_S = 0.1
+CLEAR_AFTER_S = 1.0
+
+
+def status_name(node_fqn: str, item: str) -> str:
+    """``<node FQN>: <item>`` (e.g. ``/station_a/ssi_bridge: shoulder``): unique per bridge."""
+    return f"{node_fqn}: {item}"
+
+
+class ChannelHealth:
+    """One joint's level over time: stale ratio and jumps over a window, debounced changes.
+
+    :meth:`observe` runs every cycle (cheap: a deque of the window's cycles and a short list of
+    level changes); :attr:`level` / :attr:`message` are what the diagnostics publish.
+    """
+
+    def __init__(self, window_s: float = RATIO_WINDOW_S, raise_after_s: float = RAISE_AFTER_S,
+                 clear_after_s: float = CLEAR_AFTER_S) -> None:
+        self.window_s = window_s
+        self.raise_after_s = raise_after_s
+        self.clear_after_s = clear_after_s
+        #: (time, stale, implausible) of each cycle in the window
+        self._cycles: deque[tuple[float, bool, bool]] = deque()
+        self.stale_in_window = 0
+        self.jumps_in_window = 0
+        #: the raw level once a rise held RAISE_AFTER_S (falls at once)
+        self._confirmed = STALE
+        #: time of the first sample (the stale ratio counts from two windows after it)
+        self._first_t: float | None = None
+        #: a sample has been seen (before it, STALE "no sample received yet" is no condition)
+        self._sampled = False
+        #: (since, lowest raw level) while the raw level is above ``_confirmed``
+        self._up: tuple[float, int] | None = None
+        #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
+        self._history: deque[tuple[float, int]] = deque()
+        self.level = STALE
+        self.message = "no sample received yet"
+        self._messages: dict[int, str] = {STALE: self.message}
+
+    @property
+    def stale_ratio(self) -> float:
+        """Stale cycles / cycles over the window (0 before any cycle)."""
+        return self.stale_in_window / len(self._cycles) if self._cycles else 0.0
+
+    def observe(self, now: float, *, stale: bool, implausible: bool, sts: int | None,
+                consecutive_stale: int, stale_limit: int) -> int:
+        """Count one cycle and return the debounced level."""
+        cycles = self._cycles
+        cycles.append((now, stale, implausible))
+        self.stale_in_window += stale
+        self.jumps_in_window += implausible
+        horizon = now - self.window_s
+        while cycles and cycles[0][0] < horizon:
+            _t, was_stale, was_jump = cycles.popleft()
+            self.stale_in_window -= was_stale
+            self.jumps_in_window -= was_jump
+        raw, message = channel_level(sts, consecutive_stale, stale_limit)
+        ratio = self.stale_in_window / len(cycles)
+        if self._first_t is None and sts is not None:
+            self._first_t = now
+        settled = self._first_t is not None and now - self._first_t >= 2 * self.window_s
+        if raw != STALE and settled and len(cycles) >= MIN_WINDOW_CYCLES:
+            if ratio >= STALE_RATIO_ERROR and raw < ERROR:
+                raw, message = ERROR, self._ratio_text(ratio, len(cycles))
+            elif ratio >= STALE_RATIO_WARN and raw < WARN:
+                raw, message = WARN, self._ratio_text(ratio, len(cycles))
+            elif self.jumps_in_window and raw < WARN:
+                raw, message = WARN, (f"position jumped faster than max_speed "
+                                      f"({self.jumps_in_window} sample(s) in the last "
+                                      f"{self.window_s:g} s)")
+        self._messages[raw] = message
+        return self._debounce(now, raw)
+
+    def _ratio_text(self, ratio: float, n: int) -> str:
+        return (f"{ratio:.0%} of the last {n} cycles stale ({self.window_s:g} s; WARN from "
+                f"{STALE_RATIO_WARN:.0%}, ERROR from {STALE_RATIO_ERROR:.0%})")
+
+    def _debounce(self, now: float, raw: int) -> int:
+        """Two stages. ``confirmed`` follows the raw level down at once but up only when the
+        worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
+        follows ``confirmed`` up at once and down to the worst confirmed level of the last
+        CLEAR_AFTER_S, so it falls only when the better level held that long."""
+        if not self._sampled:
+            if raw == STALE:
+                return self.level  # still no sample: nothing to debounce yet
+            # the first sample: "no sample yet" is no condition to hold on to
+            self._sampled = True
+            self._confirmed = self.level = raw
+            self._history.append((now, raw))
+            self.message = self._messages[raw]
+            return raw
+        confirmed = self._confirmed
+        if raw < confirmed:
+            confirmed, self._up = raw, None
+        elif raw > confirmed:
+            if self._up is None:
+                self._up = (now, raw)
+            elif raw < self._up[1]:
+                self._up = (self._up[0], raw)
+            if now - self._up[0] >= self.raise_after_s:
+                confirmed, self._up = self._up[1], None
+        else:
+            self._up = None
+        history = self._history
+        if confirmed != self._confirmed or not history:
+            history.append((now, confirmed))
+        self._confirmed = confirmed
+        horizon = now - self.clear_after_s
+        while len(history) > 1 and history[1][0] <= horizon:
+            history.popleft()  # history[0] stays the level in force at the horizon
+        if confirmed > self.level:
+            self.level = confirmed
+        elif confirmed < self.level and history[0][0] <= horizon:
+            worst = max(level for _t, level in history)
+            if worst < self.level:
+                self.level = worst
+        self.message = self._messages.get(self.level, self.message)
+        return self.level
+
+
+def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
+                   health: ChannelHealth, position: float,
+                   extra: dict[str, str] | None = None) -> DiagnosticStatus:
+    """A joint's DiagnosticStatus (``<node FQN>: <joint>``), every status bit a key/value."""
     inp = counters.last_input
-    level, message = channel_level(counters.last_sts, counters.consecutive_stale, stale_limit)
     values = {
         "position": f"{position:.6f}",
         "REG_SSI_POS": str(counters.last_position),
         "samples": str(counters.samples),
         "stale_cycles": str(counters.stale_cycles),
+        "stale_ratio": f"{health.stale_ratio:.3f}",
         "error_cycles": str(counters.error_cycles),
         "handshake_failures": str(counters.handshake_failures),
+        "implausible_jumps": str(counters.implausible),
     }
+    values.update(extra or {})
     if inp is not None:
         values.update({name: str(value) for name, value in inp.bits().items()})
+    frame = counters.frame
+    values["frame_errors"] = str(counters.frame_errors)
+    if frame is not None:
+        values.update({"POWER_FAILURE": str(frame.power_failure),
+                       "ENCODER_ERROR": str(frame.encoder_error),
+                       "PARITY_ERROR": str(frame.parity_error),
+                       "FILLER_ERROR": str(frame.filler_error)})
+        if level < ERROR and frame.power_failure:
+            level, message = ERROR, "POWER_FAILURE: the encoder's PowerFail bit is set (003)"
+        elif level < WARN and (frame.parity_error or frame.filler_error or frame.encoder_error):
+            level = WARN
+            message = ("parity error (001 5.5.7)" if frame.parity_error else
+                       "bit that must be 0 read as 1 (004 3)" if frame.filler_error else
+                       "encoder error bit set")
     return DiagnosticStatus(
-        level=level, name=f"ssi_bridge: {joint}", message=message, hardware_id=hardware_id,
+        level=health.level, name=name, message=health.message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
@@ -142,4 +304,5 @@ def station_status(name: str, hardware_id: str, *, alive: bool, nmt_state: str,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
-__all__ = ["ChannelCounters", "bus_status", "channel_level", "channel_status", "station_status"]
+__all__ = ["ChannelCounters", "ChannelHealth", "bus_status", "channel_level", "channel_status",
+           "station_status", "status_name"]

@@ -1,29 +1,51 @@
 """``ros2 run ssi_bridge ssi_bridge_node``: start the bridge, stop it cleanly on SIGINT/SIGTERM.
 
-rclpy's own signal handlers (SIGINT and SIGTERM) shut the context down; the executor then
-returns, the node closes its recording and bus, and the process exits 0 — also when the
-signal arrives while the node is still starting. A start-up failure (bad parameter, bus that
-cannot be opened, gateway that does not answer) exits 1 with the reason on one line instead
-of a traceback.
+Any number of SIGINT/SIGTERM at any moment ends in exit 0 with the recording closed (summary
+and metadata.yaml) and the bus closed. ``ros2 launch`` forwards the terminal's Ctrl-C, so the
+node sees SIGINT twice, often milliseconds apart; the second one must not interrupt the
+shutdown the first one started:
+
+* until the handlers below are in place nothing is open, and a stop signal is a plain exit 0;
+* from then on a signal only wakes a watcher thread (``signal.set_wakeup_fd``); the Python
+  handler itself does nothing, so no KeyboardInterrupt ever lands inside a shutdown step;
+* the watcher stops the executor; the main thread then closes the recording and the bus while
+  the ROS context is still valid (its log lines reach /rosout, no "Failed to publish log
+  message to rosout"), and only then shuts the context down. Later signals are no-ops.
+
+A start-up failure (bad parameter or params file, bus that cannot be opened, gateway that does
+not answer) exits 1 with the reason on one line instead of a traceback.
 """
 
 from __future__ import annotations
 
 import signal
+import socket
 import sys
+import threading
+import time
+from collections.abc import Callable
+
+#: the stop signals a launch system or a terminal sends
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: longest reason printed for a start-up error (an echoed 1 MB value stays readable)
+MAX_REASON = 400
+#: seconds a stop waits for callbacks still running (a register handshake takes < 1 s)
+CALLBACK_DRAIN_S = 5.0
 
 
 def _stopped_while_importing(signum: int, _frame: object) -> None:
-    sys.exit(0)  # nothing is open yet: a stop request during start-up is a clean exit
+    raise SystemExit(0)  # nothing is open yet: a stop request during start-up is a clean exit
 
 
-# importing rclpy takes a few hundred ms; until rclpy.init() installs its handlers, SIGTERM
-# would kill the process with 143 instead of the clean exit a launch system expects
-signal.signal(signal.SIGTERM, _stopped_while_importing)
+# importing rclpy takes a few hundred ms; until the node's own handlers are in place a stop
+# signal would otherwise end in a KeyboardInterrupt traceback (SIGINT) or exit 143 (SIGTERM)
+for _sig in STOP_SIGNALS:
+    signal.signal(_sig, _stopped_while_importing)
 
 import rclpy  # noqa: E402
 from rclpy.exceptions import NameValidationException, ParameterException  # noqa: E402
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
 
 from ssi_bridge.exceptions import SsiBridgeError  # noqa: E402
 
@@ -31,42 +53,179 @@ from ssi_bridge.exceptions import SsiBridgeError  # noqa: E402
 START_ERRORS = (SsiBridgeError, ParameterException, NameValidationException, ValueError, OSError)
 
 
+class StopRequests:
+    """Stop signals, seen by a watcher thread through ``signal.set_wakeup_fd``.
+
+    The Python-level handler does nothing (it only has to exist so that CPython's C handler
+    writes the signal number to the wake-up socket); the watcher thread sets :attr:`event`
+    and calls the ``on_stop`` callbacks once, at the first signal.
+    """
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.signum = 0
+        self._callbacks: list[Callable[[], None]] = []
+        self._lock = threading.Lock()
+        self._reader, self._writer = socket.socketpair()
+        self._writer.setblocking(False)
+
+    @property
+    def requested(self) -> bool:
+        """True once a stop signal (or :meth:`request`) arrived."""
+        return self.event.is_set()
+
+    def install(self) -> None:
+        """Route SIGINT and SIGTERM to the watcher (main thread only)."""
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, _ignore)
+        signal.set_wakeup_fd(self._writer.fileno(), warn_on_full_buffer=False)
+        threading.Thread(target=self._watch, name="stop-signals", daemon=True).start()
+
+    def on_stop(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` at the first stop (at once if it already happened)."""
+        with self._lock:
+            if not self.event.is_set():
+                self._callbacks.append(callback)
+                return
+        callback()
+
+    def request(self) -> None:
+        """Stop as if a signal had arrived (e.g. the end of a replayed log)."""
+        with self._lock:
+            if self.event.is_set():
+                return
+            self.event.set()
+            callbacks, self._callbacks = self._callbacks, []
+        for callback in callbacks:
+            callback()
+
+    def _watch(self) -> None:
+        while True:
+            data = self._reader.recv(64)
+            if not data:
+                return
+            if not self.event.is_set():
+                self.signum = data[0]
+                self.request()
+
+
+def _ignore(_signum: int, _frame: object) -> None:
+    """The Python side of a stop signal: nothing (the watcher thread acts on it)."""
+
+
+def one_line(err: object, limit: int = MAX_REASON) -> str:
+    """``err`` as one line of at most ``limit`` characters (rcl errors span several lines)."""
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= limit else text[: limit - 14] + f"... ({len(text)} chars)"
+
+
+def params_file_problem(argv: list[str]) -> str | None:
+    """Why a ``--params-file`` on the command line cannot be used, in one line, or None.
+
+    rcl would report it too, but over several lines (its own log line, then the error with
+    source positions); checked first, a missing or malformed file is one clear line.
+    """
+    import yaml
+
+    for flag, path in zip(argv, argv[1:]):
+        if flag != "--params-file":
+            continue
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = yaml.safe_load(f)
+        except OSError as err:
+            return f"params file {one_line(path, 200)}: {err.strerror or err}"
+        except yaml.YAMLError as err:
+            return f"params file {one_line(path, 200)} is not valid YAML: {one_line(err, 300)}"
+        if not isinstance(data, dict):
+            return (f"params file {one_line(path, 200)}: expected a mapping "
+                    "'<node name or /**>: {ros__parameters: {...}}'")
+    return None
+
+
+def _init(args: list[str] | None) -> str | None:
+    """rclpy.init() without rclpy's signal handlers (ours are in place); the reason on one
+    line if the command line or a params file is bad."""
+    from rclpy.signals import SignalHandlerOptions
+
+    problem = params_file_problem(sys.argv if args is None else args)
+    if problem is not None:
+        return problem
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:  # noqa: BLE001 - rcl reports a bad params file as RCLError
+        return one_line(err)
+    return None
+
+
+def _spin(node: Node, stops: StopRequests) -> None:
+    """Run the node's callbacks until a stop is requested or the context goes away."""
+    executor = MultiThreadedExecutor(num_threads=4)
+    try:
+        executor.add_node(node)
+        stops.on_stop(executor.wake)
+        while not stops.requested and rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
+    except ExternalShutdownException:
+        pass
+    except Exception:
+        if rclpy.ok() and not stops.requested:
+            raise  # a real fault, not a shutdown racing a callback
+    finally:
+        _wait_for_callbacks(executor, node)  # no new ones start: spin_once is not called again
+        executor.shutdown(timeout_sec=1.0)
+
+
+def _wait_for_callbacks(executor: MultiThreadedExecutor, node: Node,
+                        timeout: float = CALLBACK_DRAIN_S) -> None:
+    """Let callbacks still running (a service call in its register handshake) finish before
+    the node closes the bus under them; their errors are logged, not left to Task.__del__.
+
+    Jazzy's ``Executor.shutdown`` does not wait for them (its wait is skipped once the
+    executor is marked shut down) and destroys the guard condition a finishing callback
+    wakes, so the executor's task list is read here, before it is shut down.
+    """
+    deadline = time.monotonic() + timeout
+    for task in list(getattr(executor, "_futures", ())):
+        while not task.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if task.done() and task.exception() is not None:
+            node.get_logger().warning(f"a callback failed while stopping: "
+                                      f"{one_line(task.exception())}")
+
+
 def main(args: list[str] | None = None) -> int:
     """Run the node until interrupted; exit 0 on a clean stop, 1 with the reason otherwise."""
     from ssi_bridge.ros.node import SsiBridgeNode
 
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # rclpy.init() installs its own handler
-    rclpy.init(args=args)
+    stops = StopRequests()
+    stops.install()
+    reason = _init(args)
+    if reason is not None:
+        if stops.requested:
+            return 0
+        print(f"ssi_bridge_node: cannot start: {reason}", file=sys.stderr)
+        return 1
     node = None
     try:
         try:
-            node = SsiBridgeNode()
+            node = SsiBridgeNode(stop=stops.request)
         except START_ERRORS as err:
-            if not rclpy.ok():
+            if stops.requested or not rclpy.ok():
                 return 0  # stopped by a signal while starting
-            print(f"ssi_bridge_node: cannot start: {err}", file=sys.stderr)
+            print(f"ssi_bridge_node: cannot start: {one_line(err)}", file=sys.stderr)
             return 1
         except Exception:
-            if not rclpy.ok():
+            if stops.requested or not rclpy.ok():
                 return 0
             raise
-        executor: MultiThreadedExecutor | None = None
-        try:
-            if not rclpy.ok():
-                return 0  # a stop signal arrived while the node was being built
-            executor = MultiThreadedExecutor(num_threads=4)
-            executor.add_node(node)
-            executor.spin()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
-        except Exception:
-            if rclpy.ok():
-                raise  # a real fault, not a shutdown racing the start of the executor
-        finally:
-            if executor is not None:
-                executor.shutdown(timeout_sec=1.0)
+        if not stops.requested:
+            _spin(node, stops)
     finally:
         if node is not None:
+            if stops.signum:
+                name = signal.Signals(stops.signum).name
+                node.get_logger().info(f"{name} received: closing the recording and the bus")
             node.shutdown()
             node.destroy_node()
         rclpy.try_shutdown()

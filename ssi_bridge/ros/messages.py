@@ -13,6 +13,7 @@ from ssi_bridge_msgs.msg import ChannelStatus
 from ssi_bridge.module.images import ProcessInput
 from ssi_bridge.module.registers import Reg
 from ssi_bridge.ros.diagnostics import ChannelCounters
+from ssi_bridge.ros.frame_watch import FrameWatch
 
 #: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it
@@ -30,7 +31,7 @@ def time_msg(ns: int) -> Time:
 
 
 def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
-                 counters: ChannelCounters) -> ChannelStatus:
+                 counters: ChannelCounters, watch: FrameWatch | None = None) -> ChannelStatus:
     """Every bit of one channel's process input image, as ~/status carries it."""
     sts, cmp = inp.sts, inp.cmp
     m = ChannelStatus(joint=name, slot=slot)
@@ -51,5 +52,14 @@ def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
     m.ssi_frame = inp.reg_rd_data if m.ssi_frame_valid else 0
     m.samples, m.stale_cycles, m.error_cycles = (counters.samples, counters.stale_cycles,
                                                  counters.error_cycles)
+    m.frame_errors = counters.frame_errors
+    if watch is not None:
+        if watch.checked:
+            v = watch.verdict
+            m.frame_checked = True
+            m.parity_error, m.filler_error = v.parity_error, v.filler_error
+            m.power_failure, m.encoder_error = v.power_failure, v.encoder_error
+        m.cam_state = watch.cam_state(int(sample.position))
+        m.cam_enabled = watch.cam.enabled
     return m
 

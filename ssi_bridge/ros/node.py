@@ -12,38 +12,50 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
+from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.player import CanLogPlayer
-from ssi_bridge.exceptions import ConfigError, RecordingError
+from ssi_bridge.encoder.config import EncoderConfig
+from ssi_bridge.encoder.families import family_config
+from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
 from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.station import count_factor, joint_encoder
+from ssi_bridge.gateway.station import (
+    count_factor, encoder_overrides, joint_encoder, para1_mismatch,
+)
+from ssi_bridge.gateway.timebase import ModelClock, to_ros_ns, wire_now
+from ssi_bridge.gateway import wire
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
-from ssi_bridge.module.registers import validate_para1
+from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import (
-    ChannelCounters, bus_status, channel_level, channel_status, station_status,
+    OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, station_status,
+    status_name,
 )
 from ssi_bridge.ros.faults import FaultInjector, StationFaults
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
-from ssi_bridge.ros.observe import ObservedCycleThread
+from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
+from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import (
     ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
 )
@@ -55,6 +67,25 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 #: object 0x5801 Encoder Config = REG_PARA1 of each slot (000 Table 16/17)
 ENCODER_CONFIG = 0x5801
+#: REG_SSI_MASK object (000 Table 35)
+SSI_DIAG_MAPPING = 0x5840
+
+#: parameters that change at run time (every other one is read-only in its descriptor)
+LIVE_NODE_PARAMETERS = ("publish_rate", "diagnostics_period", "frame_id", "velocity_window",
+                        "stale_cycles")
+LIVE_JOINT_PARAMETERS = ("para1", "max_speed")
+
+
+def spec_max_speed(family: str) -> float:
+    """The highest speed (rad/s) a family's manual specifies, 0 where it states none.
+
+    Only the TR encoders give one in these manuals: the overspeed limit, at most 6000 1/min
+    (001 §5.4.2); SICK's 004 states no speeds for its families.
+    """
+    if not family.upper().startswith("TR"):
+        return 0.0
+    cfg = family_config(family)
+    return 0.0 if cfg.linear else cfg.overspeed_rpm / 60.0 * 2.0 * math.pi
 
 
 def pin_process(cpus: tuple[int, ...]) -> None:
@@ -73,8 +104,10 @@ def pin_process(cpus: tuple[int, ...]) -> None:
 class SsiBridgeNode(Node):
     """Bridge of one XN-GW-CANOPEN station's XN-1SSI channels to ROS 2."""
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, stop: Callable[[], None] | None = None, **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
+        #: ends the process's spin cleanly (main's stop request; without main: the context)
+        self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         self.settings: NodeSettings = declare_parameters(self)
         if self.settings.replay_can_log:
@@ -87,13 +120,39 @@ class SsiBridgeNode(Node):
             # the node and its simulated station meet on this bus (ros/station.py)
             self.settings = with_station_bus(self.settings)
         s = self.settings
-        self._t0 = time.monotonic()
+        #: the simulated station's clock: wire time since the node started (gateway/timebase)
+        self.model_clock = ModelClock()
+        self._last_stamp_ns = 0
+        #: header stamps moved forward because the clock stepped back (NTP step)
+        self.clock_steps = 0
+        #: cycles not published because a joint's TPDOs of that SYNC were missing
+        self.incomplete_cycles = 0
+        self._waiting_for_clock = False
         self.joints: dict[str, JointSettings] = {j.name: j for j in s.joints}
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
+        self._check_wire(s)
         self._open_bus_side(s)
         self._create_ros_side(s)
         self._start(s)
+
+    def _check_wire(self, s: NodeSettings) -> None:
+        """Warn when publish_rate's SYNC cycles do not fit the wire at bus.bitrate (wire.py).
+
+        With several stations the budget is the bus's: one SYNC, every station's TPDOs.
+        """
+        counts = [max(j.slot for j in s.station_joints(sid)) for sid in s.station_ids]
+        self.cycle_wire_s = wire.frame_seconds(wire.stations_cycle_bits(counts), s.bus_bitrate)
+        if s.listen_only or wire.stations_fits(counts, s.bus_bitrate, s.publish_rate):
+            return
+        what = (f"{counts[0]} slot(s)" if len(counts) == 1 else
+                f"{len(counts)} stations with {'+'.join(map(str, counts))} slots")
+        self.get_logger().warning(
+            f"publish_rate {s.publish_rate:g} Hz does not fit the CAN wire: one cycle of "
+            f"{what} (SYNC + TPDOs) takes up to {self.cycle_wire_s * 1e3:.3f} ms at "
+            f"{s.bus_bitrate} bit/s, plus {wire.SDO_RESERVE_FRAMES} frames reserved for register "
+            f"traffic; the highest rate that fits is "
+            f"{wire.stations_max_cycle_rate(counts, s.bus_bitrate):g} Hz (docs/canopen.md)")
 
     def _open_bus_side(self, s: NodeSettings) -> None:
         """The simulated station (if any), the master or listener, and per-joint state.
@@ -142,15 +201,34 @@ class SsiBridgeNode(Node):
                                else StationFaults(injectors, self.joints))
             for joint in s.joints:
                 self._configure_para1(joint)
+                if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
+                    self.client_of(joint.name).write_object(SSI_DIAG_MAPPING, joint.slot, joint.ssi_mask)
                 self.client_of(joint.name).edit_output(joint.slot, idle_read)
+        #: REG_PARA1 each module holds, as this node last wrote or read it back (one truth
+        #: for the parameter, the scale and the velocity estimate: :meth:`change_para1`)
+        self.para1 = {j.name: j.para1 for j in s.joints}
+        self._para1_lock = threading.RLock()
+        #: samples latched at or before this time may carry another REG_PARA1 (inf: a change
+        #: is in flight): their position and velocity are published as NaN (unknown)
+        self._para1_since = {j.name: -math.inf for j in s.joints}
+        #: why the REG_PARA1 in force does not fit the simulated encoder (a WARN), or ""
+        self.para1_note = {j.name: self._para1_note(j.name, j.para1) for j in s.joints}
+        self._tls = threading.local()  # .mirror: a parameter set that only mirrors the module
         self.scales = {j.name: self._scale(j) for j in s.joints}
-        self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window)
+        self.max_speed = {j.name: self._max_speed(
+            j, float(self.get_parameter(f"{j.name}.max_speed").value)) for j in s.joints}
+        self.velocity = {j.name: VelocityEstimator(self.scales[j.name], s.velocity_window,
+                                                   self.max_speed[j.name])
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
+        self.health = {j.name: ChannelHealth() for j in s.joints}
+        self.frames = {j.name: FrameWatch(self._encoder_config(j), j.para1) for j in s.joints}
+        if not s.listen_only:
+            self.refresh_cams()
         self.positions = {j.name: 0.0 for j in s.joints}
         self._cycle_times: deque[float] = deque()
-        self._cycle_started = time.monotonic()
-        self._last_levels: tuple[int, ...] = ()
+        self._cycle_started = wire_now()
+        self._last_levels: tuple = ()
 
     def _create_ros_side(self, s: NodeSettings) -> None:
         """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
@@ -168,10 +246,11 @@ class SsiBridgeNode(Node):
             self.cycle = ObservedCycleThread(
                 self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
                 ended=self.player.finished if self.player is not None else None,
-                on_end=self._on_replay_end)
+                on_end=self._on_replay_end,
+                silent_warning=None if self.player is not None else SILENT_WARNING_S)
         else:
             self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
-        self.diag_timer = self.create_timer(s.diagnostics_period, self.publish_diagnostics,
+        self.diag_timer = self.create_timer(s.diagnostics_period, self._on_diag_timer,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
@@ -198,7 +277,10 @@ class SsiBridgeNode(Node):
         if s.cpu_affinity:
             pin_process(s.cpu_affinity)
             self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
-        self._cycle_started = time.monotonic()
+        # Python hands the GIL to a waiting thread only every switch interval (5 ms by
+        # default): a service burst's CPU-bound handlers would hold the cycle that long
+        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
+        self._cycle_started = wire_now()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -209,8 +291,9 @@ class SsiBridgeNode(Node):
         mode = ("simulated station" if s.simulation else
                 f"replay of {s.replay_can_log}" if s.replay_can_log else
                 "listen-only" if s.listen_only else "real station")
+        names = logbridge.clip(str(list(self.joints)), 200)  # echoed input: kept short
         self.get_logger().info(
-            f"bridging {len(s.joints)} joint(s) {list(self.joints)} on "
+            f"bridging {len(s.joints)} joint(s) {names} on "
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
             f"({mode}); publishing "
             f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
@@ -221,6 +304,25 @@ class SsiBridgeNode(Node):
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
         station = self.joints[joint].station
         return self.station_clients.get(station, self.client)
+
+    def _encoder_config(self, joint: JointSettings) -> EncoderConfig | None:
+        """The joint's encoder layout (family + overrides) for the frame checks, if known."""
+        if joint.name in self.encoders:
+            return self.encoders[joint.name].config
+        try:
+            return family_config(joint.family, **encoder_overrides(joint))
+        except ConfigError as err:
+            self.get_logger().warning(f"{joint.name}: no frame checks: {err}")
+            return None
+
+    def refresh_cams(self) -> None:
+        """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)."""
+        for joint in self.settings.joints:
+            try:
+                self.frames[joint.name].set_cam(read_cam(
+                    lambda index: int(self.client_of(joint.name).read_object(index, joint.slot))))
+            except SsiBridgeError as err:
+                self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
     def _configure_para1(self, joint: JointSettings) -> None:
         """Write the joint's REG_PARA1 through object 0x5801 (000 Table 17) if it differs.
@@ -236,18 +338,52 @@ class SsiBridgeNode(Node):
         if reason:
             raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
         client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
-        self.get_logger().info(f"{joint.name}: REG_PARA1 0x{current:08X} -> 0x{joint.para1:08X} "
+        self.get_logger().info(f"{logbridge.clip(joint.name, 80)}: REG_PARA1 0x{current:08X} -> "
+                               f"0x{joint.para1:08X} "
                                f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
 
     # -- time ------------------------------------------------------------------------------
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
-        return time.monotonic() - self._t0
+        return self.model_clock()
 
-    def _stamp_ns(self, monotonic_t: float) -> int:
-        """ROS time (ns) of a past ``time.monotonic()`` instant."""
-        now_ns = self.get_clock().now().nanoseconds
-        return now_ns - int((time.monotonic() - monotonic_t) * 1e9)
+    def _stamp_ns(self, wire_t: float) -> int | None:
+        """ROS time (ns) of wire time ``wire_t``: strictly after the last stamp; None = wait.
+
+        ROS system time is wire time (``gateway/timebase.to_ros_ns``, no clock is read).
+        With ``use_sim_time`` the offset sim - wire is taken from one bracketed pair of
+        reads (a pair a thread switch split is read again); before the first ``/clock``
+        there is no time to stamp with: nothing is published and the node says so once.
+        A stamp at or before the last one (the clock stepped back) becomes last + 1 ns and
+        is counted (bus diagnostics ``clock_steps``).
+        """
+        stamp = to_ros_ns(wire_t)
+        clock = self.get_clock()
+        if clock.ros_time_is_active:
+            for _ in range(5):
+                before = wire_now()
+                sim_ns = clock.now().nanoseconds
+                after = wire_now()
+                if after - before < 1e-4:
+                    break
+            if sim_ns <= 0:
+                if not self._waiting_for_clock:
+                    self._waiting_for_clock = True
+                    self.get_logger().warning(
+                        "use_sim_time is true and no /clock has arrived: waiting for /clock, "
+                        "nothing is published until it does")
+                return None
+            if self._waiting_for_clock:
+                self._waiting_for_clock = False
+                self.get_logger().info("/clock arrived: publishing")
+            stamp += sim_ns - to_ros_ns(0.5 * (before + after))
+            if stamp <= 0:
+                return None
+        if stamp <= self._last_stamp_ns:
+            self.clock_steps += 1
+            stamp = self._last_stamp_ns + 1
+        self._last_stamp_ns = stamp
+        return stamp
 
     def _scale(self, joint: JointSettings, para1: int | None = None) -> JointScale:
         """Counts -> units for the joint's current REG_PARA1.
@@ -271,6 +407,18 @@ class SsiBridgeNode(Node):
         return JointScale(counts_per_rev=joint.steps_per_rev or 8192,
                           revolutions=joint.revolutions or 4096, direction=joint.direction)
 
+    def _para1_note(self, joint: str, para1: int) -> str:
+        """Simulation: why ``para1`` does not fit the joint's encoder (or "")."""
+        if joint not in self.encoders:
+            return ""
+        mismatch = para1_mismatch(self.encoders[joint], para1)
+        return f"REG_PARA1 0x{para1:08X} does not fit the encoder: {mismatch}" if mismatch else ""
+
+    @staticmethod
+    def _max_speed(joint: JointSettings, value: float) -> float:
+        """``<joint>.max_speed`` in joint units/s; -1: the encoder family's specified limit."""
+        return spec_max_speed(joint.family) if value < 0 else value
+
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:
         """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
@@ -289,8 +437,12 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
+        # the TPDOs need their wire time and a starved station its turn: wait for them up to
+        # 90 % of the period, at least 20 ms (a late cycle skips SYNC slots, counted in
+        # cycles_missed, instead of sending SYNCs nobody can answer), at most 50 ms; the
+        # master wakes once every station's cycle is complete
         assert self.master is not None
-        self.master.wait_cycle(min(0.5 / self.settings.publish_rate, 0.05))
+        self.master.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
@@ -298,7 +450,7 @@ class SsiBridgeNode(Node):
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
         if not self.context.ok():
             return
-        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
+        self._cycle_times.append(wire_now())  # the achieved rate is the observed one
         try:
             self._publish_cycle(cycle.sync_time)
         except RCLError:
@@ -307,9 +459,11 @@ class SsiBridgeNode(Node):
 
     def _on_quiet(self) -> None:
         """Listen-only: a period without SYNC counts as a stale cycle for every joint."""
-        for counters in self.counters.values():
+        now = wire_now()
+        for name, counters in self.counters.items():
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
+            self._observe_health(name, now, stale=True, implausible=False)
         levels = self._levels()
         if self._last_levels and levels != self._last_levels:
             self.publish_diagnostics()
@@ -324,11 +478,13 @@ class SsiBridgeNode(Node):
             + ("; exiting (replay.exit_at_end)" if self.settings.replay_exit_at_end else
                "; still running, diagnostics go STALE"))
         if self.settings.replay_exit_at_end:
-            self.context.try_shutdown()
+            self._request_stop()
 
     def _publish_cycle(self, t_sync: float) -> None:
-        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (monotonic)."""
+        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time)."""
         stamp_ns = self._stamp_ns(t_sync)
+        if stamp_ns is None:
+            return
         stamp = time_msg(stamp_ns)
         js = JointState()
         js.header.stamp = stamp
@@ -336,29 +492,54 @@ class SsiBridgeNode(Node):
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
         status = Status(header=js.header) if want_status else None
-        for joint in self.settings.joints:
-            self._update_joint(joint, t_sync, js, status)
-        if not js.name:
+        # a joint without a sample latched at this SYNC holds an older latch than this stamp:
+        # while it is not (yet) STALE the cycle is not published and no estimate takes it in
+        # (so a velocity window is always the published samples); a STALE joint's last value
+        # is published with the others (its diagnostics say STALE), so joint_states goes on
+        samples = [(joint, self.client_of(joint.name).latest(joint.slot)) for joint in self.settings.joints]
+        limit = self.settings.stale_cycles
+        transient = any(
+            (sample is None or sample.sync_time < t_sync)
+            and self.counters[joint.name].consecutive_stale + 1 < limit
+            for joint, sample in samples)
+        for joint, sample in samples:
+            self._update_joint(joint, t_sync, js, status, sample, publish=not transient)
+        if transient:
+            # a joint missed this SYNC but is not (yet) STALE: its value is an older latch
+            # than this stamp, so the cycle is not published (a STALE joint's last value is)
+            self.incomplete_cycles += 1
+        elif not js.name:
             return
-        if not self.publish_safe(self.joint_pub, js):
+        elif self.publish_safe(self.joint_pub, js):
+            self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
+            if status is not None and self.publish_safe(self.status_pub, status):
+                self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
+        else:
             return
-        self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
-        if status is not None and self.publish_safe(self.status_pub, status):
-            self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
         levels = self._levels()
         if self._last_levels and levels != self._last_levels:
             self.publish_diagnostics()
         self._last_levels = levels
 
+    def _observe_health(self, name: str, now: float, *, stale: bool, implausible: bool) -> None:
+        counters = self.counters[name]
+        self.health[name].observe(now, stale=stale, implausible=implausible,
+                                  sts=counters.last_sts,
+                                  consecutive_stale=counters.consecutive_stale,
+                                  stale_limit=self.settings.stale_cycles)
+
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
-                      status: Status | None) -> None:
+                      status: Status | None, sample: ChannelSample | None,
+                      publish: bool = True) -> bool:
+        """Count the joint's sample of this cycle; with ``publish``, add it to ``js``."""
         name = joint.name
         counters = self.counters[name]
-        sample = self.client_of(name).latest(joint.slot)
+        now = wire_now()
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
-            return
+            self._observe_health(name, now, stale=True, implausible=False)
+            return False
         fresh = sample.sync_time >= t_sync
         if fresh:
             counters.samples += 1
@@ -372,25 +553,59 @@ class SsiBridgeNode(Node):
         sts = image[7]
         if sts & ERRORS:
             counters.error_cycles += 1
-        scale = self.scales[name]
-        position = scale.position(sample.position)
+        if not publish:
+            return fresh  # the cycle is not published: a joint is not latched at its SYNC
         estimator = self.velocity[name]
-        if sts & NOT_MEASURING:
+        # the estimator's scale is the one of the REG_PARA1 in force (change_para1 swaps both)
+        position = estimator.scale.position(sample.position)
+        implausible = False
+        watch = self.frames[name]
+        # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
+        seen = watch.evaluate(image) if image != watch.image else None
+        corrupt = seen is not None and seen[1].corrupt
+        if seen is not None:
+            for text in edges(*seen):
+                self.handlers.log_event("encoder_status", name, "frame check", True, text)
+            if corrupt:
+                counters.frame_errors += 1
+                text = watch.failures.failed(t_sync, seen[1])
+                if text:
+                    self.handlers.log_event("encoder_status", name, "frame check", False, text)
+        counters.frame = watch.verdict if watch.checked else None
+        if sample.sync_time <= self._para1_since[name]:
+            # latched while REG_PARA1 changed: either setting may have read it
+            position = velocity = math.nan
+        elif corrupt:
+            # parity or filler check failed (001 5.5.7, 004 3): the frame is not what the
+            # encoder sent; keep the last good position and speed
+            position = self.positions[name]
+            velocity = estimator.velocity
+        elif sts & NOT_MEASURING:
             # REG_SSI_POS is frozen (wire break, bad REG_PARA1, STOP): the position is the
             # last good one and the speed is unknown; the estimate restarts on recovery
             estimator.reset()
             velocity = math.nan
         elif fresh:
             velocity = estimator.update(sample.sync_time, sample.position)
+            implausible = estimator.last_implausible
+            if implausible:
+                counters.implausible += 1
+        elif counters.consecutive_stale >= self.settings.stale_cycles:
+            # no fresh sample for stale_cycles cycles (silent gateway, lost frames): the
+            # position is frozen, so the speed is unknown and restarts with fresh samples
+            estimator.reset()
+            velocity = math.nan
         else:
             velocity = estimator.velocity
+        self._observe_health(name, now, stale=not fresh, implausible=implausible)
         self.positions[name] = position
         js.name.append(name)
         js.position.append(position)
         js.velocity.append(velocity)
         if status is not None:
             inp = ProcessInput.decode(image)
-            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters))
+            status.channels.append(channel_msg(name, joint.slot, sample, inp, counters, watch))
+        return fresh
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
@@ -405,7 +620,7 @@ class SsiBridgeNode(Node):
     # -- diagnostics -----------------------------------------------------------------------
     def achieved_rate(self) -> float:
         """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
-        now = time.monotonic()
+        now = wire_now()
         window = min(max(self.settings.diagnostics_period, 1.0), now - self._cycle_started)
         if window <= 0:
             return 0.0
@@ -414,29 +629,52 @@ class SsiBridgeNode(Node):
             times.popleft()
         return len(times) / window
 
-    def _levels(self) -> tuple[int, ...]:
+    def _levels(self) -> tuple:
         """The diagnostic levels without building the statuses (checked every cycle)."""
-        limit = self.settings.stale_cycles
-        levels = [channel_level(c.last_sts, c.consecutive_stale, limit)[0]
-                  for c in self.counters.values()]
+        levels = [max(h.level, WARN if self.para1_note[j] else OK)
+                  for j, h in self.health.items()]
+        # PowerFail / error bits change a joint's level too (a failed check under noise would
+        # flip it every few cycles: that one waits for the periodic message)
+        levels += [(f.power_failure, f.encoder_error) if (f := c.frame) else None
+                   for c in self.counters.values()]
         levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
     def _statuses(self) -> list:
         s = self.settings
+        fqn = self.get_fully_qualified_name()
         out = []
         for joint in s.joints:
+            name = joint.name
             hw = (f"{s.bus_interface}:{s.bus_channel} node {joint.station or s.node_id} "
                   f"slot {joint.slot} XN-1SSI")
-            out.append(channel_status(joint.name, hw, self.counters[joint.name],
-                                      s.stale_cycles, self.positions[joint.name]))
+            extra = {"para1": f"0x{self.para1[name]:08X}",
+                     "max_speed": f"{self.max_speed[name]:g}",
+                     "velocity_window": str(s.velocity_window),
+                     "stale_limit_cycles": str(s.stale_cycles),
+                     "frame_id": s.frame_id}
+            st = channel_status(status_name(fqn, name), hw, self.counters[name],
+                                self.health[name], self.positions[name], extra)
+            if self.para1_note[name] and st.level < WARN:
+                st.level, st.message = WARN, self.para1_note[name]
+            out.append(st)
         if len(self.station_clients) > 1:
             return out + self._station_statuses()
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
+        counters["clock_steps"] = self.clock_steps
+        counters["incomplete_cycles"] = self.incomplete_cycles
+        counters["late_frames"] = self.client.table.late_frames
+        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        meter = getattr(self.client, "load", None)
+        if meter is not None:
+            counters.update(meter.figures())
+        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
         out.append(bus_status(
-            "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
+            status_name(fqn, "bus"),
+            f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self._bus_problem()))
@@ -445,12 +683,20 @@ class SsiBridgeNode(Node):
     def _station_statuses(self) -> list:
         """Several stations: one bus status (master, SYNC, rate) and one per station."""
         s = self.settings
+        fqn = self.get_fully_qualified_name()
         assert self.master is not None
         counters = dataclasses.asdict(self.master.counters)
         counters.update(self.recorder.counters())
+        counters["clock_steps"] = self.clock_steps
+        counters["incomplete_cycles"] = self.incomplete_cycles
+        counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
+        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        counters.update(self.master.load.figures())
+        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
         silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
         out = [bus_status(
-            "ssi_bridge: bus", f"{s.bus_interface}:{s.bus_channel} master of stations "
+            status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
             f"{list(self.station_clients)}", alive=True, connected=self.master.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self._bus_problem())]
@@ -464,7 +710,7 @@ class SsiBridgeNode(Node):
             station_counters = {k: v for k, v in dataclasses.asdict(client.counters).items()
                                 if k not in ("frames", "syncs")}
             out.append(station_status(
-                f"ssi_bridge: station {sid}",
+                status_name(fqn, f"station {sid}"),
                 f"{s.bus_interface}:{s.bus_channel} node {sid} XN-GW-CANOPEN",
                 alive=client.gateway_alive, nmt_state=str(nmt), emcy=emcy,
                 counters=station_counters))
@@ -475,50 +721,189 @@ class SsiBridgeNode(Node):
         station = self.station.problem() if self.station is not None else None
         return "; ".join(p for p in (self.recorder.error, station) if p)
 
+    def _on_diag_timer(self) -> None:
+        """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
+        if not self.settings.listen_only and self.context.ok():
+            self.refresh_cams()
+        self.publish_diagnostics()
+
     def publish_diagnostics(self) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus."""
         if not self.context.ok():
             return
+        now = self.get_clock().now()
+        if now.nanoseconds <= 0:
+            return  # use_sim_time before the first /clock: no time to stamp with
         msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = now.to_msg()
         msg.status = self._statuses()
         if not self.publish_safe(self.diag_pub, msg):
             return
         self.recorder.record("/diagnostics", msg, self.get_clock().now().nanoseconds)
 
     # -- parameters ------------------------------------------------------------------------
+    def change_para1(self, joint: str, value: int, via: str) -> str:
+        """Write REG_PARA1 of ``joint`` and move parameter, scale and estimate with it.
+
+        The one path for every REG_PARA1 change (``<joint>.para1``, ``~/write_register`` to
+        address 20): checked against the module's rules, written by the handshake, then the
+        parameter, the counts -> units scale and the velocity estimate (restarted, samples
+        latched before the write ignored) follow. Raises ConfigError / SsiBridgeError.
+        """
+        reason = validate_para1(value)
+        if reason:
+            raise ConfigError(f"REG_PARA1 0x{value:08X} refused (would raise ERR_PARA): {reason}")
+        with self._para1_lock:
+            old = self.para1[joint]
+            self.para1_changing(joint)
+            try:
+                self.client_of(joint).write_register(self.joints[joint].slot, Reg.REG_PARA1, value)
+            except BaseException:
+                self.adopt_para1(joint, old, wire_now())
+                raise
+            self.adopt_para1(joint, value, wire_now())
+        return (f"REG_PARA1 0x{old:08X} -> 0x{value:08X} via {via}; {joint}.para1, scale and "
+                f"velocity estimate follow")
+
+    def para1_changing(self, joint: str) -> None:
+        """A REG_PARA1 change (write or LD20 reset) starts: samples are unknown until adopted."""
+        self._para1_since[joint] = math.inf
+        self.velocity[joint].reset(after=math.inf)
+
+    def adopt_para1(self, joint: str, value: int, since: float) -> None:
+        """The module now holds ``value`` (written or reset): parameter, scale, estimate follow.
+
+        Samples latched before ``since`` were acquired with the old REG_PARA1 and are skipped.
+        """
+        with self._para1_lock:
+            scale = self._scale(self.joints[joint], value)
+            s = self.settings
+            estimator = VelocityEstimator(scale, s.velocity_window, self.max_speed[joint])
+            estimator.reset(after=since)
+            self.scales[joint] = scale
+            self.velocity[joint] = estimator
+            self.frames[joint].set_para1(value)
+            self.para1[joint] = value
+            self.para1_note[joint] = self._para1_note(joint, value)
+            self._para1_since[joint] = since
+            if self.get_parameter(f"{joint}.para1").value != value:
+                self._tls.mirror = True
+                try:
+                    self.set_parameters([Parameter(f"{joint}.para1", value=value)])
+                finally:
+                    self._tls.mirror = False
+
     def _on_set_parameters(self, params: list) -> SetParametersResult:
-        """Runtime changes: REG_PARA1 via the module (refused with its reason), rates."""
+        """Runtime changes (LIVE_*_PARAMETERS): checked together, then applied together."""
+        s = self.settings
+        node_values: dict[str, Any] = {}
+        para1: dict[str, int] = {}
+        max_speed: dict[str, float] = {}
         for p in params:
-            if p.name.endswith(".para1"):
-                joint = p.name[: -len(".para1")]
-                if joint in self.joints:
-                    reason = self.handlers.apply_para1(joint, int(p.value))
-                    if reason:
-                        return SetParametersResult(successful=False, reason=reason)
-                    self.scales[joint] = self._scale(self.joints[joint], int(p.value))
-                    self.velocity[joint] = VelocityEstimator(self.scales[joint],
-                                                             self.settings.velocity_window)
-            elif p.name == "publish_rate":
-                self.cycle.period = 1.0 / float(p.value)
-            elif p.name == "diagnostics_period":
-                self.diag_timer.timer_period_ns = int(1e9 * float(p.value))
+            joint, _, key = p.name.partition(".")
+            if p.name in LIVE_NODE_PARAMETERS:
+                node_values[p.name] = p.value
+            elif joint in self.joints and key == "para1":
+                para1[joint] = int(p.value)
+            elif joint in self.joints and key == "max_speed":
+                value = float(p.value)
+                if not (value >= 0 or value == -1):
+                    return SetParametersResult(
+                        successful=False, reason=f"{p.name} {value}: >= 0 (0: off) or -1 "
+                        "(the encoder family's limit)")
+                max_speed[joint] = value
+        if getattr(self._tls, "mirror", False):
+            return SetParametersResult(successful=True)  # adopt_para1 mirrors the module
+        for joint, value in para1.items():
+            if value == self.para1[joint]:
+                continue
+            try:
+                self.change_para1(joint, value, "parameter")
+            except SsiBridgeError as err:
+                return SetParametersResult(successful=False,
+                                           reason=f"{joint}.para1 0x{value:08X}: {err}")
+        for joint, value in max_speed.items():
+            limit = self._max_speed(self.joints[joint], value)
+            self.max_speed[joint] = limit
+            self.velocity[joint].max_speed = limit
+        if node_values:
+            self._apply_node_parameters(node_values)
         return SetParametersResult(successful=True)
 
+    def _apply_node_parameters(self, values: dict[str, Any]) -> None:
+        """publish_rate, diagnostics_period, frame_id, velocity_window, stale_cycles."""
+        names = {"publish_rate": "publish_rate", "diagnostics_period": "diagnostics_period",
+                 "frame_id": "frame_id", "velocity_window": "velocity_window",
+                 "stale_cycles": "stale_cycles"}
+        self.settings = dataclasses.replace(
+            self.settings, **{names[k]: v for k, v in values.items()})
+        if "publish_rate" in values:
+            self.cycle.period = 1.0 / float(values["publish_rate"])
+        if "diagnostics_period" in values:
+            self.diag_timer.timer_period_ns = int(1e9 * float(values["diagnostics_period"]))
+            self.diag_timer.reset()
+        if "velocity_window" in values:
+            with self._para1_lock:
+                for joint in self.joints:
+                    self.velocity[joint] = VelocityEstimator(
+                        self.scales[joint], int(values["velocity_window"]),
+                        self.max_speed[joint])
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """rclpy's, plus an ~/events record of the change or the refusal."""
+        try:
+            result = super().set_parameters_atomically(parameter_list)
+        except Exception as err:
+            self._parameter_event(parameter_list, False, f"{type(err).__name__}: {err}")
+            raise
+        self._parameter_event(parameter_list, result.successful, result.reason)
+        return result
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """rclpy's, plus an ~/events record of each change or refusal."""
+        results = []
+        for param in parameter_list:
+            results.extend(super().set_parameters([param]))
+            self._parameter_event([param], results[-1].successful, results[-1].reason)
+        return results
+
+    def _parameter_event(self, params: list[Parameter], success: bool, reason: str) -> None:
+        if getattr(self._tls, "mirror", False) or not hasattr(self, "handlers"):
+            return  # the mirror of a register write (its own event) or during start-up
+        request = ", ".join(f"{p.name}={_short(p.value)}" for p in params)
+        self.handlers.log_event("set_parameters", "", request, success,
+                                "applied" if success else f"refused: {reason}")
+
     def shutdown(self) -> None:
-        """Stop recording, stop the bus side; safe to call twice."""
-        logbridge.uninstall()
-        self.cycle.stop()
+        """Stop services, recording, the bus side; safe to call twice.
+
+        Every step runs even if an earlier one fails (a recording on a full disk must not
+        leave the bus open); failures are logged on one line each.
+        """
+        steps: list[tuple[str, Callable[[], object]]] = [
+            ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
-            self.player.stop()
-        self.recorder.stop()
-        for client in self.station_clients.values():
-            client.close()
-        self.client.close()
+            steps.append(("log replay", self.player.stop))
+        steps += [("recording", self.recorder.stop)]
+        steps += [(f"station {sid} client", c.close) for sid, c in self.station_clients.items()]
+        steps += [("bus", self.client.close)]
         if self.master is not None:
-            self.master.close()
+            steps.append(("master", self.master.close))
         if self.station is not None:
-            self.station.stop()
+            steps.append(("simulated station", self.station.stop))
+        for what, step in steps:
+            try:
+                step()
+            except Exception as err:  # noqa: BLE001 - the remaining steps must still run
+                self.get_logger().error(f"stopping the {what} failed: {err}")
+        logbridge.uninstall()
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    """A parameter value for an event, truncated (a value may be huge)."""
+    text = f"0x{value:08X}" if isinstance(value, int) and not isinstance(value, bool) \
+        and value > 0xFFFF else repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 __all__ = ["SsiBridgeNode"]

@@ -115,7 +115,8 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "bus.channel": ("ssi_bridge", _describe(
         "python-can channel (virtual: any name; socketcan: can0, ...)", read_only=True)),
     "bus.bitrate": (500_000, _describe(
-        "CAN bit rate in bit/s (CiA 301 rates; ignored by the virtual interface)",
+        "CAN bit rate in bit/s (CiA 301 rates; the simulated wire (virtual, udp_multicast) "
+        "times every frame at it)",
         read_only=True, int_range=(10_000, 1_000_000))),
     "bus.listen_only": (False, _describe(
         "Only observe the bus another master drives: no NMT, SDO, SYNC or RPDO; one cycle is "
@@ -187,6 +188,11 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "REG_PARA1 (000 Table 18/19): frame length, bit rate, Gray/binary, invalid bits, "
         "ZERO test; a change is written to the module and refused with its ERR_PARA reason",
         int_range=(0, 0xFFFF_FFFF))),
+    "ssi_mask": (-1, _describe(
+        "REG_SSI_MASK (000 Table 3, object 0x5840) written at start-up: per byte x, bit 7 "
+        "copies frame bit SSI_FRAME_BIT_SELx (bits 4-0, 0 = last bit) into SSI_STSx, bit 6 "
+        "also raises SSI_DIAG; -1: leave the module's stored value",
+        read_only=True, int_range=(-1, 0xFFFF_FFFF))),
     "steps_per_rev": (0, _describe(
         "Counts per revolution of REG_SSI_POS; 0: from the encoder family",
         read_only=True, int_range=(0, 1 << 31))),
@@ -197,6 +203,12 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         float_range=(0.0, 1.0))),
     "direction": (1, _describe("+1 or -1: sign of the joint against the count direction",
                                read_only=True, int_range=(-1, 1))),
+    "max_speed": (-1.0, _describe(
+        "Plausibility limit in rad/s (rotary) or m/s (linear): a sample whose step from the "
+        "previous one is faster is flagged in diagnostics and its velocity is NaN; 0: off; "
+        "-1: from the encoder family's specification (TR: overspeed 6000 1/min, 001 §5.4.2; "
+        "off where the family states none). Changes at run time",
+        float_range=(-1.0, 1e6))),
     "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
                                           read_only=True)),
     "motion.velocity": (0.25, _describe("constant: speed in rev/s or m/s", read_only=True,
@@ -240,14 +252,52 @@ def _stations(values: list[int], node_id: int) -> tuple[int, ...]:
     if bad or len(set(ids)) != len(ids):
         raise ConfigError(f"stations {list(ids)}: unique CANopen node ids 1-127")
     return ids
+#: parameters rclpy itself declares or reads, never reported as unknown
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+RCLPY_PREFIXES = ("qos_overrides.",)
+#: longest echo of a configured value in a message
+ECHO = 80
+
+
+def _echo(value: Any) -> str:
+    """A configured value as text for a message, cut to :data:`ECHO` characters."""
+    text = repr(value)
+    return text if len(text) <= ECHO else f"{text[:ECHO]}... ({len(text)} characters)"
+
+
+def unknown_overrides(node: Node) -> list[str]:
+    """One line per parameter given (params file, ``-p``) that no declared parameter takes,
+    with the closest declared name: a typo such as ``publish_rte`` is otherwise silently
+    ignored."""
+    import difflib
+
+    declared = set(node.list_parameters([], 0).names)
+    given = getattr(node, "_parameter_overrides", {})
+    out = []
+    for name in sorted(given):
+        if name in declared or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
+            continue
+        close = difflib.get_close_matches(name, sorted(declared), n=1, cutoff=0.6)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        joint, _, key = name.partition(".")
+        if key in JOINT_PARAMETERS and f"{joint}.slot" not in declared:
+            hint = (f"; '{_echo(joint)[1:-1]}' is not in joints "
+                    f"{_echo(list(node.get_parameter('joints').value))}")
+        out.append(f"parameter '{_echo(name)[1:-1]}' is not a parameter of this node and is "
+                   f"ignored{hint}")
+    return out
 
 
 def declare_parameters(node: Node) -> NodeSettings:
     """Declare every parameter on ``node`` and return the validated settings."""
     values = {name: _declare(node, name, d, desc) for name, (d, desc) in NODE_PARAMETERS.items()}
+    if not values["joints"]:
+        # an empty YAML list has no element type, so ROS hands it over as "not set"
+        raise ConfigError("joints is empty: list at least one joint name, one per XN-1SSI "
+                          "channel (e.g. joints: [joint1])")
     names = [str(j) for j in values["joints"]]
-    if not names or len(set(names)) != len(names) or not all(names):
-        raise ConfigError(f"joints {names} must be non-empty, unique names")
+    if len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"joints {_echo(names)} must be non-empty, unique names")
     stations = _stations(values["stations"], values["bus.node_id"])
     joints = []
     per_station: dict[int, int] = {}
@@ -271,7 +321,7 @@ def declare_parameters(node: Node) -> NodeSettings:
             name=joint, station=station, slot=jv["slot"] or index, family=jv["family"],
             code=jv["code"],
             cable_length=jv["cable_length"],
-            para1=jv["para1"], steps_per_rev=jv["steps_per_rev"],
+            para1=jv["para1"], ssi_mask=jv["ssi_mask"], steps_per_rev=jv["steps_per_rev"],
             revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
             direction=jv["direction"],
             motion=MotionSettings(kind=jv["motion.kind"], velocity=jv["motion.velocity"],
@@ -296,6 +346,8 @@ def declare_parameters(node: Node) -> NodeSettings:
         if values[flag] and values["simulation"]:
             raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
                               "this node to drive its bus")
+    for line in unknown_overrides(node):
+        node.get_logger().warning(line)
     return NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],

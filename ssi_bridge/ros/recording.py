@@ -42,6 +42,8 @@ class SessionRecorder:
         self._topics: set[str] = set()
         self._qos: dict[str, Any] = {}
         self._sniffer: CanSniffer | None = None
+        #: threads finishing sessions that a write error ended (see record())
+        self._salvage: list[threading.Thread] = []
         #: the last write error, shown as ERROR on the bus diagnostics until a new session
         self.error = ""
         self.sessions = 0
@@ -82,16 +84,29 @@ class SessionRecorder:
         return path
 
     def stop(self) -> tuple[Path, int] | None:
-        """Close the running bag; returns (directory, messages) or None if none ran."""
+        """Close the running bag; returns (directory, messages) or None if none ran.
+
+        A session ended by a write error is finished first (its bag rebuilt), so that a
+        shutdown right after it leaves no half-written file behind.
+        """
+        while self._salvage:
+            self._salvage.pop().join()
         with self._lock:
             bag, self._bag = self._bag, None
             sniffer, self._sniffer = self._sniffer, None
         if sniffer is not None:
             frames = sniffer.stop()
-            self._node.get_logger().info(f"CAN log closed: {sniffer.path} ({frames} frames)")
+            self._node.get_logger().info(
+                f"CAN log closed: {sniffer.path} ({frames} frames"
+                + (f"; stopped early: {sniffer.error})" if sniffer.error else ")"))
         if bag is None:
             return None
-        summary = bag.close()
+        try:
+            summary = bag.close()
+        except (RecordingError, OSError) as err:
+            self.error = f"recording stopped: {err}"
+            self._node.get_logger().error(self.error)
+            raise RecordingError(self.error) from err
         self._node.get_logger().info(
             f"recording closed: {summary.directory} ({summary.message_count} messages)")
         return Path(summary.directory), summary.message_count
@@ -112,10 +127,36 @@ class SessionRecorder:
             self._node.get_logger().error(self.error)
             with self._lock:
                 self._bag = None
-            try:
-                bag.close()
-            except (RecordingError, OSError):
-                pass
+                sniffer, self._sniffer = self._sniffer, None
+            # closing the CAN log and rebuilding the bag take time: not in the cycle thread
+            worker = threading.Thread(target=self._end_failed_session, args=(bag, sniffer),
+                                      name="recording-salvage", daemon=True)
+            self._salvage.append(worker)
+            worker.start()
+
+    def _end_failed_session(self, bag: BagRecorder, sniffer: CanSniffer | None) -> None:
+        """After a bag write error: close the CAN log, then give the bag its summary with
+        ``recover`` so it stays readable; without room for that copy it is left for
+        ``replay --recover`` (said in the log)."""
+        from ssi_bridge.record.recover import recover_bag
+
+        if sniffer is not None:
+            frames = sniffer.stop()
+            self._node.get_logger().info(f"CAN log closed: {sniffer.path} ({frames} frames)")
+        try:
+            bag.close()
+        except (RecordingError, OSError):
+            pass  # expected: the bag is in its failed state
+        try:
+            summary = recover_bag(bag.directory)
+        except (RecordingError, OSError) as err:
+            self._node.get_logger().warning(
+                f"bag {bag.directory} left without summary: {err}; `replay --recover "
+                f"{bag.directory}` rebuilds it once there is room")
+            return
+        self._node.get_logger().info(
+            f"bag {bag.directory} rebuilt after the write error: {summary.message_count} "
+            f"messages readable")
 
     def counters(self) -> dict[str, int]:
         """Recording figures for the bus diagnostics."""
@@ -133,11 +174,17 @@ class SessionRecorder:
         config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                            bitrate=s.bus_bitrate, node_id=s.node_id)
         try:
-            self._sniffer = CanSniffer(config, bag_dir / "can_0.log")
+            self._sniffer = CanSniffer(config, bag_dir / "can_0.log",
+                                       on_error=self._on_can_log_error)
         except BusError as err:
             # the bag still records; the reason shows on the bus diagnostics
             self.error = f"CAN log not written: {err}"
             self._node.get_logger().error(self.error)
+
+    def _on_can_log_error(self, reason: str) -> None:
+        """The CAN log hit a write error (sniffer thread): ERROR on the bus diagnostics at once
+        (the node checks :attr:`error` every cycle); the bag goes on recording."""
+        self.error = reason
 
     def on_start(self, request: Any, response: Any) -> Any:
         """~/start_recording."""

@@ -3,19 +3,34 @@
 Every handler answers within a bounded time (the client's handshake timeouts) and turns every
 failure into ``success: false`` with a message naming the joint, the register and the reason;
 no exception escapes into the executor. Each call is also recorded as an event.
+
+Requests are taken from DDS at once by the node's own thread and served in arrival order by
+one worker thread (:class:`RequestQueue`). Up to ``MAX_QUEUED`` requests wait; one more is
+refused at once with "busy: N queued". So a burst of calls is never lost in a DDS history
+that overflows while a handshake runs, and costs the cycle little CPU.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from builtin_interfaces.msg import Time
-from rclpy.qos import QoSProfile
+from contextlib import ExitStack
 
+from builtin_interfaces.msg import Time
+from rclpy.callback_groups import CallbackGroup
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
-from ssi_bridge.module.registers import Reg, validate_para1
+from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.module.registers import Para1, Reg
 from ssi_bridge.ros.units import to_int32
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
@@ -26,12 +41,166 @@ from ssi_bridge_msgs.srv import (
 if TYPE_CHECKING:
     from ssi_bridge.ros.node import SsiBridgeNode
 
+logger = logging.getLogger(__name__)
+
 MAX_ADDRESS = 63
-#: services keep up to 100 pending requests (rclpy's default of 10 drops a burst of calls)
-SERVICE_QOS = QoSProfile(depth=100)
+#: KEEP_ALL: DDS keeps every request until the executor takes it (a KEEP_LAST history of
+#: depth N silently replaced the oldest of more than N waiting requests)
+SERVICE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                         reliability=ReliabilityPolicy.RELIABLE)
+#: requests waiting for the worker; one more is refused at once with "busy: N queued"
+MAX_QUEUED = 100
+#: fault kinds of ssi_bridge_msgs/srv/InjectFault that need a note on hidden effects
+ENCODER_ERROR = 3
 #: REG_SF signatures (000 "Resetting the register bank")
 SF_LD20 = 0x6C643230
 SF_LD48 = 0x6C643438
+
+
+class _Job:
+    """One request: run by the worker, then its reply sent with the request's header."""
+
+    __slots__ = ("run", "service", "response", "header")
+
+    def __init__(self, run: Callable[[], Any], service: Any, response: Any, header: Any) -> None:
+        self.run = run
+        self.service = service
+        self.response = response
+        self.header = header
+
+
+class _Detached(CallbackGroup):
+    """A callback group no executor runs: :class:`RequestQueue` takes these requests itself."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
+class RequestQueue:
+    """Takes the requests of its services from DDS at once, serves them in arrival order.
+
+    rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
+    1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a
+    queue. Here a taker thread waits on the services alone and takes every waiting request
+    per wake-up (the calls rclpy's executor makes: ``service_take_request`` and
+    ``send_response``); a worker thread runs them one at a time and replies; beyond ``limit``
+    waiting requests the taker refuses at once.
+    """
+
+    def __init__(self, node: Any, limit: int = MAX_QUEUED, name: str = "ssi_services") -> None:
+        self.node = node
+        self.limit = limit
+        self.group = _Detached()
+        self._services: list[tuple[Any, Callable[[Any, Any], Any], Callable[..., Any]]] = []
+        self._jobs: deque[_Job] = deque()
+        self._lock = threading.Condition()
+        self._stopped = False
+        self._wake = node.create_guard_condition(lambda: None, callback_group=self.group)
+        self._worker = threading.Thread(target=self._work, name=name, daemon=True)
+        self._taker = threading.Thread(target=self._take, name=f"{name}_take", daemon=True)
+
+    def __len__(self) -> int:
+        return len(self._jobs)
+
+    def add(self, service: Any, handler: Callable[[Any, Any], Any],
+            refuse: Callable[[Any, Any, int], None]) -> None:
+        """Serve ``service`` (created in :attr:`group`); ``refuse`` fills a busy answer."""
+        self._services.append((service, handler, refuse))
+
+    def start(self) -> None:
+        """Start taking requests (after every service was added)."""
+        self._worker.start()
+        self._taker.start()
+
+    def stop(self) -> None:
+        """End both threads; waiting requests are not answered (the node is going)."""
+        with self._lock:
+            self._stopped = True
+            self._jobs.clear()
+            self._lock.notify()
+        self._wake.trigger()
+        for thread in (self._taker, self._worker):
+            if thread.is_alive() and thread is not threading.current_thread():
+                thread.join(2.0)
+
+    def _take(self) -> None:
+        context = self.node.context
+        while not self._stopped and context.ok():
+            try:
+                ready = self._wait(context)
+                for service, handler, refuse in self._services:
+                    if service.handle.pointer in ready:
+                        self._take_all(service, handler, refuse)
+            except Exception as err:  # noqa: BLE001 - shutdown invalidates the handles
+                if self._stopped or not context.ok():
+                    return
+                logger.error("service requests not taken: %s: %s", type(err).__name__, err)
+                time.sleep(0.1)
+
+    def _wait(self, context: Any) -> list[int]:
+        """Block until a request (or :meth:`stop`) arrives; the ready services' pointers."""
+        with ExitStack() as stack:
+            handles = [s.handle for s, _h, _r in self._services]
+            for handle in handles:
+                stack.enter_context(handle)
+            stack.enter_context(self._wake.handle)
+            stack.enter_context(context.handle)
+            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(handles), 0, context.handle)
+            wait_set.clear_entities()
+            for handle in handles:
+                wait_set.add_service(handle)
+            wait_set.add_guard_condition(self._wake.handle)
+            wait_set.wait(200_000_000)  # ns; also re-checks stop and the context
+            return wait_set.get_ready_entities("service")
+
+    def _take_all(self, service: Any, handler: Callable[[Any, Any], Any],
+                  refuse: Callable[[Any, Any, int], None]) -> None:
+        while True:
+            with service.handle:
+                taken = service.handle.service_take_request(service.srv_type.Request)
+            if taken is None or taken[1] is None:
+                return
+            request, header = taken
+            response = service.srv_type.Response()
+            with self._lock:
+                waiting = len(self._jobs)
+                if waiting < self.limit and not self._stopped:
+                    self._jobs.append(_Job(lambda r=request, a=response, h=handler: h(r, a),
+                                           service, response, header))
+                    self._lock.notify()
+                    continue
+            refuse(request, response, waiting)
+            self._send(service, response, header)
+
+    @staticmethod
+    def _send(service: Any, response: Any, header: Any) -> None:
+        try:
+            service.send_response(response, header)
+        except Exception as err:  # noqa: BLE001 - a client gone or shutdown
+            logger.debug("reply not sent: %s", err)
+
+    def _work(self) -> None:
+        while True:
+            with self._lock:
+                while not self._jobs and not self._stopped:
+                    self._lock.wait()
+                if self._stopped:
+                    return
+                job = self._jobs[0]
+            try:
+                job.run()
+            except Exception:  # noqa: BLE001 - handlers answer themselves; keep serving
+                logger.exception("service handler failed")
+            with self._lock:
+                if self._jobs and self._jobs[0] is job:
+                    self._jobs.popleft()
+            self._send(job.service, job.response, job.header)
 
 
 class BridgeServices:
@@ -41,10 +210,14 @@ class BridgeServices:
         self.node = node
         self.events = node.create_publisher(Event, "~/events", 50)
         node.recorder.offer(self.events.topic_name, self.events.qos_profile)
+        self.queue = RequestQueue(node)
+        self.busy_refusals = 0
+        self._busy_logged = 0.0
 
-    def register(self, group: Any) -> None:
-        """Create every service of the contract in ``group`` (one at a time: a handshake
-        per slot is serialised anyway) with a deep request queue."""
+    def register(self, group: Any = None) -> None:
+        """Create every service of the contract; their requests go through :attr:`queue`
+        (one at a time: a handshake per slot is serialised anyway). ``group`` is unused: no
+        executor runs these services."""
         node, rec = self.node, self.node.recorder
         for srv_type, name, handler in (
                 (ReadRegister, "~/read_register", self.read_register),
@@ -55,8 +228,33 @@ class BridgeServices:
                 (InjectFault, "~/inject_fault", self.inject_fault),
                 (StartRecording, "~/start_recording", rec.on_start),
                 (StopRecording, "~/stop_recording", rec.on_stop)):
-            node.create_service(srv_type, name, handler, callback_group=group,
-                                qos_profile=SERVICE_QOS)
+            service = node.create_service(srv_type, name, handler,
+                                          callback_group=self.queue.group,
+                                          qos_profile=SERVICE_QOS)
+            self.queue.add(service, handler, self._refuser(name[2:]))
+        self.queue.start()
+
+    def stop(self) -> None:
+        """Stop serving (node shutdown)."""
+        self.queue.stop()
+
+    def _refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
+        """Fills the prompt answer to a request beyond the queue's limit."""
+        def refuse(request: Any, response: Any, waiting: int) -> None:
+            response.success = False
+            response.message = (f"{kind}: busy: {waiting} queued (at most "
+                                f"{self.queue.limit} requests wait); call again later")
+            self.busy_refusals += 1
+            self._log_busy(kind, getattr(request, "joint", ""), response.message)
+        return refuse
+
+    def _log_busy(self, kind: str, joint: str, message: str) -> None:
+        """A log line at most once a second with the count (an event per refusal would cost
+        the cycle the CPU a burst already takes); the bus diagnostics count them too."""
+        if time.monotonic() - self._busy_logged >= 1.0:
+            self._busy_logged = time.monotonic()
+            self.node.get_logger().warning(
+                f"{message} ({self.busy_refusals} busy refusals since start)")
 
     # -- helpers ---------------------------------------------------------------------------
     def _joint(self, requested: str) -> str:
@@ -77,7 +275,9 @@ class BridgeServices:
         self.node.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity
-        if success:
+        if success and kind == "read_register":
+            self.node.get_logger().debug(text)  # a read changes nothing: the event suffices
+        elif success:
             self.node.get_logger().info(text)
         else:
             self.node.get_logger().warning(text)
@@ -125,9 +325,8 @@ class BridgeServices:
         def body(joint: str) -> str:
             _check_address(request.address)
             if request.address == Reg.REG_PARA1:
-                reason = validate_para1(request.value)
-                if reason:
-                    raise ConfigError(f"REG_PARA1 0x{request.value:08X} refused: {reason}")
+                # the one REG_PARA1 path: module, <joint>.para1, scale and velocity together
+                return self.node.change_para1(joint, request.value, "~/write_register")
             self.node.client_of(joint).write_register(self._slot(joint), request.address,
                                                       request.value)
             return f"{_reg_name(request.address)} <- 0x{request.value:08X} accepted"
@@ -161,7 +360,7 @@ class BridgeServices:
                 client.write_register(slot, Reg.REG_OFFSET, offset)
                 after = client.read_register(slot, Reg.REG_SSI_POS)
             finally:
-                estimator.reset(after=time.monotonic(), hold=True)
+                estimator.reset(after=wire_now(), hold=True)
             response.offset = to_int32(offset)
             response.position = scale.position(after)
             return (f"REG_OFFSET <- {to_int32(offset)}; position now {response.position:.6f} "
@@ -171,16 +370,31 @@ class BridgeServices:
     def reset_registers(self, request: Any, response: Any) -> Any:
         """~/reset_registers: REG_SF = "LD20" (with parameters) or "LD48" (without)."""
         def body(joint: str) -> str:
-            value = SF_LD20 if request.include_parameters else SF_LD48
-            estimator = self.node.velocity[joint]
-            estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
-            try:
-                self.node.client_of(joint).write_register(self._slot(joint), Reg.REG_SF, value)
-            finally:
-                estimator.reset(after=time.monotonic() + 0.05, hold=True)
-            which = "LD20: retentive registers incl. REG_PARA1" if request.include_parameters \
-                else "LD48: retentive registers except REG_PARA1"
-            return f"{which} restored to defaults"
+            node, slot = self.node, self._slot(joint)
+            if not request.include_parameters:
+                estimator = node.velocity[joint]
+                estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
+                try:
+                    node.client_of(joint).write_register(slot, Reg.REG_SF, SF_LD48)
+                finally:
+                    estimator.reset(after=wire_now() + 0.05, hold=True)
+                return "LD48: retentive registers except REG_PARA1 restored to defaults"
+            # LD20 also restores REG_PARA1 (000 "Resetting the register bank"): the value the
+            # module now holds becomes <joint>.para1, the scale and the estimate's resolution
+            with node._para1_lock:
+                old = node.para1[joint]
+                node.para1_changing(joint)
+                value = old
+                try:
+                    node.client_of(joint).write_register(slot, Reg.REG_SF, SF_LD20)
+                    value = node.client_of(joint).read_register(slot, Reg.REG_PARA1)
+                finally:
+                    node.adopt_para1(joint, value, wire_now())
+            note = node.para1_note[joint]
+            return ("LD20: retentive registers incl. REG_PARA1 restored to defaults; REG_PARA1 "
+                    f"0x{old:08X} -> 0x{value:08X}, {joint}.para1, scale and velocity estimate "
+                    "follow" + (f"; WARNING: {note} (set {joint}.para1 to read it again)"
+                                if note else ""))
         return self._run("reset_registers", request, response, body,
                          f"include_parameters={request.include_parameters}")
 
@@ -203,21 +417,49 @@ class BridgeServices:
             if self.node.faults is None:
                 raise ConfigError("fault injection needs simulation:=true; this node drives "
                                   "real hardware")
-            return self.node.faults.inject(request.kind, joint, request.rate, request.duration)
+            message = self.node.faults.inject(request.kind, joint, request.rate,
+                                              request.duration)
+            if request.kind == ENCODER_ERROR:
+                hidden = self._hidden_encoder_error(joint)
+                if hidden:
+                    message += f"; nothing will show: {hidden}"
+            return message
         return self._run("inject_fault", request, response, body,
                          f"kind={request.kind} rate={request.rate} duration={request.duration}")
 
-    def apply_para1(self, joint: str, value: int) -> str | None:
-        """Write a new REG_PARA1 for a parameter change; the reason when refused."""
-        reason = validate_para1(value)
-        if reason:
-            return f"{joint}.para1 0x{value:08X} refused (would raise ERR_PARA): {reason}"
-        try:
-            self.node.client_of(joint).write_register(self._slot(joint), Reg.REG_PARA1, value)
-        except SsiBridgeError as err:
-            return f"{joint}.para1 0x{value:08X} not written: {err}"
-        self.log_event("set_parameters", joint, f"para1=0x{value:08X}", True, "REG_PARA1 written")
-        return None
+    def _hidden_encoder_error(self, joint: str) -> str:
+        """Why an ENCODER_ERROR on ``joint`` reaches no diagnostics, or "" when it shows.
+
+        The error bits travel in the frame after the position (004 §2.3); the XN-1SSI reports
+        them only as SSI_DIAG, and only for a frame bit REG_SSI_MASK selects with EN_Dx_RMSx
+        and EN_Dx_DS (000 Table 3; bit 0 = the last bit clocked).
+        """
+        encoder = self.node.encoders.get(joint)
+        if encoder is None:
+            return ""
+        cfg = encoder.config
+        if cfg.error_output is not ErrorOutput.FLAGS or cfg.frame_format is not FrameFormat.PLAIN:
+            return ""  # the position itself changes (error value / all ones): it shows
+        para = Para1.decode(self.node.para1[joint])
+        last = len(cfg.special_bits) - 1
+        shift = para.ssi_frame_len - cfg.frame_bits  # extra clocks read 0s after the frame
+        bits = {last - i + shift: b for i, b in enumerate(cfg.special_bits)
+                if b in ERROR_BITS and 0 <= last - i + shift < para.ssi_frame_len}
+        if not bits:
+            return ""  # no error bit in this layout: faults.py's own note says so
+        mask = self.node.client_of(joint).read_register(self._slot(joint), Reg.REG_SSI_MASK)
+        for x in range(4):
+            byte = (mask >> (8 * x)) & 0xFF
+            if byte & 0xC0 == 0xC0 and (byte & 0x1F) in bits:
+                return ""
+        listed = ", ".join(f"{b.name} = frame bit {i}" for i, b in sorted(bits.items()))
+        first = min(bits)
+        dropped = (f"; INVALID_BITS_LSB = {para.invalid_bits_lsb} of REG_PARA1 keeps them out of "
+                   "REG_SSI_POS" if para.invalid_bits_lsb > first else "")
+        return (f"the {cfg.name} error bit(s) ({listed}, counted from the last clock) are "
+                f"mapped by no REG_SSI_MASK byte (now 0x{mask:08X}; SSI_DIAG needs EN_Dx_RMSx + "
+                f"EN_Dx_DS + SSI_FRAME_BIT_SELx, 000 Table 3){dropped}; write REG_SSI_MASK "
+                f"(51) = 0x{0xC0 | first:02X} to see it as SSI_DIAG (WARN)")
 
 
 def _check_address(address: int) -> None:

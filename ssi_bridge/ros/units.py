@@ -75,17 +75,35 @@ class VelocityEstimator:
     round-axis) wrap gives the true speed, not a spike. For constant speed the estimate is
     exact up to one count over the window; for a varying speed it lags by (window - 1) / 2
     samples — the documented trade of quantisation noise against delay (docs/node.md).
+
+    Unknown is NaN: before two samples, after :meth:`reset`, and for a sample whose step
+    from the previous one is faster than ``max_speed`` (joint units/s; 0 = no check), which
+    is counted in :attr:`implausible` and restarts the estimate from that sample.
     """
 
-    def __init__(self, scale: JointScale, window: int = 5) -> None:
+    def __init__(self, scale: JointScale, window: int = 5, max_speed: float = 0.0) -> None:
         if window < 2:
             raise ConfigError(f"velocity window {window} must be >= 2 samples")
+        if not max_speed >= 0:
+            raise ConfigError(f"max_speed {max_speed} must be >= 0 (0: no check)")
         self._scale = scale
+        self.window = window
+        self.max_speed = max_speed
+        #: samples whose step exceeded ``max_speed`` (since construction)
+        self.implausible = 0
+        #: the last sample given to :meth:`update` was such a jump
+        self.last_implausible = False
         self._samples: deque[tuple[float, int]] = deque(maxlen=window)
         self._unwrapped = 0
         self._last_raw: int | None = None
+        self._last_t: float | None = None
         self._ignore_until: float | None = None
         self._held: float | None = None
+
+    @property
+    def scale(self) -> JointScale:
+        """The counts -> units scale the estimate uses."""
+        return self._scale
 
     def reset(self, after: float | None = None, hold: bool = False) -> None:
         """Forget history, e.g. after a preset or a fault (the next estimate restarts).
@@ -98,12 +116,14 @@ class VelocityEstimator:
         held = self.velocity if hold else None
         self._samples.clear()
         self._last_raw = None
+        self._last_t = None
         self._unwrapped = 0
         self._ignore_until = after
         self._held = held
 
     def update(self, t: float, counts: int) -> float:
         """Add a sample (latch time in s, raw REG_SSI_POS) and return the velocity estimate."""
+        self.last_implausible = False
         if self._ignore_until is not None and t <= self._ignore_until:
             return self.velocity
         raw = to_int32(counts)
@@ -114,17 +134,30 @@ class VelocityEstimator:
             modulus = self._scale.modulus
             if modulus:
                 step = (step + modulus // 2) % modulus - modulus // 2
+            last_t = self._last_t
+            if (self.max_speed > 0 and last_t is not None and t > last_t
+                    and abs(step * self._scale.unit_per_count) > self.max_speed * (t - last_t)):
+                # faster than the joint can move: this sample's speed is unknown and the
+                # window restarts here, so the jump never enters an estimate
+                self.implausible += 1
+                self.last_implausible = True
+                self._samples.clear()
+                self._held = None
+                self._last_raw, self._last_t, self._unwrapped = raw, t, raw
+                self._samples.append((t, raw))
+                return math.nan
             self._unwrapped += step
         self._last_raw = raw
         if self._samples and t <= self._samples[-1][0]:
             return self.velocity
+        self._last_t = t
         self._samples.append((t, self._unwrapped))
         return self.velocity
 
     @property
     def velocity(self) -> float:
-        """Current estimate in joint units per second (0.0 before two samples, or the held one)."""
+        """Current estimate in joint units per second (NaN before two samples, or the held one)."""
         if len(self._samples) < 2:
-            return self._held if self._held is not None else 0.0
+            return self._held if self._held is not None else math.nan
         (t0, c0), (t1, c1) = self._samples[0], self._samples[-1]
         return (c1 - c0) / (t1 - t0) * self._scale.unit_per_count

@@ -101,3 +101,35 @@ def test_sdo_transport_runs_the_same_handshake(channel) -> None:
             assert client.read_register(1, Reg.REG_MAGIC_NO) == MAGIC_NO
             client.write_register(1, Reg.REG_CMP2, 77)
             assert client.read_register(1, Reg.REG_CMP2) == 77
+
+
+def test_lost_clear_pulse_is_sent_again(station) -> None:
+    # 000 "Comparison value 1, Comparison value 2": FLAG_CMPx latches a match and "must be
+    # reset by the application via the process output data using CLR_CMPx = 1" (not
+    # possible while the values match). A pulse whose RPDO is lost leaves the flag set in
+    # the next image with STS_CMPx = 0: the client sends the pulse again.
+    gateway, client, readers = station
+    module = gateway.modules[0]
+    client.write_register(1, Reg.REG_CMP1, readers[0].value)
+    client.set_control(1, enable_cmp1=True)
+    client.sync()
+    assert client.wait_cycle(1.0)
+    wait_for(lambda: module.status.cmp & 0x02, "FLAG_CMP1 not latched on the match")
+    readers[0].value += 10                      # no match any more: a clear would work
+    client.sync()
+    assert client.wait_cycle(1.0)
+    client.bus.loss_rate = 1.0                  # the pulse RPDO is lost on the wire
+    client.set_control(1, enable_cmp1=True, clear_cmp1=True)
+    client.bus.loss_rate = 0.0
+    assert gateway.objects.outputs[0][6] == 0x01, "the module never saw CLR_CMP1"
+    for _ in range(4):
+        client.sync()
+        assert client.wait_cycle(1.0)
+        if not module.status.cmp & 0x02:
+            break
+    wait_for(lambda: not module.status.cmp & 0x02, "FLAG_CMP1 never cleared")
+    assert client.counters.pulse_resends >= 1
+    for _ in range(2):
+        client.sync()
+        assert client.wait_cycle(1.0)
+    wait_for(lambda: gateway.objects.outputs[0][6] == 0x01, "CLR_CMP1 not released")

@@ -47,3 +47,37 @@ def test_frames_sent_just_before_stop_are_logged(tmp_path: Path):
             logged = sniffer.stop()
         assert logged == 50
         assert [bytes(f.data)[0] for f in can.LogReader(str(path))] == list(range(50))
+
+
+def test_a_full_disk_stops_the_log_cleanly_and_leaves_it_readable(tmp_path: Path, small_fs):
+    # a real ENOSPC: the log lives on a 64 kB tmpfs; about 1500 candump lines fill it
+    fs = small_fs(64 * 1024)
+    path = fs / "can_0.log"
+    errors: list[str] = []
+    sniffer = CanSniffer(BusConfig(channel="sniffer_full"), path, on_error=errors.append)
+    sender = can.Bus(interface="virtual", channel="sniffer_full")
+    try:
+        sent = 0
+        deadline = time.monotonic() + 60.0
+        while not errors and time.monotonic() < deadline:
+            sender.send(can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False))
+            sent += 1
+            if sent % 100 == 0:
+                time.sleep(0.001)  # let the notifier thread keep up
+        assert errors, f"no write error reported after {sent} frames"
+        assert str(path) in errors[0] and "errno 28" in errors[0], errors
+        # stopped: it no longer reads the bus, so nothing queues up for it
+        stop_deadline = time.monotonic() + 10.0
+        while not sniffer._notifier.stopped and time.monotonic() < stop_deadline:
+            time.sleep(0.01)
+        for _ in range(5000):
+            sender.send(can.Message(arbitration_id=0x182, data=bytes(8), is_extended_id=False))
+    finally:
+        sender.shutdown()
+        logged = sniffer.stop()  # after the error: no exception, no second report
+    assert len(errors) == 1
+    text = path.read_bytes()
+    assert text.endswith(b"\n"), "the torn last line was cut off"
+    frames = list(can.LogReader(str(path)))  # every line parses
+    assert len(frames) == logged > 100
+    assert all(f.arbitration_id == 0x181 for f in frames)

@@ -11,6 +11,7 @@ from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.gateway.aborts import SdoAbort
 from ssi_bridge.gateway.dictionary import build_dictionary, tpdo_cob_base
+from ssi_bridge.module.registers import Reg
 
 NODE_ID = 7  # conftest's station node id
 
@@ -159,3 +160,35 @@ def test_silent_gateway_sends_nothing(station) -> None:
 def test_dictionary_slot_count_is_checked() -> None:
     with pytest.raises(ValueError, match="1-8"):
         build_dictionary(1, 9)
+
+
+def test_injected_invalid_para1_raises_err_para_and_its_emcy(station) -> None:
+    # 000 "Additional emergencies": 7000 hex, byte 3 module no., byte 4 channel 1, byte 5
+    # 0x10 "Parameter error"; the invalid set reaches the module past every master check
+    st = station
+    module = st.gateway.modules[0]
+    reason = module.inject_parameter_error()
+    assert "SSI_BIT_RATE = 8 is reserved" in reason
+    assert module.read_register(Reg.REG_PARA1) == 0x19010000, "REG_PARA1 keeps the valid set"
+    st.sync()
+    st.wait_for(lambda: any(e.code == 0x7000 for e in st.node.emcy.log), "no EMCY 0x7000")
+    emcy = next(e for e in st.node.emcy.log if e.code == 0x7000)
+    assert emcy.data[:3] == bytes([1, 1, 0x10])  # module 1, channel 1, parameter error
+    assert st.node.sdo[0x5804][1].raw & 0x10, "diagnostics bit 4 (object 0x5804)"
+    module.clear_parameter_error()
+    st.sync()
+    st.wait_for(lambda: st.node.emcy.log[-1].code == 0, "no error-reset EMCY")
+
+
+def test_identity_revision_from_the_manual_rest_marked_as_simulation(station) -> None:
+    # 000 ch. 4: "The support of XN-1SSI modules has been implemented from firmware version
+    # V3.00 of XN-GW-CANOPEN" -> revision 3.0 (CiA 301: major in the upper 16 bits). The manual
+    # gives no Vendor-ID, product code or serial number: named simulation values, also in the EDS
+    sdo = station.node.sdo
+    assert sdo[0x1018][3].raw == 0x0003_0000
+    eds = canopen.import_od(str(EDS), NODE_ID)
+    for sub in (1, 2, 4):
+        assert eds[0x1018][sub].name.endswith("(simulation value)")
+        assert sdo[0x1018][sub].raw == eds[0x1018][sub].default
+    assert eds[0x1018][3].name == "Revision number"
+    assert "simulation values" in EDS.read_text()

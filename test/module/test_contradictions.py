@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ssi_bridge.module.diagnostics import Diag, cam_state, to_int32
-from ssi_bridge.module.images import CmpControl, CmpStatus
+from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus
 from ssi_bridge.module.registers import BIT_RATES_HZ, DEVICENET_BIT_RATES_HZ, Para1, Reg
 
 
@@ -70,5 +70,6 @@ def test_signed_comparison_in_the_module(reader, module, master) -> None:
     reader.push(5)
     image = master.control(CmpControl.EN_CMP1)
     assert not image.cmp & CmpStatus.REL_CMP1, "REL_CMP1 = 0: -5 < 0"
+    # the limits are Unsigned32 (docs/module.md): 0xFFFFFFFB is above 0x7FFFFFFF
     module.write_register(Reg.REG_UPPER_LIMIT, 0x7FFFFFFF)
-    assert not master.control(CmpControl.EN_CMP1).sts, "-5 is no overflow of 0x7FFFFFFF"
+    assert master.control(CmpControl.EN_CMP1).sts & ModuleStatus.STS_OFLW

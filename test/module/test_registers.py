@@ -158,3 +158,18 @@ def test_para1_invalid_sets(value: int, fragment: str) -> None:
 @pytest.mark.parametrize("value", [0x16017E00, 0x01000000, 0x20000000, 0x99070000 | 0x20])
 def test_para1_valid_sets(value: int) -> None:
     assert validate_para1(value) is None, f"0x{value:08X} is a valid Table 19 set"
+
+
+def test_injected_parameter_error_until_a_valid_set(module, reader) -> None:
+    # 000 "Error detection": ERR_PARA is a "non-retentive error message, and rejected
+    # parameter set with it"; STS_STOP = 1 while it stands; a valid set clears it
+    from ssi_bridge.module.images import ModuleStatus
+    reason = module.inject_parameter_error()
+    assert "reserved" in reason
+    module.cycle(0.0)
+    assert module.status.sts & ModuleStatus.ERR_PARA and module.status.sts & ModuleStatus.STS_STOP
+    module.clear_parameter_error()
+    module.cycle(0.001)
+    assert not module.status.sts & (ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)
+    with pytest.raises(ValueError):
+        module.inject_parameter_error(0x19010000)   # a valid set cannot raise ERR_PARA

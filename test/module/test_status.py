@@ -35,12 +35,35 @@ def test_lower_limit_table_2(reader, module, master, lower, pos, uflw) -> None:
     assert (Diag.STS_UFLW in module.diag) == uflw, "diagnostics bit 3 'Encoder value underflow'"
 
 
-def test_negative_position_below_a_lower_limit(reader, module, master) -> None:
-    # offset makes REG_SSI_POS negative (Integer32): -1 < lower limit 1 -> underflow
+@pytest.mark.parametrize("upper, lower, pos, oflw, uflw", [
+    # 000 Table 1 "Register content of REG_UPPER_LIMIT less than FFFFFFFF hex": 0xFFFFFFFE is
+    # an active upper limit far above 8192 (unsigned), not -2
+    (0xFFFFFFFE, 0, 8192, False, False),
+    # 000 Table 2 "Register content of REG_LOWER_LIMIT greater than 0": 0x80000000 is above
+    # 8192 (unsigned), not INT32_MIN, so 8192 lies below it
+    (0xFFFFFFFF, 0x80000000, 8192, False, True),
+])
+def test_limits_compare_unsigned(reader, module, master, upper, lower, pos, oflw, uflw) -> None:
+    # 000 "Lower limit, upper limit": "The limit values are set by default to the maximum and
+    # minimum value" (defaults 0xFFFFFFFF and 0: maximum and minimum as unsigned numbers)
+    module.write_register(Reg.REG_UPPER_LIMIT, upper)
+    module.write_register(Reg.REG_LOWER_LIMIT, lower)
+    reader.push(pos)
+    image = master.cycle()
+    assert bool(image.sts & M.STS_OFLW) == oflw
+    assert bool(image.sts & M.STS_UFLW) == uflw
+    assert (Diag.STS_OFLW in module.diag, Diag.STS_UFLW in module.diag) == (oflw, uflw)
+
+
+def test_position_below_the_offset_is_above_an_upper_limit(reader, module, master) -> None:
+    # REG_SSI_POS = 9 - 10 = 0xFFFFFFFF (000 "Offset function": SSI encoder - REG_OFFSET), as
+    # an Unsigned32 register above the upper limit 1000 and not below the lower limit 1
     module.write_register(Reg.REG_OFFSET, 10)
     module.write_register(Reg.REG_LOWER_LIMIT, 1)
+    module.write_register(Reg.REG_UPPER_LIMIT, 1000)
     reader.push(9)
-    assert master.cycle().sts & M.STS_UFLW
+    sts = master.cycle().sts
+    assert sts & M.STS_OFLW and not sts & M.STS_UFLW
 
 
 @pytest.mark.parametrize("values, expected", [

@@ -79,14 +79,47 @@ def domain_id(monkeypatch: pytest.MonkeyPatch, ros_domain: int) -> int:
 
 
 @pytest.fixture
-def start_node(tmp_path: Path, domain_id: int) -> Iterator[Callable[..., NodeProcess]]:
-    """Factory: start the installed node with parameters; every started node is stopped."""
+def node_exe() -> Path:
+    """The installed node executable (for tests that start it themselves)."""
+    if not NODE_EXE.exists():
+        pytest.fail(f"{NODE_EXE} missing: run `make setup` (make test does it)")
+    return NODE_EXE
+
+
+@pytest.fixture
+def node_env(domain_id: int) -> dict[str, str]:
+    """The environment of a node in the test's DDS domain."""
+    return dds_env(domain_id)
+
+
+def _then(first: Callable[[], None], second: Callable[[], None] | None) -> Callable[[], None]:
+    """A preexec_fn running ``first`` (die with the test, SIGINT default) then ``second``."""
+    if second is None:
+        return first
+
+    def both() -> None:
+        first()
+        second()
+
+    both.dies_with_parent = True  # type: ignore[attr-defined]
+    return both
+
+
+@pytest.fixture
+def start_node(tmp_path: Path, domain_id: int,
+               child_preexec: Callable[[], None]) -> Iterator[Callable[..., NodeProcess]]:
+    """Factory: start the installed node with parameters; every started node is stopped.
+
+    Every node dies with the test process (PR_SET_PDEATHSIG) and handles SIGINT; ``preexec``
+    runs after that in the child (e.g. a resource limit).
+    """
     if not NODE_EXE.exists():
         pytest.fail(f"{NODE_EXE} missing: run `make setup` (make test does it)")
     started: list[NodeProcess] = []
 
     def _start(params: dict[str, Any] | None = None, *, namespace: str = "",
-               params_file: Path | None = None, args: tuple[str, ...] = ()) -> NodeProcess:
+               params_file: Path | None = None, args: tuple[str, ...] = (),
+               preexec: Callable[[], None] | None = None) -> NodeProcess:
         index = len(started)
         cmd = [str(NODE_EXE), "--ros-args"]
         if params_file is not None:
@@ -104,7 +137,8 @@ def start_node(tmp_path: Path, domain_id: int) -> Iterator[Callable[..., NodePro
         env = dds_env(domain_id)
         with open(log_path, "wb") as log:
             proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
-                                    cwd=tmp_path, start_new_session=True)
+                                    cwd=tmp_path, start_new_session=True,
+                                    preexec_fn=_then(child_preexec, preexec))
         node = NodeProcess(proc, domain_id, namespace, log_path, env=env)
         started.append(node)
         return node

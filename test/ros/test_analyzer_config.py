@@ -10,8 +10,10 @@ from its documentation (generic_analyzer.hpp / README of ros/diagnostics, Jazzy)
 * ``contains``: a substring
 
 holds. The aggregator offers each status to every analyzer, so an overlap would show a status
-twice and a miss would leave it under "Other". Output names drop ``remove_prefix`` the way
-``removeLeadingNameChaff`` does (the prefix, then one ':' and any spaces after it).
+twice and a miss would leave it under "Other". Output names are ``path + "/" +`` the status
+name with every "/" turned into a space (``getOutputName`` of status_item.hpp), then drop
+``remove_prefix`` the way ``removeLeadingNameChaff`` does (the prefix, then one ':' and any
+spaces after it). Status names are ``<node FQN>: <joint>`` (ARCHITECTURE.md).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ CONFIG = REPO / "config" / "diagnostic_analyzers.yaml"
 STATION = REPO / "config" / "ssi_bridge.yaml"
 NODE_SRC = REPO / "ssi_bridge" / "ros" / "node.py"
 
-BUS_STATUS = "ssi_bridge: bus"
+BUS_STATUS = "/ssi_bridge: bus"
 MATCHERS = ("regex", "expected", "name", "startswith", "find_and_remove_prefix", "contains")
 GENERIC = "diagnostic_aggregator/GenericAnalyzer"
 GROUP = "diagnostic_aggregator/AnalyzerGroup"
@@ -51,6 +53,11 @@ def generic_match(params: dict[str, Any], name: str) -> bool:
     if any(name.startswith(p) for p in prefixes):
         return True
     return any(c in name for c in _strings(params.get("contains")))
+
+
+def output_name(path: str, status: str) -> str:
+    """StatusItem::toStatusMsg: the analyzer path, "/", the name with "/" as spaces."""
+    return f"{path}/{status.replace('/', ' ')}"
 
 
 def remove_leading_chaff(output_name: str, chaff: str) -> str:
@@ -92,11 +99,14 @@ def analyzers(config: dict[str, Any]) -> dict[str, tuple[str, dict[str, Any]]]:
     return _analyzers(params, "/" + params.get("path", "").strip("/"))
 
 
-def joint_status_name(joint: str) -> str:
+def joint_status_name(joint: str, node_fqn: str = "/ssi_bridge") -> str:
     """The name the node gives a joint's DiagnosticStatus (from the node's own code)."""
-    from ssi_bridge.ros.diagnostics import ChannelCounters, channel_status
+    from ssi_bridge.ros.diagnostics import (
+        ChannelCounters, ChannelHealth, channel_status, status_name,
+    )
 
-    return channel_status(joint, "hw", ChannelCounters(), 5, 0.0).name
+    return channel_status(status_name(node_fqn, joint), "hw", ChannelCounters(),
+                          ChannelHealth(), 0.0).name
 
 
 def _station_joints() -> list[str]:
@@ -126,8 +136,12 @@ def test_layout_follows_the_aggregator_format(config: dict[str, Any],
 
 
 def test_bus_status_name_is_the_one_the_node_publishes() -> None:
-    assert BUS_STATUS in NODE_SRC.read_text(), "node renamed its bus status: update the config"
-    assert joint_status_name("joint1") == "ssi_bridge: joint1"
+    from ssi_bridge.ros.diagnostics import status_name
+
+    assert 'status_name(fqn, "bus")' in NODE_SRC.read_text(), \
+        "node renamed its bus status: update the config"
+    assert status_name("/ssi_bridge", "bus") == BUS_STATUS
+    assert joint_status_name("joint1") == "/ssi_bridge: joint1"
 
 
 @pytest.mark.parametrize("joint", JOINTS + _station_joints())
@@ -137,24 +151,47 @@ def test_each_joint_status_matches_only_the_joints_analyzer(
     hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, name)]
     assert hits == ["joints"], f"{name!r} matched by {hits}"
     path, p = analyzers["joints"]
-    out = f"{path}/{name}"
+    out = output_name(path, name)
     for chaff in p.get("remove_prefix", []):
         out = remove_leading_chaff(out, chaff)
     assert out == f"/SSI Bridge/Joints/{joint}"
+
+
+@pytest.mark.parametrize("ns", ["/station_a", "/cell/station_b"])
+def test_namespaced_bridges_land_in_the_same_analyzers_under_distinct_names(
+        analyzers: dict[str, Any], ns: str) -> None:
+    from ssi_bridge.ros.diagnostics import status_name
+
+    outs = set()
+    for fqn in (f"{ns}/ssi_bridge", "/ssi_bridge"):
+        name = joint_status_name("shoulder", fqn)
+        hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, name)]
+        assert hits == ["joints"], f"{name!r} matched by {hits}"
+        bus = status_name(fqn, "bus")
+        assert [k for k, (_p, p) in analyzers.items() if generic_match(p, bus)] == ["bus"]
+        path, p = analyzers["joints"]
+        out = output_name(path, name)
+        for chaff in p.get("remove_prefix", []):
+            out = remove_leading_chaff(out, chaff)
+        outs.add(out)
+    assert len(outs) == 2, f"two stations must not merge: {outs}"
+    assert f"/SSI Bridge/Joints/{ns.replace('/', ' ').strip()} ssi_bridge: shoulder" in outs
 
 
 def test_bus_status_matches_only_the_bus_analyzer(analyzers: dict[str, Any]) -> None:
     hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, BUS_STATUS)]
     assert hits == ["bus"], f"{BUS_STATUS!r} matched by {hits}"
     path, p = analyzers["bus"]
-    out = f"{path}/{BUS_STATUS}"
+    out = output_name(path, BUS_STATUS)
     for chaff in p.get("remove_prefix", []):
         out = remove_leading_chaff(out, chaff)
     assert out == "/SSI Bridge/Bus/bus"
 
 
-@pytest.mark.parametrize("name", ["other_node: bus", "ssi_bridge", "ssi_bridge: ",
-                                  "my ssi_bridge: joint1", "ssi_bridge:joint1"])
+@pytest.mark.parametrize("name", ["other_node: bus", "/other_node: bus", "/ssi_bridge",
+                                  "/ssi_bridge: ", "my /ssi_bridge: joint1",
+                                  "/ssi_bridge:joint1", "/my_ssi_bridge: joint1",
+                                  "ssi_bridge: joint1"])
 def test_foreign_statuses_are_left_to_other_analyzers(analyzers: dict[str, Any],
                                                       name: str) -> None:
     hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, name)]

@@ -43,13 +43,13 @@ def _inject(probe, node, **kw):
 def test_wire_faults_are_errors_until_cleared(running, probe, kind):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
     _inject(probe, node, kind=kind)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    st = _level_of(diags, "ssi_bridge: joint1")
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    st = _level_of(diags, "/ssi_bridge: joint1")
     assert "ERR_SSI" in st.message, st.message
     _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_power_failure_on_an_encoder_without_the_bit_says_so(running, probe):
@@ -62,11 +62,11 @@ def test_fault_with_a_duration_clears_itself(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     joints = probe.subscribe(JointState, node.topic("joint_states"))
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
     res = _inject(probe, node, kind=K.DATA_WIRE_BREAK, duration=1.0)
     assert "for 1 s" in res.message
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
     probe.wait_for(lambda: len(joints) > 0 and not math.isnan(joints[-1][1].velocity[0]), 2.0,
                    "a measured velocity after recovery", node)
     time.sleep(0.3)
@@ -87,35 +87,35 @@ def test_encoder_error_bit_via_reg_ssi_mask_warns(running, probe):
     ok = probe.call(WriteRegister, node.topic("~/write_register"),
                     WriteRegister.Request(address=51, value=0xC0))
     assert ok.success, ok.message
-    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.OK, 5.0)
+    _wait_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 5.0)
     _inject(probe, node, kind=K.ENCODER_ERROR)
-    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.WARN, 2 * PERIOD + 1)
-    assert "SSI_DIAG" in _level_of(diags, "ssi_bridge: a").message
+    _wait_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.WARN, 2 * PERIOD + 1)
+    assert "SSI_DIAG" in _level_of(diags, "/ssi_bridge: a").message
     _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "ssi_bridge: a", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_silent_gateway_is_a_bus_error_and_recovers(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.OK, 5.0)
+    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 5.0)
     _inject(probe, node, kind=K.GATEWAY_SILENT)
-    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    assert "silent" in _level_of(diags, "ssi_bridge: bus").message
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    assert "silent" in _level_of(diags, "/ssi_bridge: bus").message
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
     _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "ssi_bridge: bus", DiagnosticStatus.OK, 3 * PERIOD + 2)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_total_can_frame_loss_makes_the_joint_stale(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
     _inject(probe, node, kind=K.CAN_FRAME_LOSS, rate=1.0)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
     _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "ssi_bridge: joint1", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 3 * PERIOD + 2)
 
 
 @pytest.mark.parametrize("request_, words", [

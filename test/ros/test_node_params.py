@@ -41,10 +41,10 @@ def test_runtime_para1_change_is_validated_by_the_module_rules(running, probe):
     assert "INVALID_BITS" in bad.reason and "SSI_FRAME_LEN" in bad.reason, bad.reason
     reserved_rate = _set(probe, node, "joint1.para1", 0x19090000)  # bit-rate code 9: reserved
     assert not reserved_rate.successful and "SSI_BIT_RATE" in reserved_rate.reason
-    good = _set(probe, node, "joint1.para1", 0x19020000)  # 250 kbit/s
+    good = _set(probe, node, "joint1.para1", 0x19030000)  # 125 kbit/s, not the default
     assert good.successful, good.reason
     back = probe.call(ReadRegister, node.topic("~/read_register"), ReadRegister.Request(address=20))
-    assert back.success and back.value == 0x19020000
+    assert back.success and back.value == 0x19030000
 
 
 def test_out_of_range_value_is_refused_by_the_descriptor(running, probe):

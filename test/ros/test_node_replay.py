@@ -66,7 +66,7 @@ def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node,
         for _, arr in diags[-5:]:
             for st in arr.status:
                 level = st.level[0] if isinstance(st.level, bytes) else st.level
-                if st.name == "ssi_bridge: joint1" and level == STALE:
+                if st.name == "/ssi_bridge: joint1" and level == STALE:
                     return True
         return False
 

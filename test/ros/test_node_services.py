@@ -61,7 +61,7 @@ def test_set_preset_refuses_bad_positions(running, probe, position, words):
 
 
 def test_reset_registers_ld48_keeps_para1_ld20_restores_it(running, probe):
-    node = running({"joint1.para1": 0x19020000})  # 250 kbit/s instead of the default 500
+    node = running({"joint1.para1": 0x19020000})  # 250 kbit/s, not the factory 500 kbit/s
     write = probe.call(WriteRegister, node.topic("~/write_register"),
                        WriteRegister.Request(address=REG_LOWER_LIMIT, value=77))
     assert write.success, write.message
@@ -160,3 +160,43 @@ def test_publishing_continues_through_a_burst_of_bad_calls(running, probe):
     rate = (len(msgs) - start) / elapsed
     assert rate >= 0.9 * 50.0, f"joint_states fell to {rate:.1f} Hz during the burst"
     assert all(not f.result().success for f in futures)
+
+
+def test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full(running, probe):
+    """Every call gets an answer: success, or at once "busy: N queued" (none lost in a DDS
+    history, which dropped the oldest of more than 100 waiting requests before)."""
+    import threading
+
+    from rclpy.qos import HistoryPolicy, ReliabilityPolicy
+
+    node = running({"publish_rate": 1000.0})
+    # the clients keep every request and answer too (KEEP_ALL), so any loss is the node's
+    qos = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    clients = [probe.node.create_client(ReadRegister, node.topic("~/read_register"),
+                                        qos_profile=qos) for _ in range(4)]
+    for client in clients:
+        assert client.wait_for_service(timeout_sec=10.0)
+    answers: list = []
+    lock = threading.Lock()
+    futures = []
+    for k in range(250):
+        for c, client in enumerate(clients):
+            f = client.call_async(ReadRegister.Request(address=1))  # REG_MAGIC_NO
+            f.add_done_callback(lambda fut, c=c, k=k: (lock.acquire(), answers.append(
+                (c, k, fut.result())), lock.release()))
+            futures.append(f)
+    probe.wait_for(lambda: len(answers) == 1000, 120.0, "an answer to each of 1000 calls", node)
+    ok = [(c, k) for c, k, r in answers if r.success]
+    busy = [r.message for _, _, r in answers if not r.success]
+    assert ok, "the queue serves requests during the burst"
+    assert all("busy:" in m and "queued" in m for m in busy), busy[:3]
+    magic = {r.value for _, _, r in answers if r.success}
+    assert len(magic) == 1, f"every successful read returns REG_MAGIC_NO, got {magic}"
+    # each client's successful calls are answered in the order it sent them
+    for c in range(4):
+        mine = [k for cc, k in ok if cc == c]
+        assert mine == sorted(mine), f"client {c} answered out of order"
+    # and the node is still serving normally afterwards
+    after = probe.call(ReadRegister, node.topic("~/read_register"), ReadRegister.Request(address=1))
+    assert after.success, after.message

@@ -72,7 +72,7 @@ def test_diagnostics_ok_for_the_joint(running, probe):
     def joint_status():
         for _, arr in reversed(diags):
             for st in arr.status:
-                if st.name == "ssi_bridge: elbow":
+                if st.name == "/ssi_bridge: elbow":
                     return st
         return None
 

@@ -46,9 +46,9 @@ def test_shipped_two_encoder_station(running, probe):
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     probe.wait_for(lambda: len(diags) > 0, 5.0, "diagnostics", node)
     levels = {st.name: st.level for st in diags[-1][1].status}
-    assert levels == {"ssi_bridge: shoulder": DiagnosticStatus.OK,
-                      "ssi_bridge: carriage": DiagnosticStatus.OK,
-                      "ssi_bridge: bus": DiagnosticStatus.OK}, levels
+    assert levels == {"/ssi_bridge: shoulder": DiagnosticStatus.OK,
+                      "/ssi_bridge: carriage": DiagnosticStatus.OK,
+                      "/ssi_bridge: bus": DiagnosticStatus.OK}, levels
 
 
 def test_two_bridges_side_by_side_in_namespaces(running, probe):
@@ -111,17 +111,19 @@ def test_sine_velocity_error_stays_within_the_documented_lag_bound(running, prob
         f"velocity error {err[worst]:.4f} rad/s > bound {bound[worst]:.4f} at sample {worst}")
 
 
-def test_eight_encoders_at_1khz_never_report_a_false_wire_break(running, probe):
+def test_eight_encoders_at_the_highest_wire_rate_never_report_a_false_wire_break(running, probe):
     # The module latches when the SYNC is on the wire; a gateway thread that falls behind must
     # not clock two bursts inside one monoflop time (that reads as a missing start level,
     # ERR_SSI, 000 "Error detection / messages"). Regression: this flapped at 1 kHz.
     joints = [f"axis{i}" for i in range(1, 9)]
-    node = running({"joints": joints, "publish_rate": 1000.0, "diagnostics_period": 0.5})
+    # 8 slots fit the wire at 480 Hz at 1 Mbit/s (docs/canopen.md rate table), not at 1 kHz
+    node = running({"joints": joints, "publish_rate": 480.0, "bus.bitrate": 1_000_000,
+                    "diagnostics_period": 0.5})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     time.sleep(2.0)
     probe.wait_for(lambda: len(diags) > 2, 5.0, "diagnostics", node)
     for st in diags[-1][1].status:
-        if st.name.startswith("ssi_bridge: axis"):
+        if st.name.startswith("/ssi_bridge: axis"):
             values = {kv.key: kv.value for kv in st.values}
             assert values["error_cycles"] == "0", f"{st.name}: {st.message} {values}"
-            assert int(values["samples"]) > 100, st.name
+            assert int(values["samples"]) > 50, st.name

@@ -1,0 +1,58 @@
+"""Bus load as the master sees it: wire time of every frame on the bus, from frame timestamps.
+
+Each frame handled (received, with its receive timestamp, or sent by this master) adds its
+length at the bit rate (``gateway/wire.frame_bits``: SOF to IFS with its actual stuff bits).
+Over the last ``window`` seconds of frame timestamps the figures are the load (wire time /
+window), frames and wire time per SYNC cycle: what ``ssi_bridge: bus`` shows.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+import can
+
+from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.wire import frame_bits
+
+SYNC_COB_ID = 0x080
+
+
+class BusLoad:
+    """Frames (timestamp, wire seconds, is SYNC) of the last ``window`` seconds."""
+
+    def __init__(self, bitrate: int, window: float = 1.0) -> None:
+        self.bitrate = bitrate
+        self.window = window
+        self._frames: deque[tuple[float, float, bool]] = deque()
+        self._lock = threading.Lock()
+
+    def add(self, msg: can.Message) -> None:
+        """Account one frame (its timestamp, or now when it has none)."""
+        if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
+            return
+        bits = frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
+        with self._lock:
+            self._frames.append((msg.timestamp or wire_now(), bits / self.bitrate,
+                                 msg.arbitration_id == SYNC_COB_ID))
+
+    def figures(self, now: float | None = None) -> dict[str, str]:
+        """load %, frames and wire time per cycle over the window ending ``now``."""
+        now = wire_now() if now is None else now
+        with self._lock:
+            frames = self._frames
+            while frames and frames[0][0] < now - self.window:
+                frames.popleft()
+            items = list(frames)
+        busy = sum(d for _, d, _ in items)
+        syncs = sum(1 for _, _, s in items if s)
+        return {
+            "bus_load_percent": f"{100.0 * busy / self.window:.1f}",
+            "frames_per_cycle": f"{len(items) / syncs:.2f}" if syncs else "0",
+            "wire_ms_per_cycle": f"{1e3 * busy / syncs:.3f}" if syncs else "0",
+            "bus_bitrate": str(self.bitrate),
+        }
+
+
+__all__ = ["BusLoad"]

@@ -1,0 +1,51 @@
+"""The bridge's one time base: CAN wire time, and its one conversion to ROS time.
+
+Every instant in the data path is a *wire time*: seconds of CLOCK_REALTIME as a float, the
+base python-can gives every received frame (``can.Message.timestamp``: ``time.time()`` on the
+``virtual`` interface, the kernel receive time on ``socketcan`` and ``udp_multicast``). SYNC
+send time, latch time, TPDO arrival, ``header.stamp``, recorded and CAN-log times are all
+wire times, so no instant is ever moved from one clock into another by reading two clocks
+(a thread switch between two reads shifts the result by the switch, up to Python's 5 ms GIL
+switch interval: issue 10). The same base holds in every process and, with NTP, on every host.
+
+* :func:`wire_now` reads the clock (one read).
+* :func:`to_ros_ns` is the conversion to ROS time: ROS system time *is* CLOCK_REALTIME, so it
+  is the identity in nanoseconds. (With ``use_sim_time`` the node adds one offset it takes
+  from the ``/clock`` message itself, see ``ros/stamps.py``.)
+* :class:`ModelClock` is a simulated station's clock: wire time minus the station's start
+  instant (a constant), so the encoder motion and the latch share the base in small floats.
+
+NTP: a *slewed* clock keeps every difference; a *step* moves wire time as it moves ROS time.
+The node keeps ``header.stamp`` strictly increasing across a backward step and counts it.
+"""
+
+from __future__ import annotations
+
+import time
+
+#: the wire clock (CLOCK_REALTIME, s); python-can stamps frames in this base
+wire_now = time.time
+
+
+def to_ros_ns(t: float) -> int:
+    """ROS system time (ns) of wire time ``t`` (s): the same clock, only the unit changes."""
+    return round(t * 1e9)
+
+
+class ModelClock:
+    """A simulated station's time: seconds of wire time since ``epoch`` (its start)."""
+
+    def __init__(self, epoch: float | None = None) -> None:
+        #: wire time (s) at which the model's time is 0
+        self.epoch = wire_now() if epoch is None else epoch
+
+    def __call__(self) -> float:
+        """The model time now."""
+        return wire_now() - self.epoch
+
+    def at(self, wire_t: float) -> float:
+        """The model time of wire time ``wire_t`` (a frame's timestamp)."""
+        return wire_t - self.epoch
+
+
+__all__ = ["ModelClock", "to_ros_ns", "wire_now"]

@@ -1,0 +1,236 @@
+"""How long a CAN 2.0A frame occupies the wire, and what a SYNC cycle of the station costs.
+
+A classical base frame (ISO 11898-1) is SOF, 11-bit identifier, RTR, IDE, r0, 4-bit DLC,
+0-8 data bytes, 15-bit CRC (polynomial 0x4599 over SOF..data), then CRC delimiter, ACK slot,
+ACK delimiter, 7 EOF bits and the 3-bit intermission (IFS). SOF..CRC is bit-stuffed: after
+five equal bits the transmitter inserts one of the opposite level (and the stuff bit counts
+for the next run). :func:`frame_bits` counts a real frame's bits from its actual content;
+:func:`worst_frame_bits` is the classical upper bound, used where the content is not known
+(the rate table and the start-up check).
+
+One SYNC cycle of the bridge (``docs/canopen.md``) is SYNC (no data) + one 8-byte process input
+image TPDO per slot + the encoder default PDOs carrying 0x6820 of slot pairs (8 bytes, 4 for an
+odd last slot). :func:`max_cycle_rate` leaves :data:`SDO_RESERVE_FRAMES` 8-byte frames per
+cycle free for register traffic (an SDO request and its response, and the RPDO of a handshake
+step), so a register access never pushes the cycle's own frames past the next SYNC.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+
+#: bits after the CRC that are never stuffed: CRC delimiter, ACK slot, ACK delimiter, EOF, IFS
+TAIL_BITS = 1 + 1 + 1 + 7 + 3
+#: 8-byte frames per cycle kept free for register traffic (SDO request + response, one RPDO)
+SDO_RESERVE_FRAMES = 3
+#: bit rates of the rate table (bit/s)
+TABLE_BITRATES = (125_000, 250_000, 500_000, 1_000_000)
+_CRC15_POLY = 0x4599
+
+
+def _bits(value: int, width: int) -> list[int]:
+    return [(value >> i) & 1 for i in range(width - 1, -1, -1)]
+
+
+def crc15(bits: Iterable[int]) -> int:
+    """The CAN CRC-15 of a bit sequence (ISO 11898-1, polynomial 0x4599, initial 0)."""
+    crc = 0
+    for bit in bits:
+        nxt = bit ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if nxt:
+            crc ^= _CRC15_POLY
+    return crc
+
+
+def stuff_count(bits: Sequence[int]) -> int:
+    """Stuff bits a transmitter inserts into ``bits`` (one after every 5 equal levels)."""
+    count, run, last = 0, 0, -1
+    for bit in bits:
+        if bit == last:
+            run += 1
+        else:
+            last, run = bit, 1
+        if run == 5:
+            count += 1
+            last, run = 1 - bit, 1  # the stuff bit starts the next run
+    return count
+
+
+def _crc_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = 0
+        for i in range(7, -1, -1):
+            nxt = ((byte >> i) & 1) ^ ((crc >> 14) & 1)
+            crc = (crc << 1) & 0x7FFF
+            if nxt:
+                crc ^= _CRC15_POLY
+        table.append(crc)
+    return table
+
+
+_CRC_TABLE = _crc_table()
+
+
+def _fast_crc(head: int, payload: bytes) -> int:
+    """CRC-15 of the 19 header bits then the payload bytes (byte-wise table, same result)."""
+    crc = 0
+    for i in range(18, -1, -1):
+        nxt = ((head >> i) & 1) ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if nxt:
+            crc ^= _CRC15_POLY
+    for byte in payload:
+        crc = ((crc << 8) & 0x7FFF) ^ _CRC_TABLE[((crc >> 7) & 0xFF) ^ byte]
+    return crc
+
+
+def _step(last: int, run: int, bit: int) -> tuple[int, int, int]:
+    """One transmitted bit: (stuff bits inserted, new last level, new run length)."""
+    run = run + 1 if bit == last else 1
+    if run == 5:
+        return 1, 1 - bit, 1
+    return 0, bit, run
+
+
+def _stuff_table() -> dict[tuple[int, int], list[tuple[int, int, int]]]:
+    """Per stuffing state (last level, run) and byte: stuff bits and the state after it."""
+    table = {}
+    for last in (-1, 0, 1):
+        for run in range(0, 5):
+            row = []
+            for byte in range(256):
+                n, lv, rn = 0, last, run
+                for i in range(7, -1, -1):
+                    k, lv, rn = _step(lv, rn, (byte >> i) & 1)
+                    n += k
+                row.append((n, lv, rn))
+            table[(last, run)] = row
+    return table
+
+
+_STUFF = _stuff_table()
+
+
+def _fast_stuff(value: int, width: int) -> int:
+    """:func:`stuff_count` of the ``width``-bit number ``value`` (MSB first), a byte at a time."""
+    count, last, run = 0, -1, 0
+    lead = width % 8
+    for i in range(lead - 1, -1, -1):
+        k, last, run = _step(last, run, (value >> (width - lead + i)) & 1)
+        count += k
+    for shift in range(width - lead - 8, -1, -8):
+        k, last, run = _STUFF[(last, run)][(value >> shift) & 0xFF]
+        count += k
+    return count
+
+
+def frame_bits(can_id: int, data: bytes | bytearray = b"", remote: bool = False,
+               dlc: int | None = None) -> int:
+    """Bits a CAN 2.0A base frame occupies on the wire, SOF to the end of IFS, stuffing included."""
+    if not 0 <= can_id <= 0x7FF:
+        raise ValueError(f"identifier 0x{can_id:X} is not an 11-bit base identifier")
+    payload = b"" if remote else bytes(data)
+    n = len(payload) if dlc is None else dlc
+    # SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4): 19 bits
+    head = (can_id << 7) | ((1 if remote else 0) << 6) | (n & 0xF)
+    crc = _fast_crc(head, payload)
+    width = 34 + 8 * len(payload)
+    value = (((head << 8 * len(payload)) | int.from_bytes(payload, "big")) << 15) | crc
+    return width + _fast_stuff(value, width) + TAIL_BITS
+
+
+def reference_frame_bits(can_id: int, data: bytes = b"", remote: bool = False) -> int:
+    """:func:`frame_bits` spelled out bit by bit (the test compares both)."""
+    payload = b"" if remote else bytes(data)
+    head = [0] + _bits(can_id, 11) + [1 if remote else 0, 0, 0] + _bits(len(payload), 4)
+    for byte in payload:
+        head += _bits(byte, 8)
+    head += _bits(crc15(head), 15)
+    return len(head) + stuff_count(head) + TAIL_BITS
+
+
+def worst_frame_bits(n_bytes: int) -> int:
+    """The classical upper bound of a base frame's bits: 34 + 8n stuffable bits, (34+8n-1)/4 stuff."""
+    stuffable = 34 + 8 * n_bytes
+    return stuffable + (stuffable - 1) // 4 + TAIL_BITS
+
+
+def frame_seconds(bits: int, bitrate: int) -> float:
+    """Wire time (s) of ``bits`` at ``bitrate`` bit/s."""
+    return bits / bitrate
+
+
+def cycle_payloads(slots: int) -> list[int]:
+    """Data bytes of each frame of one SYNC cycle: SYNC, the images, the position PDOs."""
+    if not 1 <= slots <= 8:
+        raise ValueError(f"slots {slots} outside 1-8")
+    positions = [4 * len([s for s in (2 * g + 1, 2 * g + 2) if s <= slots])
+                 for g in range((slots + 1) // 2)]
+    return [0] + [8] * slots + positions
+
+
+def cycle_bits(slots: int) -> int:
+    """Worst-case bits of one SYNC cycle of ``slots`` modules (SYNC + TPDOs)."""
+    return sum(worst_frame_bits(n) for n in cycle_payloads(slots))
+
+
+def cycle_seconds(slots: int, bitrate: int) -> float:
+    """Worst-case wire time (s) of SYNC -> end of the last TPDO of one cycle."""
+    return frame_seconds(cycle_bits(slots), bitrate)
+
+
+def budget_bits(slots: int) -> int:
+    """The bits a cycle must find room for: the cycle plus the register-traffic reserve."""
+    return cycle_bits(slots) + SDO_RESERVE_FRAMES * worst_frame_bits(8)
+
+
+def max_cycle_rate(slots: int, bitrate: int) -> float:
+    """Highest SYNC rate (Hz) at which the cycle and the reserve fit the wire, rounded down to 10 Hz."""
+    return math.floor(bitrate / budget_bits(slots) / 10.0) * 10.0
+
+
+def fits(slots: int, bitrate: int, rate_hz: float) -> bool:
+    """True when ``rate_hz`` cycles per second of ``slots`` modules fit at ``bitrate``."""
+    return rate_hz * budget_bits(slots) <= bitrate
+
+
+def stations_cycle_bits(slot_counts: Sequence[int]) -> int:
+    """Worst-case bits of one cycle of several stations on one bus: ONE SYNC, their TPDOs."""
+    sync = worst_frame_bits(0)
+    return sync + sum(cycle_bits(n) - sync for n in slot_counts)
+
+
+def stations_budget_bits(slot_counts: Sequence[int]) -> int:
+    """:func:`budget_bits` of several stations: their cycle plus one register-traffic reserve.
+
+    The node runs one register service at a time, so the reserve is the bus's, not per station.
+    """
+    return stations_cycle_bits(slot_counts) + SDO_RESERVE_FRAMES * worst_frame_bits(8)
+
+
+def stations_fits(slot_counts: Sequence[int], bitrate: int, rate_hz: float) -> bool:
+    """True when ``rate_hz`` cycles of every station together fit at ``bitrate``."""
+    return rate_hz * stations_budget_bits(slot_counts) <= bitrate
+
+
+def stations_max_cycle_rate(slot_counts: Sequence[int], bitrate: int) -> float:
+    """Highest SYNC rate (Hz, rounded down to 10 Hz) for all stations together."""
+    return math.floor(bitrate / stations_budget_bits(slot_counts) / 10.0) * 10.0
+
+
+def rate_table() -> str:
+    """The Markdown table of :func:`max_cycle_rate` per slot count and bit rate (docs/canopen.md)."""
+    head = "| slots | " + " | ".join(f"{b // 1000} kbit/s" for b in TABLE_BITRATES) + " |"
+    rule = "|---|" + "---|" * len(TABLE_BITRATES)
+    rows = [f"| {n} | " + " | ".join(f"{max_cycle_rate(n, b):.0f} Hz" for b in TABLE_BITRATES)
+            + " |" for n in range(1, 9)]
+    return "\n".join([head, rule, *rows])
+
+
+__all__ = ["SDO_RESERVE_FRAMES", "TABLE_BITRATES", "budget_bits", "crc15", "cycle_bits",
+           "cycle_payloads", "cycle_seconds", "fits", "frame_bits", "frame_seconds",
+           "max_cycle_rate", "rate_table", "stations_budget_bits", "stations_cycle_bits",
+           "stations_fits", "stations_max_cycle_rate", "stuff_count", "worst_frame_bits"]

@@ -1,0 +1,97 @@
+"""ChannelHealth: windowed stale ratio and debounced levels (ROS-free, exact sequences).
+
+Thresholds as documented in docs/node.md: over the last 0.5 s, >= 10 % stale cycles is WARN,
+>= 50 % ERROR; a worse level is published once it held 0.1 s, a better one once it held 1 s.
+"""
+
+from __future__ import annotations
+
+import random
+
+from ssi_bridge.ros.diagnostics import ERROR, OK, STALE, WARN, ChannelHealth
+
+PERIOD = 0.01  # 100 Hz
+
+
+def _run(health, t, cycles, stale=lambda k: False, sts=0, jump=lambda k: False, limit=5):
+    consecutive = 0
+    levels = []
+    for k in range(cycles):
+        t += PERIOD
+        s = stale(k)
+        consecutive = consecutive + 1 if s else 0
+        levels.append(health.observe(t, stale=s, implausible=jump(k), sts=sts,
+                                     consecutive_stale=consecutive, stale_limit=limit))
+    return t, levels
+
+
+def test_stale_until_the_first_sample_then_ok_at_once():
+    h = ChannelHealth()
+    assert h.level == STALE and "no sample" in h.message
+    assert h.observe(0.01, stale=True, implausible=False, sts=None, consecutive_stale=1,
+                     stale_limit=5) == STALE
+    t, levels = _run(h, 0.01, 150)
+    assert set(levels) == {OK} and h.message == "reading"
+
+
+def test_thirty_percent_loss_warns_within_half_a_second_and_stays():
+    h = ChannelHealth()
+    t, _ = _run(h, 0.0, 200)
+    rng = random.Random(7)
+    t, levels = _run(h, t, 300, stale=lambda k: rng.random() < 0.3)
+    first = levels.index(WARN)
+    assert first * PERIOD <= 0.5, f"WARN after {first * PERIOD:.2f} s"
+    assert set(levels[first:]) == {WARN}, "a steady 30 % loss does not flap"
+    assert "stale" in h.message and "%" in h.message
+
+
+def test_load_hiccups_of_a_few_stale_cycles_do_not_flap_the_level():
+    # at 1 kHz under load: bursts of 6 stale cycles (more than stale_cycles = 5) every 100
+    h = ChannelHealth()
+    t = 0.0
+    consecutive = 0
+    levels = []
+    for k in range(5000):
+        t += 0.001
+        s = k % 100 < 6
+        consecutive = consecutive + 1 if s else 0
+        levels.append(h.observe(t, stale=s, implausible=False, sts=0,
+                                consecutive_stale=consecutive, stale_limit=5))
+    after = levels[1000:]
+    assert set(after) == {OK}, f"levels seen: {sorted(set(after))}"
+
+
+def test_total_loss_is_stale_and_half_loss_is_error():
+    h = ChannelHealth()
+    t, _ = _run(h, 0.0, 200)
+    t, levels = _run(h, t, 30, stale=lambda k: True)
+    assert levels[-1] == STALE
+    h2 = ChannelHealth()
+    t, _ = _run(h2, 0.0, 200)
+    t, levels = _run(h2, t, 100, stale=lambda k: k % 3 != 0)  # 2 of 3 stale, never 5 in a row
+    assert levels[-1] == ERROR
+
+
+def test_recovery_clears_after_the_window_and_the_clear_time():
+    h = ChannelHealth()
+    t, _ = _run(h, 0.0, 200)
+    t, _ = _run(h, t, 100, stale=lambda k: k % 3 != 0)
+    assert h.level == ERROR
+    t, levels = _run(h, t, 200)
+    assert levels[50] != OK and levels[-1] == OK
+
+
+def test_a_jump_beyond_max_speed_warns():
+    h = ChannelHealth()
+    t, _ = _run(h, 0.0, 200)
+    t, levels = _run(h, t, 30, jump=lambda k: k == 0)
+    assert WARN in levels and "max_speed" in h.message
+
+
+def test_module_errors_pass_through_debounced():
+    h = ChannelHealth()
+    t, _ = _run(h, 0.0, 200)
+    t, levels = _run(h, t, 5, sts=0x02)  # ERR_SSI (bit 1 of process input byte 7)
+    assert levels[-1] == OK, "held less than 0.1 s"
+    t, levels = _run(h, t, 20, sts=0x02)
+    assert levels[-1] == ERROR and "ERR_SSI" in h.message

@@ -1,0 +1,148 @@
+"""What the installed node prints: a warning-free default, one line per start-up error, typos
+named with the closest parameter, echoed input kept short, EMCY floods summarised, library
+messages (canopen, python-can) under the node's logger, a silent listen-only bus reported."""
+
+from __future__ import annotations
+
+import re
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from ssi_bridge.line.timing import recommended_bit_rate
+from ssi_bridge.module.para1 import Para1
+from ssi_bridge.ros.observe import SILENT_WARNING_S
+from ssi_bridge.ros.params import DEFAULT_PARA1, JointSettings
+
+REPO = Path(__file__).resolve().parents[2]
+LINE = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[0-9.]+\] \[([^\]]+)\]: (.*)$")
+
+
+def wait_for_log(node, text: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while text not in node.log():
+        if node.proc.poll() is not None:
+            pytest.fail(f"node exited {node.proc.returncode} before {text!r}:\n{node.log()}")
+        if time.monotonic() > deadline:
+            pytest.fail(f"no {text!r} within {timeout} s:\n{node.log()[-3000:]}")
+        time.sleep(0.01)
+
+
+def stop(node) -> str:
+    """SIGINT, exit 0; the whole log."""
+    node.proc.send_signal(signal.SIGINT)
+    code = node.proc.wait(30)
+    log = node.log()
+    assert code == 0, log[-3000:]
+    return log
+
+
+def lines(log: str) -> list[tuple[str, str, str]]:
+    """(severity, logger, message) of every ROS log line."""
+    return [m.groups() for m in map(LINE.match, log.splitlines()) if m]
+
+
+def test_default_parameters_follow_the_cable_table():
+    # 004 §2.7: < 400 kHz for cables under 50 m; the default cable is 10 m
+    rate = Para1.decode(DEFAULT_PARA1).bit_rate_hz
+    limit = recommended_bit_rate(JointSettings("j", 1).cable_length)
+    assert limit is not None and rate < limit, (rate, limit)
+
+
+@pytest.mark.parametrize("params_file", [None, REPO / "config" / "ssi_bridge.yaml"],
+                         ids=["defaults", "shipped_config"])
+def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_node,
+                                                                         params_file):
+    node = start_node(params_file=params_file)
+    wait_for_log(node, "bridging")
+    log = stop(node)
+    parsed = lines(log)
+    assert parsed, log
+    assert [p for p in parsed if p[0] != "INFO"] == [], log
+    # logger names: the module is the logger, never repeated in brackets inside the message
+    assert not [p for p in parsed if p[2].startswith("[")], log
+    assert any(name == "ssi_bridge.client.master" for _, name, _ in parsed), log
+    assert "Failed to publish log message to rosout" not in log
+    assert all(LINE.match(line) for line in log.splitlines() if line.strip()), log
+
+
+@pytest.mark.parametrize("content, words", [
+    (None, "No such file"),
+    ("/**:\n  ros__parameters:\n    joints: [a\n", "not valid YAML"),
+    ("- 1\n- 2\n", "expected a mapping"),
+    ("/**:\n  ros__parameters:\n    joints: []\n", "joints is empty"),
+])
+def test_params_file_problems_are_one_line_and_exit_1(start_node, tmp_path: Path, content,
+                                                      words):
+    path = tmp_path / "given.yaml"
+    if content is not None:
+        path.write_text(content)
+    node = start_node(params_file=path)
+    assert node.proc.wait(60) == 1
+    out = [line for line in node.log().splitlines() if line.strip()]
+    assert len(out) == 1, out
+    assert out[0].startswith("ssi_bridge_node: cannot start:") and words in out[0], out
+
+
+def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
+    node = start_node({"publish_rte": 50.0, "joint2.slot": 2, "bus.bitrte": 250000})
+    wait_for_log(node, "bridging")
+    log = stop(node)
+    warnings = [m for sev, _, m in lines(log) if sev == "WARN"]
+    assert any("'publish_rte'" in w and "did you mean 'publish_rate'" in w for w in warnings), log
+    assert any("'bus.bitrte'" in w and "did you mean 'bus.bitrate'" in w for w in warnings), log
+    assert any("'joint2.slot'" in w and "'joint2' is not in joints ['joint1']" in w
+               for w in warnings), log
+    assert len(warnings) == 3, warnings
+
+
+def test_a_huge_joint_name_is_not_echoed_in_full(start_node):
+    name = "j" * 1_000_000
+    node = start_node({"joints": [name]})
+    wait_for_log(node, "bridging")
+    log = stop(node)
+    assert len(log) < 20_000, f"{len(log)} characters of log"
+    assert "(1000000 characters)" in log
+
+
+def test_emcy_floods_are_one_line_per_second_per_slot_and_code(start_node):
+    # the default REG_PARA1 (25-bit binary) on a 30-bit Gray AFM60: the module's SSI error bit
+    # flaps, and the gateway sends an EMCY 0x7000 / 0x0000 pair per flap (~100 a second)
+    node = start_node({"joint1.family": "AFM60_MULTI", "publish_rate": 1000.0})
+    wait_for_log(node, "bridging")
+    deadline = time.monotonic() + 60.0
+    while node.log().count("more in the last") < 4 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    log = stop(node)
+    emcy = [(t, m) for t, m in ((float(re.search(r"\[([0-9.]+)\]", line).group(1)), line)
+                                for line in log.splitlines() if "EMCY" in line)]
+    assert len([m for _, m in emcy if "more in the last" in m]) >= 4, log[-3000:]
+    hidden = sum(int(n) for n in re.findall(r"and (\d+) more", log))
+    assert hidden > len(emcy), "edges were summarised, not printed"
+    for key in ("EMCY 0x7000 slot 1: SSI error", "EMCY 0x0000 error reset"):
+        times = [t for t, m in emcy if key in m]
+        assert all(b - a >= 0.99 for a, b in zip(times, times[1:])), (key, times)
+    assert all("[ssi_bridge.client.master]" in m and m.startswith("[INFO]") for _, m in emcy)
+    assert "ssi_bridge.gateway.emergency" not in log, "the gateway side logs at DEBUG"
+
+
+def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):
+    node = start_node({"publish_rate": 10.0}, args=("--log-level", "debug"))
+    wait_for_log(node, "bridging")
+    log = stop(node)
+    names = {name for _, name, _ in lines(log)}
+    assert {"ssi_bridge.canopen.network", "ssi_bridge.canopen.nmt"} <= names, sorted(names)
+    assert not [n for n in names if n.startswith(("canopen", "can."))], sorted(names)
+
+
+def test_listen_only_on_a_silent_bus_says_so(start_node):
+    node = start_node({"simulation": False, "bus.listen_only": True})
+    wait_for_log(node, "bridging")
+    started = time.monotonic()
+    wait_for_log(node, "no SYNC on the bus", timeout=SILENT_WARNING_S + 30.0)
+    assert time.monotonic() - started >= SILENT_WARNING_S - 1.0, "not before the documented time"
+    log = stop(node)
+    assert log.count("no SYNC on the bus") == 1, "one warning, not one per period"
+

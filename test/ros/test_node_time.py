@@ -1,0 +1,65 @@
+"""header.stamp in the one time base (docs/canopen.md "Time and the wire"): strictly
+increasing, the SYNC's wire time, and with use_sim_time nothing before the first /clock."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+
+@pytest.mark.integration
+def test_stamps_are_wire_times_and_strictly_increasing(running, probe):
+    node = running({"publish_rate": 200.0})
+    msgs = probe.subscribe(JointState, node.topic("joint_states"), qos=500)
+    probe.wait_for(lambda: len(msgs) > 200, 20.0, "200 joint_states", node)
+    got = list(msgs)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in got]
+    assert all(b > a for a, b in zip(stamps, stamps[1:])), "header.stamp not increasing"
+    # ROS system time is wire time: each stamp (the SYNC on the wire) lies in the past of
+    # the moment the message was received, by less than a second on this host
+    now_ns = time.time_ns()
+    assert all(0 < now_ns - s < 60 * 10**9 for s in stamps)
+
+
+@pytest.mark.integration
+def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_node, probe):
+    node = start_node({"use_sim_time": True, "publish_rate": 100.0})
+    msgs = probe.subscribe(JointState, node.topic("joint_states"), qos=100)
+    probe.wait_for(lambda: "waiting for /clock" in node.log(), 30.0,
+                   "the node saying it waits for /clock", node)
+    assert node.log().count("waiting for /clock") == 1
+    time.sleep(0.5)  # the node cycles meanwhile (100 Hz): none of its cycles may publish
+    assert msgs == [], f"{len(msgs)} joint_states published without /clock"
+    pub = probe.node.create_publisher(Clock, "/clock", 10)
+    sim_s = 1000
+
+    def tick() -> None:
+        nonlocal sim_s
+        sim_s += 1
+        pub.publish(Clock(clock=__import__("builtin_interfaces.msg").msg.Time(sec=sim_s)))
+
+    timer = probe.node.create_timer(0.05, tick)
+    try:
+        probe.wait_for(lambda: len(msgs) > 5, 20.0, "joint_states after /clock", node)
+    finally:
+        probe.node.destroy_timer(timer)
+    for _, m in msgs:
+        sec = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        assert 999 < sec < sim_s + 2, sec
+    assert node.log().count("waiting for /clock") == 1
+
+
+@pytest.mark.integration
+def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running, probe):
+    from ssi_bridge.gateway import wire
+
+    joints = [f"axis{i}" for i in range(1, 5)]
+    node = running({"joints": joints, "publish_rate": 1000.0, "bus.bitrate": 500_000})
+    best = wire.max_cycle_rate(4, 500_000)
+    assert f"the highest rate that fits is {best:g} Hz" in node.log(), node.log()[-2000:]
+    assert f"publish_rate 1000 Hz does not fit the CAN wire" in node.log()
+    quiet = running({"joints": ["a"], "publish_rate": 100.0, "bus.bitrate": 500_000})
+    assert "does not fit the CAN wire" not in quiet.log()
