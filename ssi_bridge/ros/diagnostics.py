@@ -242,6 +242,7 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
     values.update(extra or {})
     if inp is not None:
         values.update({name: str(value) for name, value in inp.bits().items()})
+    level, message = health.level, health.message
     frame = counters.frame
     values["frame_errors"] = str(counters.frame_errors)
     if frame is not None:
@@ -257,7 +258,7 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
                        "bit that must be 0 read as 1 (004 3)" if frame.filler_error else
                        "encoder error bit set")
     return DiagnosticStatus(
-        level=health.level, name=name, message=health.message, hardware_id=hardware_id,
+        level=level, name=name, message=message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
