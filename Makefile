@@ -16,10 +16,11 @@ ONLY        ?=
 
 SOURCES := $(shell find msg_defs config launch resource -type f 2>/dev/null) setup.py setup.cfg package.xml
 
-.PHONY: help setup run test bench lock clean
+.PHONY: help setup run monitor test bench lock clean
 
 help:
 	@echo "make run    set up if needed, then run ssi_bridge_node (ARGS='--ros-args ...' passes through)"
+	@echo "make monitor  print joints, diagnostics and bus load of a running node each second (ARGS='--namespace ns')"
 	@echo "make test   set up if needed, then run the whole test suite (PYTEST_ARGS=... passes through)"
 	@echo "make bench  run the benchmarks in bench/ (ONLY=<name> runs bench/bench_<name>.py)"
 	@echo "make setup  create .venv from requirements.lock and colcon-build into install/"
@@ -47,12 +48,17 @@ $(STAMP_BUILD): | log
 run: setup
 	@$(ENV) && exec install/ssi_bridge/lib/ssi_bridge/ssi_bridge_node $(ARGS)
 
+monitor: setup
+	@$(ENV) && exec install/ssi_bridge/lib/ssi_bridge/monitor $(ARGS)
+
 test: setup
 	@$(ENV) && python -m pytest $(PYTEST_ARGS)
 
 bench: setup
 	@$(ENV) && mkdir -p bench/results && : > bench/results/latest.jsonl && \
-	for f in bench/bench_$(if $(ONLY),$(ONLY),*).py; do echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
+	for f in bench/bench_$(if $(ONLY),$(ONLY),*).py; do \
+	  case "$$f" in *bench_soak.py) [ -n "$(ONLY)" ] || { echo "# $$f: minutes long, run it with make bench ONLY=soak"; continue; };; esac; \
+	  echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
 
 lock:
 	@py=$$(scripts/find_python.sh); rm -rf /tmp/ssi_bridge_lock_venv; "$$py" -m venv /tmp/ssi_bridge_lock_venv

@@ -17,6 +17,8 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
+    # colcon test runs pytest (not unittest) only for packages that declare it as a test extra
+    extras_require={"test": ["pytest"]},
     zip_safe=True,
     maintainer="ssi_bridge maintainers",
     maintainer_email="ssi-bridge@example.com",
@@ -24,10 +26,11 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            f"ssi_bridge_node = {PACKAGE}.ros.main:main",
-            f"replay = {PACKAGE}.record.replay_cli:main",
-            f"plot = {PACKAGE}.record.plot_cli:main",
-            f"station = {PACKAGE}.gateway.station_cli:main",
+            f"ssi_bridge_node = {PACKAGE}.tools.ssi_bridge_node:main",
+            f"replay = {PACKAGE}.tools.replay:main",
+            f"plot = {PACKAGE}.tools.plot:main",
+            f"monitor = {PACKAGE}.tools.monitor:main",
+            f"station = {PACKAGE}.tools.station:main",
         ],
     },
 )

@@ -1,4 +1,4 @@
-"""Benchmark (issues 6, 10): ssi_bridge_node's joint_states against a bare rclpy publisher.
+"""Benchmark: ssi_bridge_node's joint_states against a bare rclpy publisher.
 
 For 1 and 8 encoders (joints j1..jN on slots 1..N) the installed ``ssi_bridge_node`` runs on a
 simulated 1 Mbit/s CAN wire at 1 kHz (1 encoder) or at the highest rate that wire allows for
@@ -16,12 +16,17 @@ same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per p
 * ``cpu_s_per_s``: utime+stime of the publisher process (/proc/<pid>/stat) over the window per
   second; the node's includes its simulated station, gateway and CAN bus (lower is better)
 
-* ``latency_beyond_wire_p50_us`` / ``_p99_us`` (issue 10): receive - header.stamp minus the
+* ``latency_beyond_wire_p50_us`` / ``_p99_us``: receive - header.stamp minus the
   computed SYNC -> last TPDO wire time (the TPDOs of one cycle, worst-case stuffed) against
   the bare publisher's latency (goal p99 <= 1.2x)
 * loaded run (1 encoder, 1 kHz, two CPU-burning processes beside it, killed by PID at the
   end): ``cycles_missed_fraction``, ``spurious_faults`` (EMCY / "silent" in the node log),
   ``stamp_inversions``
+
+Live view cost (``foxglove.port``): one node with 1 encoder at 1 kHz and its Foxglove WebSocket
+server on; its CPU s/s in alternating windows with no client, one client
+(``bench/liveview_client.py``, another process) subscribed to joint_states, and one subscribed
+to every node topic; medians of 3 rounds (``node_1enc_liveview_*``).
 
 QoS on both sides is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID.
@@ -49,6 +54,7 @@ REPO = HERE.parent
 RESULTS = HERE / "results" / "latest.jsonl"
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
 SUBSCRIBER = HERE / "node_subscriber.py"
+LIVEVIEW_CLIENT = HERE / "liveview_client.py"
 
 RATE_HZ = 1000.0
 CASES = (1, 8)
@@ -397,6 +403,129 @@ def run_stations(records: list[dict], domain_id: int, env: dict[str, str], work:
                            "baseline = 1 station x 8 slots, same rate, same run (same 13 frames "
                            "per cycle)")
             emit(records, rec)
+# -- live view (foxglove.port): node CPU with one Foxglove WebSocket client vs none -------------
+LIVEVIEW_ROUNDS = 3
+LIVEVIEW_WINDOW_S = 3.0
+#: what the client subscribes to: joint_states alone (a plot panel), or every node topic
+LIVEVIEW_CASES = {"client": [f"{NODE_NS}/joint_states"],
+                  "all_topics": [f"{NODE_NS}/joint_states", f"{NODE_NS}/ssi_bridge/status",
+                                 "/diagnostics", f"{NODE_NS}/ssi_bridge/events"]}
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait_file(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str) -> None:
+    deadline = time.monotonic() + STARTUP_TIMEOUT_S
+    while not path.exists():
+        for p, log in procs:
+            if p.poll() is not None:
+                raise RuntimeError(f"{what}: {p.args[1] if len(p.args) > 1 else p.args[0]} "
+                                   f"exited {p.returncode}: {_tail(log)}")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{what}: nothing within {STARTUP_TIMEOUT_S} s")
+        time.sleep(0.05)
+
+
+def _cpu_window(pid: int) -> tuple[float, float, int, int]:
+    """(CPU s, elapsed s, wall ns start, wall ns end) of ``pid`` over LIVEVIEW_WINDOW_S."""
+    cpu0, m0, w0 = _cpu_seconds(pid), time.monotonic(), time.time_ns()
+    time.sleep(LIVEVIEW_WINDOW_S)
+    return _cpu_seconds(pid) - cpu0, time.monotonic() - m0, w0, time.time_ns()
+
+
+def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[str, list[float]]:
+    """One node (1 encoder, 1 kHz, live view on), alternating windows with no client, one
+    client on joint_states and one on every topic: node CPU s/s, and the joint_states rates
+    the WebSocket client and the DDS subscriber received."""
+    port = _free_port()
+    cmd = node_cmd(1, domain_id, work, {"foxglove.port": port})
+    windows: dict[str, list[tuple[float, float, int, int]]] = {"idle": [], **{
+        case: [] for case in LIVEVIEW_CASES}}
+    ws_rates: list[float] = []
+    procs: list[subprocess.Popen] = []
+    ready, pub_log, sub_log = work / "lv.ready", work / "lv.pub.log", work / "lv.sub.log"
+    try:
+        with open(sub_log, "wb") as log:
+            procs.append(subprocess.Popen(
+                [sys.executable, str(SUBSCRIBER), f"{NODE_NS}/joint_states",
+                 str(work / "lv.samples"), str(ready)], stdout=log, stderr=subprocess.STDOUT,
+                env=env, cwd=work, start_new_session=True))
+        with open(pub_log, "wb") as log:
+            node = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                    cwd=work, start_new_session=True)
+        procs.append(node)
+        _wait_file(ready, [(node, pub_log)], "live view node: first joint_states")
+        time.sleep(WARMUP_S)
+        for r in range(LIVEVIEW_ROUNDS):
+            windows["idle"].append(_cpu_window(node.pid))
+            for case, topics in LIVEVIEW_CASES.items():
+                tag = f"lv_{case}_{r}"
+                c_ready, c_out, c_log = (work / f"{tag}.ready", work / f"{tag}.out",
+                                         work / f"{tag}.log")
+                with open(c_log, "wb") as log:
+                    client = subprocess.Popen(
+                        [sys.executable, str(LIVEVIEW_CLIENT), f"ws://127.0.0.1:{port}",
+                         ",".join(topics), str(c_ready), str(c_out)], stdout=log,
+                        stderr=subprocess.STDOUT, env=env, cwd=work, start_new_session=True)
+                try:
+                    _wait_file(c_ready, [(client, c_log), (node, pub_log)],
+                               f"live view client on {topics}")
+                    time.sleep(0.5)
+                    windows[case].append(_cpu_window(node.pid))
+                finally:
+                    _stop(client)
+                if case == "client":
+                    n, first, last = (int(v) for v in c_out.read_text().split())
+                    ws_rates.append((n - 1) / ((last - first) / 1e9))
+                time.sleep(0.5)  # the server notices the disconnect; serializing stops
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+    import numpy as np
+
+    recv = np.loadtxt(work / "lv.samples", dtype=np.int64, ndmin=2)[:, 0]
+    out: dict[str, list[float]] = {"ws_rate_hz": ws_rates}
+    for case, wins in windows.items():
+        cycles = [int(((recv >= w0) & (recv < w1)).sum()) for _, _, w0, w1 in wins]
+        out[case] = [cpu / el for cpu, el, _, _ in wins]
+        out[f"{case}_dds_rate_hz"] = [n / (el or 1.0) for (_, el, _, _), n in zip(wins, cycles)]
+    return out
+
+
+def report_liveview(records: list[dict], lv: dict[str, list[float]], plain: dict) -> None:
+    """Medians of the alternating windows; baselines from the same node or the same run."""
+    import statistics
+
+    med = {k: statistics.median(v) for k, v in lv.items()}
+    rows = [
+        ("client_cpu_s_per_s", med["client"], med["idle"], "s/s",
+         "node CPU with one Foxglove WebSocket client subscribed to joint_states; baseline = "
+         "the same node process, live view server on, no client (alternating windows)"),
+        ("all_topics_cpu_s_per_s", med["all_topics"], med["idle"], "s/s",
+         "node CPU with one client subscribed to joint_states, ~/status, /diagnostics and "
+         "~/events (~/status is then built every cycle); baseline = same node, no client"),
+        ("idle_cpu_s_per_s", med["idle"], plain["cpu_s_per_s"], "s/s",
+         "node CPU with the live view server on and no client; baseline = node with "
+         "foxglove.port 0 (the default) measured earlier in this run"),
+        ("ws_rate_hz", med["ws_rate_hz"], med["client_dds_rate_hz"], "Hz",
+         "joint_states per second received by the WebSocket client; baseline = joint_states "
+         "per second received over DDS by the subscriber (also a Python process) in the same "
+         "windows"),
+    ]
+    for name, value, base, unit, note in rows:
+        rec = {"metric": f"node_1enc_liveview_{name}", "value": round(value, 3), "unit": unit,
+               "baseline": round(base, 3)}
+        if base:
+            rec["ratio"] = round(value / base, 3)
+        rec["note"] = (f"{note}; 1 encoder at {RATE_HZ:g} Hz, median of {LIVEVIEW_ROUNDS} "
+                       f"windows of {LIVEVIEW_WINDOW_S:g} s")
+        emit(records, rec)
 
 
 def run(records: list[dict]) -> None:
@@ -409,6 +538,7 @@ def run(records: list[dict]) -> None:
         raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
     domain_id = _domain_id()
     env = _env(domain_id)
+    plain: dict[int, dict] = {}
     with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
         work = Path(tmp)
         for n in CASES:
@@ -418,6 +548,7 @@ def run(records: list[dict]) -> None:
                 bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work,
                                case_rate(n))
                 report(records, n, node, bare)
+                plain[n] = node
                 if n == max(CASES):
                     pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
                         "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work,
@@ -442,6 +573,13 @@ def run(records: list[dict]) -> None:
             for p in load:
                 p.kill()
                 p.wait(5)
+        if 1 in plain:
+            try:
+                report_liveview(records, measure_liveview(domain_id, env, work), plain[1])
+            except Exception as err:  # noqa: BLE001
+                emit(records, {"metric": "node_1enc_liveview",
+                               "error": f"{type(err).__name__}: {err}",
+                               "note": traceback.format_exc(limit=3)[-800:]})
 
 
 def main() -> int:
@@ -450,7 +588,7 @@ def main() -> int:
         run(records)
     except Exception as err:  # noqa: BLE001
         emit(records, {"metric": "node", "error": f"{type(err).__name__}: {err}"})
-    try:  # the service-burst part (issue 11); `python bench/service_burst.py` runs it alone
+    try:  # the service-burst part; `python bench/service_burst.py` runs it alone
         sys.path.insert(0, str(HERE))
         import service_burst
 

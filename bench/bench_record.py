@@ -94,7 +94,7 @@ def bench_replay(tmp: Path) -> None:
 
     from ssi_bridge.record.bag import BagRecorder
     from ssi_bridge.record.reader import Bag
-    from ssi_bridge.record.replay import Player, ReplayOptions
+    from ssi_bridge.record.bag_replay import Player, ReplayOptions
 
     rec = BagRecorder.open(tmp / "replay")
     rec.add_topic("/bench_joint_states", "sensor_msgs/msg/JointState")

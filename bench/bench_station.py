@@ -1,4 +1,4 @@
-"""Benchmark (issue 10): the simulated station as a process of its own vs in the node's process.
+"""Benchmark: the simulated station as a process of its own vs in the node's process.
 
 * ``station_startup_s``: spawn of the ``station`` program until its boot-up message is on the
   udp_multicast bus; baseline: building and starting the same station in this process on the

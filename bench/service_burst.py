@@ -1,4 +1,4 @@
-"""Benchmark part of bench_node.py (issue 11): a burst of service calls to the node at 1 kHz.
+"""Benchmark part of bench_node.py: a burst of service calls to the node at 1 kHz.
 
 The installed node runs one simulated encoder at 1000 Hz; ``bench/node_subscriber.py`` records
 every joint_states message in another process. After a warm-up, 4 clients (4 rclpy nodes in

@@ -28,7 +28,7 @@ from canopen.objectdictionary import eds
 
 from ssi_bridge.gateway.bus import CIA_BITRATES
 
-#: number of XN-1SSI modules a station may hold (issue 5)
+#: number of XN-1SSI modules a station may hold
 MAX_SLOTS = 8
 #: 0x1000 device type: CiA 401 generic I/O (the gateway's first device profile)
 DEVICE_TYPE = 0x0000_0191

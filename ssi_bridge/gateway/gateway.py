@@ -252,7 +252,7 @@ class XnGateway:
         subtraction of a constant, no clock read, whenever this thread gets to run. (It used
         to read the model clock and ``time.time()`` in two statements: a thread switch between
         them moved the latch back by the switch, into the previous burst's monoflop time, and
-        the module saw a line held low: a false ERR_SSI, issue 10.) Without a timestamp: now.
+        the module saw a line held low: a false ERR_SSI.) Without a timestamp: now.
         """
         return self.clock.at(timestamp) if timestamp else self.clock()
 

@@ -5,7 +5,7 @@ all behind an XN-GW-CANOPEN gateway on a CAN bus.
 without a joint hold a module with nothing connected). :class:`Station` adds the gateway and
 the simulation-only fault objects (0x4000-0x4003, :mod:`ssi_bridge.gateway.simulation`), so a
 master reaches it only over the bus, like real hardware, whether it runs in the master's
-process or in one of its own (``station`` executable, :mod:`ssi_bridge.gateway.station_cli`).
+process or in one of its own (``station`` executable, :mod:`ssi_bridge.tools.station`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ base python-can gives every received frame (``can.Message.timestamp``: ``time.ti
 send time, latch time, TPDO arrival, ``header.stamp``, recorded and CAN-log times are all
 wire times, so no instant is ever moved from one clock into another by reading two clocks
 (a thread switch between two reads shifts the result by the switch, up to Python's 5 ms GIL
-switch interval: issue 10). The same base holds in every process and, with NTP, on every host.
+switch interval). The same base holds in every process and, with NTP, on every host.
 
 * :func:`wire_now` reads the clock (one read).
 * :func:`to_ros_ns` is the conversion to ROS time: ROS system time *is* CLOCK_REALTIME, so it

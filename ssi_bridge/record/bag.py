@@ -1,13 +1,21 @@
-"""Record rclpy messages into a rosbag2-compatible MCAP bag directory.
+"""Record rclpy messages into a rosbag2-compatible MCAP bag directory, split as rosbag2 does.
 
 Layout as rosbag2 (storage plugin ``mcap``) writes it: ``<dir>/<dirname>_0.mcap`` with
 profile ``ros2``, one ``ros2msg`` schema per type, ``cdr`` channels carrying
 ``offered_qos_profiles`` and ``topic_type_hash``, zstd/lz4 chunks with message indexes and a
 summary with statistics, a ``rosbag2`` metadata record; and ``<dir>/metadata.yaml``.
 
+Splitting (``max_size`` bytes, ``max_duration_s``; 0 = never), with rosbag2's rule: before a
+message is written, the open file is closed when it holds ``max_size`` bytes or more, or when
+the message is more than ``max_duration_s`` after the file's first message; the message then
+opens ``<dirname>_<k+1>.mcap``. A closed file is a complete MCAP (summary, chunk index,
+statistics) and starts with the configuration metadata record and every schema and channel,
+so each file stands alone. The writer's per-chunk index lives with the open file only, so a
+session's memory does not grow with its length.
+
 Crash safety: a background thread closes the open chunk and flushes the file every
 ``flush_period_s`` (0.5 s), so a kill -9 loses at most that much; ``recover.recover_bag``
-rebuilds the summary and metadata.yaml. Any OSError (disk full, EFBIG, EIO) turns the
+rebuilds the cut last file and metadata.yaml. Any OSError (disk full, EFBIG, EIO) turns the
 recorder into a failed state and surfaces as :class:`RecordingError` on the next call, so the
 node can stop recording and report ERROR while it keeps publishing.
 """
@@ -20,17 +28,29 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 from rclpy.qos import QoSProfile
 
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
-from ssi_bridge.record.metadata import ROS_DISTRO, BagInfo, TopicInfo, metadata_text, write_metadata
+from ssi_bridge.record.mcap_file import McapFile
+from ssi_bridge.record.metadata import (
+    ROS_DISTRO,
+    BagInfo,
+    FileInfo,
+    TopicInfo,
+    file_name,
+    metadata_text,
+    write_metadata,
+)
 from ssi_bridge.record.qos import qos_text
 from ssi_bridge.record.schema import build_schema
+from ssi_bridge.record.split import MIN_SPLIT_SIZE, SplitPolicy
+
+__all__ = ["CONFIG_METADATA_NAME", "MIN_SPLIT_SIZE", "BagRecorder", "BagSummary", "SplitPolicy"]
 
 logger = logging.getLogger(__name__)
 
@@ -51,65 +71,71 @@ class BagSummary:
     #: log-time span of the recorded messages (s)
     duration: float
     topics: dict[str, int] = field(default_factory=dict)
+    #: the bag's MCAP files (relative names) in writing order
+    files: tuple[str, ...] = ()
 
 
 @dataclass
-class _Channel:
-    """One registered topic."""
+class _Topic:
+    """One registered topic: what every file's channel is made from, and the session count."""
 
-    channel_id: int
     info: TopicInfo
+    schema_text: bytes
+    channel_meta: dict[str, str]
     sequence: int = 0
 
 
 class BagRecorder:
     """Write one bag; thread-safe ``write`` from any thread (e.g. the node's 1 kHz timer)."""
 
-    def __init__(self, directory: Path, stream: BinaryIO, writer: Writer, info: BagInfo,
-                 flush_period_s: float) -> None:
+    def __init__(self, directory: Path, info: BagInfo, compression: CompressionType,
+                 chunk_size: int, split: SplitPolicy, flush_period_s: float) -> None:
         self._directory = directory
-        self._stream = stream
-        self._writer = writer
         self._info = info
+        self._compression = compression
+        self._chunk_size = chunk_size
+        self._split = split
         self._lock = threading.Lock()
-        self._channels: dict[str, _Channel] = {}
-        self._schemas: dict[str, int] = {}
+        self._topics: dict[str, _Topic] = {}
+        self._file: McapFile | None = None
+        #: finished files whose fsync + close the flush thread still owes
+        self._closing: list[McapFile] = []
         self._dirty = False
         self._error: RecordingError | None = None
         self._closed = False
         self._stop = threading.Event()
         self._flush_period = flush_period_s
         self._flusher = threading.Thread(target=self._flush_loop, name="bag-flush", daemon=True)
-        self._flusher.start()
 
     @classmethod
     def open(cls, directory: Path, *, compression: str = "zstd",
              metadata: dict[str, str] | None = None, flush_period_s: float = 0.5,
-             chunk_size: int = 1024 * 1024) -> BagRecorder:
-        """Create the bag directory and its MCAP file; refuse an existing or unwritable one."""
+             chunk_size: int = 1024 * 1024, max_size: int = 0,
+             max_duration_s: float = 0.0) -> BagRecorder:
+        """Create the bag directory and its first MCAP file; refuse an existing or unwritable
+        one, an unknown compression and split limits below the minimum."""
         directory = Path(directory).absolute()
         if compression not in COMPRESSIONS:
             raise RecordingError(f"compression {compression!r}: expected zstd, lz4 or none")
+        split = SplitPolicy(max_size, max_duration_s)
         if directory.exists():
             raise RecordingError(f"bag directory {directory} already exists; choose a new name")
-        file_name = f"{directory.name}_0.mcap"
         try:
             directory.mkdir(parents=True)
-            stream = open(directory / file_name, "xb")  # noqa: SIM115 - closed in close()
         except OSError as err:
             raise RecordingError(f"cannot create bag {directory}: {err.strerror or err}") from err
-        writer = Writer(stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
-        info = BagInfo(file_name, custom_data={str(k): str(v) for k, v in (metadata or {}).items()})
+        info = BagInfo(custom_data={str(k): str(v) for k, v in (metadata or {}).items()})
+        rec = cls(directory, info, COMPRESSIONS[compression], chunk_size, split, flush_period_s)
         try:
-            writer.start(profile="ros2", library=f"ssi_bridge {__version__}")
-            if info.custom_data:
-                writer.add_metadata(CONFIG_METADATA_NAME, info.custom_data)
-            stream.flush()
+            rec._file = rec._open_file()
         except OSError as err:
-            stream.close()
-            raise RecordingError(f"cannot write bag {directory}: {err.strerror or err}") from err
-        logger.info("recording to %s (%s chunks)", directory, compression or "uncompressed")
-        return cls(directory, stream, writer, info, flush_period_s)
+            raise RecordingError(f"cannot create bag {directory}: {err.strerror or err}") from err
+        rec._flusher.start()
+        limits = ([f"split at {max_size} B"] if max_size else []) + (
+            [f"split every {max_duration_s:g} s"] if max_duration_s else [])
+        logger.info("recording to %s (%s chunks%s)", directory, compression or "uncompressed",
+                    "".join(f"; {x}" for x in limits))
+        return rec
 
     @property
     def directory(self) -> Path:
@@ -118,8 +144,13 @@ class BagRecorder:
 
     @property
     def message_count(self) -> int:
-        """Messages written so far."""
+        """Messages written so far (all files)."""
         return self._info.message_count
+
+    @property
+    def files(self) -> list[str]:
+        """Names of the bag's MCAP files so far, the open one last."""
+        return [f.path for f in self._info.files]
 
     @property
     def error(self) -> RecordingError | None:
@@ -130,27 +161,25 @@ class BagRecorder:
         """Register a topic (once) with its type ``pkg/msg/Type`` and offered QoS."""
         with self._lock:
             self._check()
-            if name in self._channels:
-                if self._channels[name].info.type != build_schema(type_name).name:
-                    raise RecordingError(f"topic {name} already recorded with type "
-                                         f"{self._channels[name].info.type}")
-                return
             schema = build_schema(type_name)
+            if name in self._topics:
+                if self._topics[name].info.type != schema.name:
+                    raise RecordingError(f"topic {name} already recorded with type "
+                                         f"{self._topics[name].info.type}")
+                return
             qtext = qos_text([qos or DEFAULT_QOS])
             channel_meta = {"offered_qos_profiles": qtext}
             if schema.type_hash:
                 channel_meta["topic_type_hash"] = schema.type_hash
+            topic = _Topic(TopicInfo(name, schema.name, qtext, schema.type_hash),
+                           schema.text.encode(), channel_meta)
+            assert self._file is not None
             try:
-                if schema.name not in self._schemas:
-                    self._schemas[schema.name] = self._writer.register_schema(
-                        schema.name, "ros2msg", schema.text.encode())
-                channel_id = self._writer.register_channel(
-                    name, "cdr", self._schemas[schema.name], channel_meta)
+                self._file.add_channel(name, schema.name, topic.schema_text, channel_meta)
             except OSError as err:
                 raise self._fail(err) from err
-            info = TopicInfo(name, schema.name, qtext, schema.type_hash)
-            self._info.topics.append(info)
-            self._channels[name] = _Channel(channel_id, info)
+            self._info.topics.append(topic.info)
+            self._topics[name] = topic
 
     def write(self, topic: str, msg: Any, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
@@ -158,18 +187,21 @@ class BagRecorder:
         data = cdr.serialize(msg)
         with self._lock:
             self._check()
-            channel = self._channels.get(topic)
-            if channel is None:
+            entry = self._topics.get(topic)
+            if entry is None:
                 raise RecordingError(f"topic {topic} was not added to the recorder")
+            file = self._file
+            assert file is not None
             try:
-                self._writer.add_message(
-                    channel.channel_id, log_time_ns, data,
-                    log_time_ns if publish_time_ns is None else publish_time_ns,
-                    channel.sequence)
+                if self._split.due(file.info, file.size, log_time_ns):
+                    file = self._next_file()
+                file.write(topic, log_time_ns, data,
+                           log_time_ns if publish_time_ns is None else publish_time_ns,
+                           entry.sequence)
             except OSError as err:
                 raise self._fail(err) from err
-            channel.sequence += 1
-            channel.info.message_count += 1
+            entry.sequence += 1
+            entry.info.message_count += 1
             info = self._info
             if info.start_ns == 0 or log_time_ns < info.start_ns:
                 info.start_ns = log_time_ns
@@ -182,45 +214,95 @@ class BagRecorder:
             self._check()
             if not self._dirty:
                 return
+            assert self._file is not None
             try:
-                self._writer.flush()
+                self._file.flush()
             except OSError as err:
                 raise self._fail(err) from err
             self._dirty = False
 
     def close(self) -> BagSummary:
-        """Finish the MCAP file (summary, statistics, indexes), write metadata.yaml."""
+        """Finish the open MCAP file (summary, statistics, indexes), write metadata.yaml."""
         self._stop.set()
-        if self._flusher is not threading.current_thread():
+        if self._flusher.is_alive() and self._flusher is not threading.current_thread():
             self._flusher.join()
         with self._lock:
             if self._closed:
                 raise RecordingError(f"bag {self._directory} is already closed")
             self._closed = True
+            file, self._file = self._file, None
+            pending, self._closing = self._closing, []
             if self._error is None:
                 try:
-                    self._writer.add_metadata("rosbag2", {
-                        "serialized_metadata": metadata_text(self._info),
-                        "ROS_DISTRO": ROS_DISTRO})
-                    self._writer.finish()
-                    self._stream.flush()
-                    os.fsync(self._stream.fileno())
-                    self._stream.close()
+                    assert file is not None
+                    self._finish(file)
+                    for done in (*pending, file):
+                        done.sync_close()
                     write_metadata(self._directory, self._info)
                 except OSError as err:
                     self._fail(err)
             if self._error is not None:
-                try:
-                    self._stream.close()
-                except OSError:
-                    logger.debug("closing %s after a write error failed too", self._directory)
+                for done in (*pending, file):
+                    if done is not None:
+                        done.abandon()
                 raise RecordingError(f"{self._error}; the bag was left without a summary: "
                                      f"`replay --recover {self._directory}` rebuilds it")
         info = self._info
-        logger.info("closed %s: %d messages", self._directory, info.message_count)
+        logger.info("closed %s: %d messages in %d file(s)", self._directory,
+                    info.message_count, len(info.files))
         return BagSummary(self._directory, info.message_count, info.duration_ns / 1e9,
-                          {t.name: t.message_count for t in info.topics})
+                          {t.name: t.message_count for t in info.topics},
+                          tuple(f.path for f in info.files))
 
+    # -- files ---------------------------------------------------------------------------------
+    def _open_file(self) -> McapFile:
+        """Create the next ``<name>_<k>.mcap``: header, configuration, every schema and channel.
+
+        The schemas and channels go into the file's first chunk, which the first message
+        (already waiting when a split opens the file) completes.
+        """
+        entry = FileInfo(file_name(self._directory.name, len(self._info.files)))
+        path = self._directory / entry.path
+        file = McapFile.create(path, entry, self._compression, self._chunk_size,
+                               f"ssi_bridge {__version__}")
+        try:
+            if self._info.custom_data:
+                file.add_metadata(CONFIG_METADATA_NAME, self._info.custom_data)
+            for name, topic in self._topics.items():
+                file.add_channel(name, topic.info.type, topic.schema_text, topic.channel_meta)
+            file.flush()
+        except OSError:
+            file.abandon()
+            if self._info.files:
+                # a split that could not start its file (disk full) leaves the closed files
+                # complete; a header without messages is no part of the bag
+                path.unlink(missing_ok=True)
+            raise
+        self._info.files.append(entry)
+        return file
+
+    def _finish(self, file: McapFile) -> None:
+        """Write the rosbag2 metadata record (the bag as known now) and the file's summary."""
+        file.add_metadata("rosbag2", {"serialized_metadata": metadata_text(self._info),
+                                      "ROS_DISTRO": ROS_DISTRO})
+        file.finish()
+
+    def _next_file(self) -> McapFile:
+        """Split: finish the open file now, leave its fsync to the flush thread, open the next.
+
+        Called with the lock held on the writing thread; the finish costs one chunk's
+        compression and the summary, the fsync (which may wait on the disk) is not done here.
+        """
+        assert self._file is not None
+        old = self._file
+        self._finish(old)
+        self._closing.append(old)
+        self._file = self._open_file()
+        logger.info("%s: closed %s (%d messages), writing %s", self._directory, old.info.path,
+                    old.info.message_count, self._file.info.path)
+        return self._file
+
+    # -- state ---------------------------------------------------------------------------------
     def _check(self) -> None:
         """Raise if the recorder is closed or failed (called with the lock held)."""
         if self._error is not None:
@@ -238,15 +320,28 @@ class BagRecorder:
         return self._error
 
     def _flush_loop(self) -> None:
-        """Flush every period so that a crash loses at most ``flush_period_s`` of data."""
+        """Flush every period so that a crash loses at most ``flush_period_s`` of data; fsync
+        and close the files a split finished."""
         while not self._stop.wait(self._flush_period):
             try:
                 self.flush()
             except (RecordingError, ValueError):
                 return
+            with self._lock:
+                current = self._file
+                pending, self._closing = self._closing, []
             start = time.monotonic()
+            for done in pending:
+                try:
+                    done.sync_close()
+                except OSError as err:
+                    with self._lock:
+                        self._fail(err)
+                    return
             try:
-                os.fsync(self._stream.fileno())
+                if current is not None:
+                    os.fsync(current.fileno())
             except (OSError, ValueError):
                 pass
             logger.debug("fsync %.1f ms", (time.monotonic() - start) * 1e3)
+

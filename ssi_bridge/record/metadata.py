@@ -5,7 +5,8 @@ crash), so both produce the same layout: ``rosbag2_bagfile_information`` with ve
 storage_identifier ``mcap``, duration, starting_time, message_count,
 topics_with_message_count (type, serialization_format ``cdr``, offered_qos_profiles with the
 very text of the channel metadata, type_description_hash), relative_file_paths, files,
-custom_data and ros_distro.
+custom_data and ros_distro. A split session lists every file in ``relative_file_paths`` and
+``files`` (path, starting_time, duration, message_count), as rosbag2's SequentialWriter does.
 """
 
 from __future__ import annotations
@@ -40,11 +41,36 @@ class TopicInfo:
 
 
 @dataclass
-class BagInfo:
-    """Everything metadata.yaml holds for a single-file MCAP bag."""
+class FileInfo:
+    """One MCAP file of a bag (a ``files:`` entry): a session split by size or duration has
+    ``<name>_0.mcap``, ``<name>_1.mcap``, ... in the order they were written."""
 
-    #: file name of the MCAP file relative to the bag directory
-    file_name: str
+    #: file name relative to the bag directory
+    path: str
+    #: earliest and latest log time in this file (ns since epoch); 0 when empty
+    start_ns: int = 0
+    end_ns: int = 0
+    message_count: int = 0
+
+    @property
+    def duration_ns(self) -> int:
+        """Log-time span of this file (ns)."""
+        return max(0, self.end_ns - self.start_ns)
+
+    def add(self, log_time_ns: int, count: int = 1) -> None:
+        """Account ``count`` messages logged at ``log_time_ns``."""
+        if self.message_count == 0 or log_time_ns < self.start_ns:
+            self.start_ns = log_time_ns
+        self.end_ns = max(self.end_ns, log_time_ns)
+        self.message_count += count
+
+
+@dataclass
+class BagInfo:
+    """Everything metadata.yaml holds for an MCAP bag of one or more files."""
+
+    #: the bag's files in writing order
+    files: list[FileInfo] = field(default_factory=list)
     topics: list[TopicInfo] = field(default_factory=list)
     #: earliest and latest log time (ns since epoch); 0 when empty
     start_ns: int = 0
@@ -61,6 +87,20 @@ class BagInfo:
     def duration_ns(self) -> int:
         """Log-time span of the bag (ns)."""
         return max(0, self.end_ns - self.start_ns)
+
+
+def file_name(bag_name: str, index: int) -> str:
+    """rosbag2's name of the ``index``-th file of bag directory ``bag_name``: ``<name>_<i>.mcap``."""
+    return f"{bag_name}_{index}.mcap"
+
+
+def file_index(bag_name: str, name: str) -> int | None:
+    """The index ``i`` of a file named ``<bag_name>_<i>.mcap``, else None."""
+    prefix, suffix = f"{bag_name}_", ".mcap"
+    if not (name.startswith(prefix) and name.endswith(suffix)):
+        return None
+    digits = name[len(prefix):-len(suffix)]
+    return int(digits) if digits.isdigit() else None
 
 
 def _topic_entry(topic: TopicInfo) -> dict[str, Any]:
@@ -92,9 +132,10 @@ def metadata_dict(info: BagInfo) -> dict[str, Any]:
         # rosbag2's own (file/message) compression; MCAP chunk compression is internal
         "compression_format": "",
         "compression_mode": "",
-        "relative_file_paths": [info.file_name],
-        "files": [{"path": info.file_name, "starting_time": dict(start),
-                   "duration": dict(duration), "message_count": info.message_count}],
+        "relative_file_paths": [f.path for f in info.files],
+        "files": [{"path": f.path, "starting_time": {"nanoseconds_since_epoch": f.start_ns},
+                   "duration": {"nanoseconds": f.duration_ns},
+                   "message_count": f.message_count} for f in info.files],
         "custom_data": dict(info.custom_data) or None,
         "ros_distro": ROS_DISTRO,
     }

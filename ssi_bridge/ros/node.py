@@ -31,7 +31,7 @@ from ssi_bridge_msgs.msg import Status
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.samples import ChannelSample
-from ssi_bridge.client.player import CanLogPlayer
+from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.encoder.config import EncoderConfig
 from ssi_bridge.encoder.families import family_config
 from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
@@ -50,6 +50,8 @@ from ssi_bridge.ros.diagnostics import (
     status_name,
 )
 from ssi_bridge.ros.faults import FaultInjector, StationFaults
+from ssi_bridge.ros.liveview import LiveView
+from ssi_bridge.ros.joint_scale import JointScale
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameters
@@ -59,7 +61,7 @@ from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import (
     ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
 )
-from ssi_bridge.ros.units import JointScale, VelocityEstimator
+from ssi_bridge.ros.velocity import VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
 NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)
@@ -254,6 +256,9 @@ class SsiBridgeNode(Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
         self.handlers.register(self._service_group)
+        self.liveview = LiveView(self, s)
+        for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
+            self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def _start_player_when_heard(self, timeout: float) -> None:
@@ -490,7 +495,8 @@ class SsiBridgeNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.settings.frame_id
         # ~/status costs as much as the rest of the cycle: build it only for a listener
-        want_status = self.recorder.active or self.status_pub.get_subscription_count() > 0
+        want_status = (self.recorder.active or self.status_pub.get_subscription_count() > 0
+                       or self.liveview.wants(self.status_pub))
         status = Status(header=js.header) if want_status else None
         # a joint without a sample latched at this SYNC holds an older latch than this stamp:
         # while it is not (yet) STALE the cycle is not published and no estimate takes it in
@@ -615,6 +621,7 @@ class SsiBridgeNode(Node):
             if self.context.ok():
                 raise
             return False
+        self.liveview.publish(publisher, msg)
         return True
 
     # -- diagnostics -----------------------------------------------------------------------
@@ -672,6 +679,7 @@ class SsiBridgeNode(Node):
             counters.update(meter.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters.update(self.liveview.counters())
         out.append(bus_status(
             status_name(fqn, "bus"),
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
@@ -719,7 +727,7 @@ class SsiBridgeNode(Node):
     def _bus_problem(self) -> str:
         """An error beside the bus state: the recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
-        return "; ".join(p for p in (self.recorder.error, station) if p)
+        return "; ".join(p for p in (self.recorder.error, self.liveview.error, station) if p)
 
     def _on_diag_timer(self) -> None:
         """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
@@ -884,7 +892,7 @@ class SsiBridgeNode(Node):
             ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
             steps.append(("log replay", self.player.stop))
-        steps += [("recording", self.recorder.stop)]
+        steps += [("recording", self.recorder.stop), ("live view", self.liveview.stop)]
         steps += [(f"station {sid} client", c.close) for sid, c in self.station_clients.items()]
         steps += [("bus", self.client.close)]
         if self.master is not None:

@@ -17,10 +17,15 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
+
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.gateway.settings import (  # noqa: F401 - re-exported
     DEFAULT_PARA1, JointSettings, MotionSettings,
 )
+
+#: smallest record.max_size (bytes); the same floor as record/bag.py's MIN_SPLIT_SIZE
+MIN_SPLIT_SIZE = 64 * 1024
+
 
 @dataclass(frozen=True)
 class NodeSettings:
@@ -32,7 +37,7 @@ class NodeSettings:
     frame_id: str = ""
     simulation: bool = True
     #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
-    simulation_transport: str = "virtual"
+    simulation_transport: str = "udp_multicast"
     #: seconds the node waits for the simulated station's boot-up at start
     simulation_start_timeout: float = 10.0
     bus_interface: str = "virtual"
@@ -49,6 +54,9 @@ class NodeSettings:
     record_path: str = ""
     record_compression: str = "zstd"
     record_can_log: bool = False
+    #: split a session into a new file at this size (bytes) / duration (s); 0 = never
+    record_max_size: int = 0
+    record_max_duration: int = 0
     cpu_affinity: tuple[int, ...] = ()
     #: observe another master's traffic (or a replayed log) instead of driving the bus
     bus_listen_only: bool = False
@@ -57,6 +65,9 @@ class NodeSettings:
     replay_rate: float = 1.0
     replay_exit_at_end: bool = False
     replay_wait_for_subscribers: float = 0.0
+    #: live view (ros/liveview.py): Foxglove WebSocket port, 0 = off; address it binds to
+    foxglove_port: int = 0
+    foxglove_address: str = "127.0.0.1"
 
     @property
     def station_ids(self) -> tuple[int, ...]:
@@ -101,7 +112,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "true: start the simulated encoders, XN-1SSI modules and gateway (a station of its "
         "own, see simulation.transport) and drive it over CAN; "
         "false: talk to a real XN-GW-CANOPEN station", read_only=True)),
-    "simulation.transport": ("virtual", _describe(
+    "simulation.transport": ("udp_multicast", _describe(
         "How the node reaches its simulated station, always over CAN only: udp_multicast "
         "(the station runs as a child process on python-can's udp_multicast bus on loopback, "
         "group and port derived from bus.channel) or virtual (the station runs in the node's "
@@ -167,6 +178,21 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "record.can_log": (False, _describe(
         "Also log the raw CAN traffic of each session beside the bag (can_0.log, candump "
         "format, read by python-can's LogReader)", read_only=True)),
+    "record.max_size": (0, _describe(
+        "Split a session into its next file <name>_<k>.mcap once the open one holds this many "
+        "bytes (rosbag2 --max-bag-size); 0: no split by size, else at least 65536",
+        read_only=True, int_range=(0, 1 << 50))),
+    "record.max_duration": (0, _describe(
+        "Split a session into its next file once a message is more than this many seconds "
+        "after the open file's first one (rosbag2 --max-bag-duration); 0: no split by time",
+        read_only=True, int_range=(0, 7 * 86400))),
+    "foxglove.port": (0, _describe(
+        "Live view: TCP port of a Foxglove WebSocket server streaming every topic of the node "
+        "(ros2msg schemas, CDR); open Foxglove and connect to ws://localhost:<port>. 0: off",
+        read_only=True, int_range=(0, 65535))),
+    "foxglove.address": ("127.0.0.1", _describe(
+        "Address the live view server binds to: 127.0.0.1 accepts clients of this host only; "
+        "an interface address or 0.0.0.0 lets other hosts connect", read_only=True)),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
@@ -337,8 +363,14 @@ def declare_parameters(node: Node) -> NodeSettings:
     if len(stations) > 1 and (values["bus.listen_only"] or values["replay.can_log"]):
         raise ConfigError("bus.listen_only / replay.can_log observe one station: use a single "
                           "entry in stations")
+    if values["foxglove.port"] and not str(values["foxglove.address"]).strip():
+        raise ConfigError("foxglove.address is empty: give the address the live view binds to "
+                          "(127.0.0.1: this host only)")
     if values["record.compression"] not in ("zstd", "lz4", "none"):
         raise ConfigError(f"record.compression {values['record.compression']!r}: zstd, lz4 or none")
+    if 0 < values["record.max_size"] < MIN_SPLIT_SIZE:
+        raise ConfigError(f"record.max_size {values['record.max_size']}: 0 (no split) or at "
+                          f"least {MIN_SPLIT_SIZE} bytes")
     if values["simulation.transport"] not in TRANSPORTS:
         raise ConfigError(f"simulation.transport {values['simulation.transport']!r}: one of "
                           f"{TRANSPORTS}")
@@ -360,8 +392,11 @@ def declare_parameters(node: Node) -> NodeSettings:
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
-        record_can_log=values["record.can_log"], bus_listen_only=values["bus.listen_only"],
+        record_can_log=values["record.can_log"], record_max_size=values["record.max_size"],
+        record_max_duration=values["record.max_duration"], bus_listen_only=values["bus.listen_only"],
         cpu_affinity=_cpus(values["cpu_affinity"]),
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
-        replay_wait_for_subscribers=values["replay.wait_for_subscribers"])
+        replay_wait_for_subscribers=values["replay.wait_for_subscribers"],
+        foxglove_port=values["foxglove.port"],
+        foxglove_address=str(values["foxglove.address"]).strip())

@@ -74,7 +74,9 @@ class SessionRecorder:
             path = resolve_bag_path(root, requested)
             metadata = self._metadata()
             self._bag = BagRecorder.open(path, compression=self._settings.record_compression,
-                                         metadata=metadata)
+                                         metadata=metadata,
+                                         max_size=self._settings.record_max_size,
+                                         max_duration_s=self._settings.record_max_duration)
             self._topics = set()
             if self._settings.record_can_log:
                 self._start_sniffer(path)
@@ -163,6 +165,7 @@ class SessionRecorder:
         bag, sniffer = self._bag, self._sniffer
         return {"recording": int(bag is not None),
                 "recorded_messages": bag.message_count if bag is not None else 0,
+                "recorded_files": len(bag.files) if bag is not None else 0,
                 "can_frames_logged": sniffer.frames if sniffer is not None else 0}
 
     def _start_sniffer(self, bag_dir: Path) -> None:

@@ -31,7 +31,7 @@ from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
 from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.module.registers import Para1, Reg
-from ssi_bridge.ros.units import to_int32
+from ssi_bridge.ros.joint_scale import to_int32
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,

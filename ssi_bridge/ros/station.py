@@ -1,7 +1,7 @@
 """The node's simulated station: started, watched and stopped by the node, reached over CAN only.
 
 ``simulation.transport: udp_multicast`` (default) runs the station as a child process (the
-``station`` program, :mod:`ssi_bridge.gateway.station_cli`) on python-can's udp_multicast
+``station`` program, :mod:`ssi_bridge.tools.station`) on python-can's udp_multicast
 bus on loopback, on a group and port derived from ``bus.channel``; ``virtual`` is the
 fallback for machines without multicast on loopback: the same station in the node's process
 on the in-process virtual bus. Either way the node talks to it only through the bus. The
@@ -113,7 +113,7 @@ class ChildStation:
 
     def start(self, timeout: float) -> None:
         """Spawn the station and wait for its boot-up (GatewayUnavailable with the reason)."""
-        cmd = [sys.executable, "-m", "ssi_bridge.gateway.station_cli", "--params-file", "-",
+        cmd = [sys.executable, "-m", "ssi_bridge.tools.station", "--params-file", "-",
                "--parent-pid", str(os.getpid())]
         watch = open_bus(self.bus)  # listening before the station can send its boot-up
         try:

@@ -1,4 +1,4 @@
-"""Bus load from frame timestamps (issue 10): the master's figures against the frame-length
+"""Bus load from frame timestamps: the master's figures against the frame-length
 formula applied to what an independent bus reader saw on the same wire."""
 
 from __future__ import annotations

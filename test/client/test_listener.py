@@ -14,7 +14,7 @@ import pytest
 
 from ssi_bridge.client.listener import LISTEN_ONLY, ListenOnlyClient
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.client.player import CanLogPlayer
+from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.sniffer import CanSniffer
 from ssi_bridge.exceptions import BusError, ConfigError
 from ssi_bridge.gateway.bus import BusConfig

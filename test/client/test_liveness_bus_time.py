@@ -1,4 +1,4 @@
-"""Liveness measured on the bus (issue 10): a stalled receive thread is not a silent gateway;
+"""Liveness measured on the bus: a stalled receive thread is not a silent gateway;
 a gateway that really stops sending is still found silent, and never before the timeout."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The simulated CAN wire: frame lengths (ISO 11898-1 base frames with stuff bits), SYNC ->
 last TPDO timing against the formula, the rate table in docs/canopen.md, and the latch time
-taken from the SYNC frame's own timestamp (issue 10)."""
+taken from the SYNC frame's own timestamp."""
 
 from __future__ import annotations
 

@@ -66,12 +66,12 @@ def test_frame_levels_follow_ssi_timing() -> None:
 
 def test_cli_frame_and_errors(tmp_path: Path) -> None:
     out = tmp_path / "frame.png"
-    ok = subprocess.run([sys.executable, "-m", "ssi_bridge.record.plot_cli", "--frame",
+    ok = subprocess.run([sys.executable, "-m", "ssi_bridge.tools.plot", "--frame",
                          "--value", "0x1ABCDE5", "--bits", "25", "--error-bits", "2",
                          "-o", str(out)], capture_output=True, text=True, timeout=60, check=False)
     assert ok.returncode == 0, ok.stderr
     assert mpimg.imread(out).shape[1] > 800
-    bad = subprocess.run([sys.executable, "-m", "ssi_bridge.record.plot_cli",
+    bad = subprocess.run([sys.executable, "-m", "ssi_bridge.tools.plot",
                           str(tmp_path / "nope"), "-o", str(out)], capture_output=True,
                          text=True, timeout=60, check=False)
     assert bad.returncode == 2 and "no such bag" in bad.stderr

@@ -29,7 +29,7 @@ def crashed_bag(tmp_path: Path, messages: int = 2000) -> Path:
 
 
 def recover(bag: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "ssi_bridge.record.replay_cli", "--recover",
+    return subprocess.run([sys.executable, "-m", "ssi_bridge.tools.replay", "--recover",
                            str(bag)], capture_output=True, text=True, timeout=120)
 
 

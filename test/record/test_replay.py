@@ -51,7 +51,7 @@ def ros(monkeypatch: pytest.MonkeyPatch,
 
 def replay(env: dict[str, str], bag: Path, *args: str) -> subprocess.CompletedProcess[str]:
     """Run the replay executable (python -m, works before install/ is rebuilt); kill on fail."""
-    proc = subprocess.Popen([sys.executable, "-m", "ssi_bridge.record.replay_cli", str(bag),
+    proc = subprocess.Popen([sys.executable, "-m", "ssi_bridge.tools.replay", str(bag),
                              "--wait-for-subscribers", "20", "--quiet", *args],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -122,7 +122,7 @@ def test_clear_errors(tmp_path: Path, short_bag: Path, make, match: str) -> None
     data = (short_bag / "short_0.mcap").read_bytes()
     (tmp_path / "truncated.mcap").write_bytes(data[: len(data) // 2])
     (tmp_path / "empty_dir").mkdir()
-    out = subprocess.run([sys.executable, "-m", "ssi_bridge.record.replay_cli",
+    out = subprocess.run([sys.executable, "-m", "ssi_bridge.tools.replay",
                           str(make(tmp_path))], capture_output=True, text=True, timeout=60,
                          check=False)
     assert out.returncode == 2 and match in out.stderr, out.stderr

@@ -18,9 +18,25 @@ from typing import Any
 
 import pytest
 import yaml
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
 REPO = Path(__file__).resolve().parents[2]
-NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
+
+
+def installed_executable(name: str) -> Path:
+    """``lib/ssi_bridge/<name>`` of the ssi_bridge the environment has sourced, found the way
+    ``ros2 run`` finds it (the ament index): this repository's install/ under `make test`,
+    the workspace's install/ under `colcon test`."""
+    try:
+        prefix = Path(get_package_prefix("ssi_bridge"))
+    except PackageNotFoundError:
+        pytest.fail("ssi_bridge is not installed in the sourced environment: run `make setup` "
+                    "and `source scripts/env.sh` (make test does both), or source a workspace's "
+                    "install/setup.bash")
+    exe = prefix / "lib" / "ssi_bridge" / name
+    if not exe.exists():
+        pytest.fail(f"{exe} missing: rebuild (make setup, or colcon build)")
+    return exe
 
 
 @dataclass
@@ -81,9 +97,7 @@ def domain_id(monkeypatch: pytest.MonkeyPatch, ros_domain: int) -> int:
 @pytest.fixture
 def node_exe() -> Path:
     """The installed node executable (for tests that start it themselves)."""
-    if not NODE_EXE.exists():
-        pytest.fail(f"{NODE_EXE} missing: run `make setup` (make test does it)")
-    return NODE_EXE
+    return installed_executable("ssi_bridge_node")
 
 
 @pytest.fixture
@@ -113,15 +127,14 @@ def start_node(tmp_path: Path, domain_id: int,
     Every node dies with the test process (PR_SET_PDEATHSIG) and handles SIGINT; ``preexec``
     runs after that in the child (e.g. a resource limit).
     """
-    if not NODE_EXE.exists():
-        pytest.fail(f"{NODE_EXE} missing: run `make setup` (make test does it)")
+    node_exe = installed_executable("ssi_bridge_node")
     started: list[NodeProcess] = []
 
     def _start(params: dict[str, Any] | None = None, *, namespace: str = "",
                params_file: Path | None = None, args: tuple[str, ...] = (),
                preexec: Callable[[], None] | None = None) -> NodeProcess:
         index = len(started)
-        cmd = [str(NODE_EXE), "--ros-args"]
+        cmd = [str(node_exe), "--ros-args"]
         if params_file is not None:
             cmd += ["--params-file", str(params_file)]
         values = {"bus.channel": f"test_{domain_id}_{index}",

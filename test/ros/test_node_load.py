@@ -1,6 +1,6 @@
 """The node at 1 kHz beside two CPU-burning processes (one per core): no false fault.
 
-Issue 10: on a loaded 2-core machine the bridge reported wire breaks (ERR_SSI, EMCY 0x7000)
+On a loaded 2-core machine the bridge reported wire breaks (ERR_SSI, EMCY 0x7000)
 that did not happen, stamps that went backwards and a silent gateway that was only a stalled
 process. With one time base (docs/node.md "Time") none of that may happen: 0 ERR_SSI / EMCY,
 0 non-increasing stamps, 0 "gateway silent", and every velocity sample within the bound of

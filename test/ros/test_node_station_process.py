@@ -22,9 +22,8 @@ from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
 
 from ssi_bridge.gateway.multicast import derive_channel
 
-from .conftest import REPO, dds_env
+from .conftest import dds_env, installed_executable
 
-STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
 REG_LOWER_LIMIT = 48
 PERIOD = 0.5
 #: the station as a child process of the node
@@ -44,7 +43,7 @@ def _children(pid: int) -> list[int]:
 
 def _station_of(node) -> int:
     kids = [k for k in _children(node.proc.pid)
-            if b"station_cli" in Path(f"/proc/{k}/cmdline").read_bytes()]
+            if b"ssi_bridge.tools.station" in Path(f"/proc/{k}/cmdline").read_bytes()]
     assert len(kids) == 1, f"expected one station child of the node, got {kids}"
     return kids[0]
 
@@ -152,7 +151,7 @@ def test_a_station_that_cannot_start_is_one_line_and_exit_1(start_node, tmp_path
 def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(running, probe):
     node = running({"simulation.transport": "virtual", "diagnostics_period": PERIOD})
     assert not [k for k in _children(node.proc.pid)
-                if b"station_cli" in Path(f"/proc/{k}/cmdline").read_bytes()]
+                if b"ssi_bridge.tools.station" in Path(f"/proc/{k}/cmdline").read_bytes()]
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.DATA_WIRE_BREAK))
@@ -171,7 +170,7 @@ def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(runni
 def _start_station(tmp_path: Path, params: dict, *extra: str) -> subprocess.Popen:
     pfile = tmp_path / "station.yaml"
     pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    return subprocess.Popen([str(STATION_EXE), "--params-file", str(pfile), *extra],
+    return subprocess.Popen([str(installed_executable("station")), "--params-file", str(pfile), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
 
@@ -218,7 +217,7 @@ def test_station_sigterm_is_a_clean_exit(tmp_path, domain_id):
 
 
 def test_station_help_is_plain_text():
-    out = subprocess.run([str(STATION_EXE), "--help"], capture_output=True, text=True,
+    out = subprocess.run([str(installed_executable("station")), "--help"], capture_output=True, text=True,
                          env=dds_env(0), timeout=30)
     assert out.returncode == 0
     for word in ("--params-file", "udp_multicast", "simulation:=false", "0x4000"):

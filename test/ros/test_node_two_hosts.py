@@ -23,9 +23,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from .conftest import NODE_EXE, REPO, dds_env
+from .conftest import dds_env, installed_executable
 
-STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
 SUBSCRIBER = Path(__file__).with_name("netns_subscriber.py")
 RATE = 50.0
 REG_LOWER_LIMIT = 48
@@ -110,14 +109,14 @@ def test_station_and_node_on_two_hosts_subscriber_on_a_third(namespaces, domain_
     try:
         with open(logs["station"], "wb") as log:
             station = subprocess.Popen(
-                ["ip", "netns", "exec", namespaces.s, str(STATION_EXE), "--params-file",
+                ["ip", "netns", "exec", namespaces.s, str(installed_executable("station")), "--params-file",
                  str(station_file)], stdout=subprocess.PIPE, stderr=log, env=env)
         procs.append(station)
         ready = station.stdout.readline().decode()
         assert ready.startswith("station ready"), logs["station"].read_text()
         with open(logs["node"], "wb") as log:
             node = subprocess.Popen(
-                ["ip", "netns", "exec", namespaces.n, str(NODE_EXE), "--ros-args",
+                ["ip", "netns", "exec", namespaces.n, str(installed_executable("ssi_bridge_node")), "--ros-args",
                  "--params-file", str(node_file)], stdout=log, stderr=subprocess.STDOUT,
                 env=env)
         procs.append(node)

@@ -1,9 +1,9 @@
-"""``ros2 run ssi_bridge plot BAG -o session.png``: a picture of a recorded session.
+"""Draw a recorded session as a picture (positions, velocities, diagnostics, events).
 
-With ``--frame`` it draws instead the bit-level timing diagram of one SSI frame taken from
-the recorded ``~/status`` (REG_SSI_FRAME of the chosen joint and sample), or of ``--value``.
+With --frame it draws instead the bit-level timing diagram of one SSI frame taken from
+the recorded ~/status (REG_SSI_FRAME of the chosen joint and sample), or of --value.
 
-Examples::
+Examples:
 
     plot ~/ssi_sessions/run1 -o run1.png
     plot run1 --frame --joint axis_1 --index 100 --bits 25 --bit-rate 500000 -o frame.png
@@ -23,11 +23,12 @@ from ssi_bridge.exceptions import RecordingError
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface of plot."""
-    parser = argparse.ArgumentParser(prog="plot", description=__doc__.split("\n", 1)[0],
+    parser = argparse.ArgumentParser(prog="plot", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag", type=Path, nargs="?", help="bag directory or .mcap file")
-    parser.add_argument("-o", "--output", type=Path, default=Path("session.png"))
-    parser.add_argument("--dpi", type=int, default=100)
+    parser.add_argument("-o", "--output", type=Path, default=Path("session.png"),
+                        help="picture file, its type from the suffix (default session.png)")
+    parser.add_argument("--dpi", type=int, default=100, help="resolution (default 100)")
     frame = parser.add_argument_group("--frame: SSI timing diagram of one frame")
     frame.add_argument("--frame", action="store_true", help="draw one SSI frame")
     frame.add_argument("--joint", default="", help="channel of ~/status (default: first)")

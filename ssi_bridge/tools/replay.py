@@ -1,6 +1,6 @@
-"""``ros2 run ssi_bridge replay BAG``: publish a recorded session; ``--recover DIR`` repairs one.
+"""Publish a recorded session again, with its timing; --recover repairs a bag cut short by a crash.
 
-Examples::
+Examples:
 
     replay ~/ssi_sessions/run1                       # original timing, all topics
     replay run1 --rate 2 --topics /joint_states --remap /joint_states:=/replayed/joint_states
@@ -24,7 +24,7 @@ BAR_WIDTH = 30
 
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface of replay."""
-    parser = argparse.ArgumentParser(prog="replay", description=__doc__.split("\n", 1)[0],
+    parser = argparse.ArgumentParser(prog="replay", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag", type=Path, help="bag directory or .mcap file")
     parser.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{summary.duration:.3f} s")
             return 0
         from ssi_bridge.record.reader import Bag
-        from ssi_bridge.record.replay import Player, ReplayOptions
+        from ssi_bridge.record.bag_replay import Player, ReplayOptions
         options = ReplayOptions(rate=args.rate, loop=args.loop, start_offset=args.start_offset,
                                 topics=args.topics, remap=_remaps(args.remap),
                                 clock_hz=args.clock,

@@ -1,0 +1,102 @@
+"""One MCAP file of a bag being written: its stream, its mcap writer and its channel ids.
+
+A bag split into several files writes each through its own :class:`McapFile`, so the chunk
+index the writer keeps for the summary belongs to the open file and is released when the
+file is finished; nothing per chunk outlives its file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import BinaryIO
+
+from mcap.writer import CompressionType, Writer
+
+from ssi_bridge.record.metadata import FileInfo
+
+
+class McapFile:
+    """An MCAP file open for writing, profile ``ros2``; ``info`` counts what it holds."""
+
+    def __init__(self, path: Path, stream: BinaryIO, writer: Writer, info: FileInfo) -> None:
+        self.path = path
+        self.info = info
+        self._stream = stream
+        self._writer: Writer | None = writer
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+
+    @classmethod
+    def create(cls, path: Path, info: FileInfo, compression: CompressionType, chunk_size: int,
+               library: str) -> McapFile:
+        """Create ``path`` (it must not exist) and write the MCAP magic and header."""
+        stream = open(path, "xb")  # noqa: SIM115 - closed in sync_close() / abandon()
+        try:
+            writer = Writer(stream, chunk_size=chunk_size, compression=compression)
+            writer.start(profile="ros2", library=library)
+        except OSError:
+            with contextlib.suppress(OSError):
+                stream.close()
+            raise
+        return cls(path, stream, writer, info)
+
+    @property
+    def size(self) -> int:
+        """Bytes written to the file so far (the open chunk not included)."""
+        return self._stream.tell()
+
+    def fileno(self) -> int:
+        """The file descriptor (for fsync)."""
+        return self._stream.fileno()
+
+    def _live(self) -> Writer:
+        if self._writer is None:
+            raise ValueError(f"{self.path} is finished")
+        return self._writer
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """An MCAP metadata record (indexed in the summary)."""
+        self._live().add_metadata(name, data)
+
+    def add_channel(self, topic: str, schema_name: str, schema_text: bytes,
+                    metadata: dict[str, str]) -> None:
+        """Register ``topic`` (cdr) with its ``ros2msg`` schema, the schema once per type."""
+        writer = self._live()
+        if schema_name not in self._schemas:
+            self._schemas[schema_name] = writer.register_schema(schema_name, "ros2msg",
+                                                                schema_text)
+        self._channels[topic] = writer.register_channel(topic, "cdr", self._schemas[schema_name],
+                                                        metadata)
+
+    def write(self, topic: str, log_time_ns: int, data: bytes, publish_time_ns: int,
+              sequence: int) -> None:
+        """Append one message of a registered topic."""
+        self._live().add_message(self._channels[topic], log_time_ns, data, publish_time_ns,
+                                 sequence)
+        self.info.add(log_time_ns)
+
+    def flush(self) -> None:
+        """Close the open chunk and hand the bytes to the OS."""
+        self._live().flush()
+
+    def finish(self) -> None:
+        """Write the last chunk, the summary (schemas, channels, statistics, chunk and metadata
+        indexes) and the footer; the file is a complete MCAP once this returns. The writer and
+        its chunk index are dropped."""
+        self._live().finish()
+        self._writer = None
+        self._stream.flush()
+
+    def sync_close(self) -> None:
+        """fsync and close the (finished) file."""
+        self._stream.flush()
+        os.fsync(self._stream.fileno())
+        self._stream.close()
+
+    def abandon(self) -> None:
+        """Close after a write error, ignoring further errors (recovery rebuilds the file)."""
+        self._writer = None
+        with contextlib.suppress(OSError, ValueError):
+            self._stream.close()

@@ -1,0 +1,153 @@
+"""Live view: an optional Foxglove WebSocket server streaming the node's topics.
+
+A user without a ROS install (the ``make run`` set-up has no ``ros2`` CLI) opens Foxglove and
+connects to ``ws://localhost:<foxglove.port>``. Every topic the node publishes becomes one
+channel with the ``ros2msg`` schema rosbag2 would store (record/schema.py) and clean CDR
+payloads (record/cdr.py), so Foxglove decodes it as it decodes a live ROS 2 robot.
+
+Like the recorder, the sink is fed right after each ``publish``. A message is serialized only
+while a client is subscribed to its channel (the SDK's ``has_sinks``), so the default
+(``foxglove.port`` 0: no server, not even the SDK imported) and an idle server cost one
+dictionary or attribute lookup per message. The server binds to ``foxglove.address``
+(default 127.0.0.1): a client on another host finds no listening socket unless the address
+says otherwise. The SDK and record/'s schema and CDR code are imported only when the server
+starts, as the recorder imports record/ only when a session starts. A server that cannot
+start (port in use, bad address) is logged and shown on the bus diagnostics; the bridge keeps
+publishing.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import TYPE_CHECKING, Any
+
+from ssi_bridge.exceptions import RecordingError
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from ssi_bridge.ros.params import NodeSettings
+
+#: addresses that keep the server on this host
+LOOPBACK = ("127.0.0.1", "::1", "localhost")
+
+
+def type_name(msg_class: type) -> str:
+    """``pkg/msg/Type`` of an rclpy message class (its module is ``pkg.msg._type``)."""
+    return f"{msg_class.__module__.split('.', 1)[0]}/msg/{msg_class.__name__}"
+
+
+class _Subscriptions:
+    """Foxglove ServerListener: counts subscriptions and logs who watches what."""
+
+    def __init__(self, node: Node) -> None:
+        self._node = node
+        self._lock = threading.Lock()
+        self.count = 0
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count += 1
+        self._node.get_logger().info(f"live view: client {client.id} subscribed to "
+                                     f"{channel.topic}")
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        with self._lock:
+            self.count = max(0, self.count - 1)
+        self._node.get_logger().info(f"live view: client {client.id} left {channel.topic}")
+
+
+class LiveView:
+    """The Foxglove WebSocket server of one node and a channel per offered publisher."""
+
+    def __init__(self, node: Node, settings: NodeSettings) -> None:
+        self._node = node
+        self._channels: dict[Any, Any] = {}
+        self._server: Any = None
+        self._context: Any = None
+        self._listener = _Subscriptions(node)
+        self._serialize: Any = None
+        #: why the server is not running although asked for; shown on the bus diagnostics
+        self.error = ""
+        self.port = 0
+        if settings.foxglove_port:
+            self._start(settings.foxglove_address, settings.foxglove_port)
+
+    @property
+    def running(self) -> bool:
+        """True while the WebSocket server listens."""
+        return self._server is not None
+
+    def _start(self, address: str, port: int) -> None:
+        import foxglove
+
+        from ssi_bridge.record.cdr import serialize
+
+        self._serialize = serialize
+        where = f"{address}:{port}"
+        try:
+            self._context = foxglove.Context()
+            self._server = foxglove.start_server(
+                name=self._node.get_fully_qualified_name(), host=address, port=port,
+                context=self._context, server_listener=self._listener)
+        except (RuntimeError, ValueError, OSError) as err:
+            reason = str(err).removeprefix("FoxgloveError: ")
+            self.error = f"live view off: cannot listen on {where}: {reason}"
+            self._node.get_logger().error(f"foxglove.port/foxglove.address: {self.error}")
+            return
+        self.port = int(self._server.port)
+        url_host = "localhost" if address in LOOPBACK else address
+        scope = ("this host only" if address in LOOPBACK else
+                 "reachable from other hosts: anyone who can reach it can read every topic")
+        self._node.get_logger().info(
+            f"live view: Foxglove WebSocket server on ws://{url_host}:{self.port} ({scope})")
+
+    def offer(self, publisher: Any) -> None:
+        """Advertise ``publisher``'s topic with its ros2msg schema (no-op while off)."""
+        if self._context is None:
+            return
+        import foxglove
+
+        from ssi_bridge.record.schema import build_schema
+
+        name = type_name(publisher.msg_type)
+        try:
+            schema = build_schema(name)
+        except RecordingError as err:
+            self._node.get_logger().error(f"live view: {publisher.topic_name} not offered: {err}")
+            return
+        # keyed by the publisher object: its topic_name is a call into rcl every time
+        self._channels[publisher] = foxglove.Channel(
+            publisher.topic_name, message_encoding="cdr", context=self._context,
+            schema=foxglove.Schema(name=schema.name, encoding="ros2msg",
+                                   data=schema.text.encode("utf-8")))
+
+    def wants(self, publisher: Any) -> bool:
+        """True while a client is subscribed to ``publisher``'s topic."""
+        channel = self._channels.get(publisher)
+        return channel is not None and channel.has_sinks()
+
+    def publish(self, publisher: Any, msg: Any) -> None:
+        """Send ``msg`` (just published on ``publisher``) to the subscribed clients, if any."""
+        channel = self._channels.get(publisher)
+        if channel is None or not channel.has_sinks():
+            return
+        # no log_time: the SDK stamps the receive time itself (system clock, as ROS time is
+        # here), which saves the ~15 us of an rclpy clock call per message
+        channel.log(self._serialize(msg))
+
+    def counters(self) -> dict[str, int]:
+        """Live view figures for the bus diagnostics."""
+        return {"liveview_port": self.port, "liveview_subscriptions": self._listener.count}
+
+    def stop(self) -> None:
+        """Close the channels and the server; safe to call twice."""
+        server, self._server = self._server, None
+        channels, self._channels = self._channels, {}
+        for channel in channels.values():
+            channel.close()
+        if server is not None:
+            server.stop()
+
+
+__all__ = ["LiveView", "type_name"]
