@@ -204,7 +204,8 @@ class SsiBridgeNode(Node):
             for joint in s.joints:
                 self._configure_para1(joint)
                 if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
-                    self.client_of(joint.name).write_object(SSI_DIAG_MAPPING, joint.slot, joint.ssi_mask)
+                    self.client_of(joint.name).write_object(SSI_DIAG_MAPPING, joint.slot,
+                                                            joint.ssi_mask)
                 self.client_of(joint.name).edit_output(joint.slot, idle_read)
         #: REG_PARA1 each module holds, as this node last wrote or read it back (one truth
         #: for the parameter, the scale and the velocity estimate: :meth:`change_para1`)
