@@ -65,7 +65,7 @@ MEASURE_S = 5.0
 STARTUP_TIMEOUT_S = 20.0
 NODE_NS = "/bench_node"
 BARE_TOPIC = "/bench_bare/joint_states"
-#: stations case (issue 15): 13 frames per cycle (SYNC + 8 image + 4 position TPDOs), about
+#: stations case: 13 frames per cycle (SYNC + 8 image + 4 position TPDOs), about
 #: 1.6 ms of wire at 1 Mbit/s with worst-case stuffing, so 400 Hz loads the wire ~65 %
 STATIONS_RATE_HZ = 400.0
 STATIONS_BITRATE = 1_000_000
@@ -376,7 +376,7 @@ def stations_cmd(n_stations: int, slots: int, domain_id: int, work: Path,
 
 
 def run_stations(records: list[dict], domain_id: int, env: dict[str, str], work: Path) -> None:
-    """Issue 15: 4 stations x 2 slots against 1 station x 8 slots, same rate, same run.
+    """4 stations x 2 slots against 1 station x 8 slots, same rate, same run.
 
     Both carry 12 TPDOs + 1 SYNC per cycle (8 images, 4 position pairs), so the wire time is
     the same; the cost should follow the slots, not the stations (ratio ~1). ``virtual``: the
