@@ -65,6 +65,10 @@ MEASURE_S = 5.0
 STARTUP_TIMEOUT_S = 20.0
 NODE_NS = "/bench_node"
 BARE_TOPIC = "/bench_bare/joint_states"
+#: stations case (issue 15): 13 frames per cycle (SYNC + 8 image + 4 position TPDOs), about
+#: 1.6 ms of wire at 1 Mbit/s with worst-case stuffing, so 400 Hz loads the wire ~65 %
+STATIONS_RATE_HZ = 400.0
+STATIONS_BITRATE = 1_000_000
 
 UNITS = {"rate_hz": "Hz", "jitter_p99_us": "us", "latency_p50_us": "us",
          "latency_p99_us": "us", "cpu_s_per_s": "s/s"}
@@ -349,6 +353,56 @@ def report_loaded(records: list[dict], n_joints: int, node: dict) -> None:
                        f"{BITRATE} bit/s, beside two CPU-burning processes (one per core)"})
 
 
+def stations_cmd(n_stations: int, slots: int, domain_id: int, work: Path,
+                 transport: str = "virtual") -> list[str]:
+    """The node as master of ``n_stations`` simulated stations of ``slots`` encoders each."""
+    import yaml
+
+    ids = [1 + 2 * k for k in range(n_stations)]  # node ids 1, 3, 5, 7
+    names = [f"s{sid}j{slot}" for sid in ids for slot in range(1, slots + 1)]
+    params: dict = {"publish_rate": STATIONS_RATE_HZ, "joints": names, "stations": ids,
+                    "simulation.transport": transport,
+                    "bus.bitrate": STATIONS_BITRATE,
+                    "bus.channel": f"bench_st_{domain_id}_{n_stations}x{slots}_{transport}",
+                    "storage_path": str(work / f"st{n_stations}x{slots}" / "retentive.json")}
+    for sid in ids:
+        for slot in range(1, slots + 1):
+            params[f"s{sid}j{slot}.station"] = sid
+            params[f"s{sid}j{slot}.slot"] = slot
+    pfile = work / f"stations{n_stations}x{slots}_{transport}.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    return [str(NODE_EXE), "--ros-args", "--params-file", str(pfile),
+            "-r", f"__ns:={NODE_NS}"]
+
+
+def run_stations(records: list[dict], domain_id: int, env: dict[str, str], work: Path) -> None:
+    """Issue 15: 4 stations x 2 slots against 1 station x 8 slots, same rate, same run.
+
+    Both carry 12 TPDOs + 1 SYNC per cycle (8 images, 4 position pairs), so the wire time is
+    the same; the cost should follow the slots, not the stations (ratio ~1). ``virtual``: the
+    simulated stations run in the node's process (each its own bus receiver of every frame,
+    as each real device has its own CAN controller), so the node's CPU includes them;
+    ``udp_multicast``: one child process per station, the node's CPU is the master's alone.
+    """
+    for transport, label in (("virtual", ""), ("udp_multicast", "_master_only")):
+        one = measure(f"st1x8{transport}", stations_cmd(1, 8, domain_id, work, transport),
+                      f"{NODE_NS}/joint_states", env, work, STATIONS_RATE_HZ)
+        four = measure(f"st4x2{transport}", stations_cmd(4, 2, domain_id, work, transport),
+                       f"{NODE_NS}/joint_states", env, work, STATIONS_RATE_HZ)
+        for key in ("cpu_s_per_s", "latency_p50_us", "latency_p99_us", "rate_hz"):
+            base = one[key]
+            rec: dict = {"metric": f"node_4stations_2slots{label}_{key}",
+                         "value": round(four[key], 3), "unit": UNITS[key],
+                         "baseline": round(base, 3)}
+            if base:
+                rec["ratio"] = round(four[key] / base, 3)
+            where = ("stations in the node's process (virtual)" if transport == "virtual" else
+                     "one station child process each (udp_multicast), node CPU = master only")
+            rec["note"] = (f"{NOTES[key]}; one master driving 4 simulated stations x 2 slots at "
+                           f"{STATIONS_RATE_HZ:g} Hz, {STATIONS_BITRATE // 1000} kbit/s, {where}; "
+                           "baseline = 1 station x 8 slots, same rate, same run (same 13 frames "
+                           "per cycle)")
+            emit(records, rec)
 # -- live view (foxglove.port): node CPU with one Foxglove WebSocket client vs none -------------
 LIVEVIEW_ROUNDS = 3
 LIVEVIEW_WINDOW_S = 3.0
@@ -475,6 +529,11 @@ def report_liveview(records: list[dict], lv: dict[str, list[float]], plain: dict
 
 
 def run(records: list[dict]) -> None:
+    if os.environ.get("BENCH_NODE_ONLY") == "stations":
+        domain_id = _domain_id()
+        with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
+            run_stations(records, domain_id, _env(domain_id), Path(tmp))
+        return
     if not NODE_EXE.exists():
         raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
     domain_id = _domain_id()
@@ -498,6 +557,11 @@ def run(records: list[dict]) -> None:
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
                                "note": traceback.format_exc(limit=3)[-800:]})
+        try:
+            run_stations(records, domain_id, env, work)
+        except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
+            emit(records, {"metric": "node_stations", "error": f"{type(err).__name__}: {err}",
+                           "note": traceback.format_exc(limit=3)[-800:]})
         load = burners(2)
         try:
             node = measure("node1loaded", node_cmd(1, domain_id, work), f"{NODE_NS}/joint_states",

@@ -26,19 +26,18 @@ from collections.abc import Callable
 import can
 import canopen
 
+from ssi_bridge.client.bus_master import SYNC_COB_ID, CanMaster
 from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
 from ssi_bridge.client.load import BusLoad
-from ssi_bridge.client.receive import FrameListener, TpdoRoutes
+from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
 from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
-from ssi_bridge.gateway.bus import (
-    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus,
-)
+from ssi_bridge.gateway.bus import BusConfig, LossyBus
 from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.gateway.dictionary import (
     MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
@@ -53,13 +52,15 @@ _PULSE_CHECKS = tuple((int(c), int(f), int(s_)) for c, f, s_ in (
     (CmpControl.CLR_CMP1, CmpStatus.FLAG_CMP1, CmpStatus.STS_CMP1),
     (CmpControl.CLR_CMP2, CmpStatus.FLAG_CMP2, CmpStatus.STS_CMP2)))
 
-SYNC_COB_ID = 0x80
+__all__ = ["SYNC_COB_ID", "BridgeClient", "CanMaster"]
 
 
 class BridgeClient:
     """Master side of the bridge for one station with ``slots`` XN-1SSI modules.
 
-    :param bus: a :class:`BusConfig` (the client opens its own bus) or an open bus it takes over
+    :param bus: a :class:`BusConfig` (the client opens its own bus), an open bus it takes
+        over, or a :class:`CanMaster` shared with the clients of other stations on the bus
+        (the master owns bus and SYNC; :meth:`sync` then sends the one SYNC of all stations)
     :param node_id: the gateway's node id
     :param slots: number of modules (1-8)
     :param sdo_timeout: bound of one SDO transfer (s)
@@ -71,7 +72,7 @@ class BridgeClient:
     :param assist_after: a handshake sends its own SYNC when none was sent for this long (s)
     """
 
-    def __init__(self, bus: BusConfig | can.BusABC, node_id: int, slots: int, *,
+    def __init__(self, bus: BusConfig | can.BusABC | CanMaster, node_id: int, slots: int, *,
                  sdo_timeout: float = 0.5, handshake_timeout: float = 1.0,
                  heartbeat_ms: int = 50, transport: str = "pdo",
                  assist_after: float = 0.005) -> None:
@@ -79,7 +80,6 @@ class BridgeClient:
             raise ValueError(f"slots {slots} outside 1-{MAX_SLOTS}")
         if transport not in ("pdo", "sdo"):
             raise ValueError(f"transport {transport!r}: use 'pdo' or 'sdo'")
-        self._source: BusConfig | can.BusABC | None = bus
         self.node_id = node_id
         self.slots = slots
         self.sdo_timeout = sdo_timeout
@@ -90,16 +90,19 @@ class BridgeClient:
         self.assist_after = assist_after
         self.counters = ClientCounters()
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
-        self.table = SlotTable(slots)
-        #: bus load from frame timestamps (for the bus diagnostics)
-        self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
+        #: the bus' master; a private one (counting into this client) unless one was given
+        self._owns_master = not isinstance(bus, CanMaster)
+        self.master = CanMaster(bus, self.counters) if not isinstance(bus, CanMaster) else bus
+        self.table = SlotTable(slots, self.master.gate)
+        #: bus load from frame timestamps (for the bus diagnostics): the master's, one bus
+        self.load: BusLoad = self.master.load
         self.bus: LossyBus | None = None
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
         self.sdo: SdoAccess | None = None
         self._handshake = Handshake(self, handshake_timeout, WRITE_STEPS * handshake_timeout)
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
-        self._send_lock = threading.Lock()
+        self._send_lock = self.master.send_lock
         self._liveness = Liveness(self)
         self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions)
 
@@ -108,15 +111,11 @@ class BridgeClient:
         """Open the bus and configure the gateway (raises GatewayUnavailable / SdoAbortError)."""
         if self.network is not None:
             return
-        inner = take_bus(self._source, "this client")
-        if not isinstance(self._source, BusConfig):
-            self._source = None  # a handed-over bus is taken once
-        self.bus = LossyBus(inner)
-        self.network = BridgeNetwork(self.bus)
-        self.network.listeners[:] = [FrameListener(self.network, self.counters, self.load)]
-        self.network.on_sent = self.load.add
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.network.connect()
+        self.master.connect()
+        self.master.attach(self)
+        self.bus = self.master.bus
+        self.network = self.master.network
+        assert self.network is not None
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
         self.network.add_node(self.node)
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
@@ -134,8 +133,10 @@ class BridgeClient:
         """Stop the supervisor and shut the bus down (the gateway keeps running)."""
         self._liveness.stop(timeout=2 * self.sdo_timeout + 1.0)
         if self.network is not None:
-            network, self.network = self.network, None
-            network.disconnect()
+            self.network = None
+            self.master.detach(self)
+            if self._owns_master:
+                self.master.close()
         self.bus = None
 
     def __enter__(self) -> BridgeClient:
@@ -176,24 +177,18 @@ class BridgeClient:
         """
         if self.network is None:
             raise BusError("client not connected")
-        seq_time = self.table.on_sync()
-        try:
-            with self._send_lock:
-                frame = self.network.send_message(SYNC_COB_ID, b"")
-        except can.CanError as err:
-            self.counters.can_errors += 1
-            raise BusError(f"could not send SYNC: {err}") from err
-        self.counters.syncs += 1
-        if frame is not None and frame.timestamp:
-            return self.table.set_sync_time(frame.timestamp)
-        return seq_time
+        return self.master.sync()
 
     def latest(self, slot: int) -> ChannelSample | None:
         """The newest sample of ``slot`` (None before the first complete one)."""
         return self.table.latest(slot)
 
     def wait_cycle(self, timeout: float) -> bool:
-        """True once every slot's image and position arrived since the last :meth:`sync`."""
+        """True once every slot's image and position arrived since the last :meth:`sync`.
+
+        On a master shared by several stations the wake-up comes when every station's cycle
+        is complete (one per cycle); use ``master.wait_cycle`` to wait for all of them.
+        """
         return self.table.wait_cycle(timeout)
 
     @property

@@ -76,6 +76,28 @@ class _Slot:
     release_seq: int | None = None  # CLR released at this sync sequence: sent once more
 
 
+class CycleGate:
+    """One condition and one wake-up per cycle for the slot tables of several stations.
+
+    The master sets ``pending`` to the number of stations at each SYNC; a table whose cycle
+    completes counts it down, and only the last one wakes the cycle's waiter, so the cycle
+    thread is woken once per cycle however many stations answer.
+    """
+
+    def __init__(self) -> None:
+        self.cond = threading.Condition()
+        self.pending = 0
+
+    def open(self, stations: int) -> None:
+        """A SYNC for ``stations`` tables is about to go out (call under :attr:`cond`)."""
+        self.pending = stations
+
+    def wait(self, timeout: float) -> bool:
+        """Wait until every station's cycle is complete or ``timeout`` (s) elapses."""
+        with self.cond:
+            return self.cond.wait_for(lambda: self.pending <= 0, timeout)
+
+
 class SlotTable:
     """Per-slot state shared by the network, timer and service threads.
 
@@ -85,9 +107,11 @@ class SlotTable:
     it completes the cycle or a handshake waits in :meth:`next_input`.
     """
 
-    def __init__(self, slots: int) -> None:
+    def __init__(self, slots: int, gate: CycleGate | None = None) -> None:
         self.slots = slots
-        self.cond = threading.Condition()
+        #: shared with the other stations' tables of one master (one wake-up per cycle)
+        self._gate = gate
+        self.cond = gate.cond if gate is not None else threading.Condition()
         self.sync_seq = 0
         self.sync_time = 0.0
         self.last_sync_time = 0.0
@@ -129,6 +153,7 @@ class SlotTable:
             self.sync_time = self.last_sync_time = at
             seq = self.sync_seq
             self._times[seq] = at
+            was_complete = self._due == 0
             for st in self._slots.values():
                 if st.image_seq == seq and 0.0 < st.image_time < at:
                     st.image_seq = seq - 1
@@ -136,6 +161,8 @@ class SlotTable:
                 if st.position_seq == seq and 0.0 < st.position_time < at:
                     st.position_seq = seq - 1
                     self._due += 1
+            if was_complete and self._due and self._gate is not None:
+                self._gate.pending += 1  # counted as complete too early: not any more
             return at
 
     def _late(self, timestamp: float) -> bool:
@@ -153,15 +180,17 @@ class SlotTable:
         """
         with self.cond:
             st = self._slots[slot]
+            completed = False
             if self._late(timestamp):
                 st.image_seq = max(st.image_seq, self.sync_seq - 1)
             elif st.image_seq != self.sync_seq:
                 st.image_seq = self.sync_seq
                 self._due -= 1
+                completed = self._due == 0
             st.image = data if type(data) is bytes else bytes(data)
             st.image_time = timestamp
             st.image_count += 1
-            if self._due == 0 or self._input_waiters:
+            if self._completes(completed) or self._input_waiters:
                 self.cond.notify_all()
             return st
 
@@ -174,6 +203,7 @@ class SlotTable:
         with self.cond:
             late = self._late(timestamp)
             seq = self.sync_seq
+            completed = False
             for slot, value in zip(slots, values):
                 st = self._slots[slot]
                 if late:
@@ -181,10 +211,20 @@ class SlotTable:
                 elif st.position_seq != seq:
                     st.position_seq = seq
                     self._due -= 1
+                    completed = completed or self._due == 0
                 st.position = value
                 st.position_time = timestamp
-            if self._due == 0:
+            if self._completes(completed):
                 self.cond.notify_all()
+
+    def _completes(self, completed: bool) -> bool:
+        """Whether to wake the waiters: this frame completed the cycle (of every station)."""
+        if self._gate is None:
+            return self._due == 0
+        if not completed:
+            return False
+        self._gate.pending -= 1
+        return self._gate.pending <= 0
 
     def latest(self, slot: int) -> ChannelSample | None:
         """The newest complete sample of ``slot`` or None before the first one."""

@@ -73,6 +73,8 @@ class JointSettings:
     measuring_step: float = 0.0
     direction: int = 1
     motion: MotionSettings = field(default_factory=MotionSettings)
+    #: node id of the XN-GW-CANOPEN station holding the module (0: the bus' first station)
+    station: int = 0
 
 
 def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSettings, ...]:

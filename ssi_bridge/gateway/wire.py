@@ -197,6 +197,30 @@ def fits(slots: int, bitrate: int, rate_hz: float) -> bool:
     return rate_hz * budget_bits(slots) <= bitrate
 
 
+def stations_cycle_bits(slot_counts: Sequence[int]) -> int:
+    """Worst-case bits of one cycle of several stations on one bus: ONE SYNC, their TPDOs."""
+    sync = worst_frame_bits(0)
+    return sync + sum(cycle_bits(n) - sync for n in slot_counts)
+
+
+def stations_budget_bits(slot_counts: Sequence[int]) -> int:
+    """:func:`budget_bits` of several stations: their cycle plus one register-traffic reserve.
+
+    The node runs one register service at a time, so the reserve is the bus's, not per station.
+    """
+    return stations_cycle_bits(slot_counts) + SDO_RESERVE_FRAMES * worst_frame_bits(8)
+
+
+def stations_fits(slot_counts: Sequence[int], bitrate: int, rate_hz: float) -> bool:
+    """True when ``rate_hz`` cycles of every station together fit at ``bitrate``."""
+    return rate_hz * stations_budget_bits(slot_counts) <= bitrate
+
+
+def stations_max_cycle_rate(slot_counts: Sequence[int], bitrate: int) -> float:
+    """Highest SYNC rate (Hz, rounded down to 10 Hz) for all stations together."""
+    return math.floor(bitrate / stations_budget_bits(slot_counts) / 10.0) * 10.0
+
+
 def rate_table() -> str:
     """The Markdown table of :func:`max_cycle_rate` per slot count and bit rate (docs/canopen.md)."""
     head = "| slots | " + " | ".join(f"{b // 1000} kbit/s" for b in TABLE_BITRATES) + " |"
@@ -208,4 +232,5 @@ def rate_table() -> str:
 
 __all__ = ["SDO_RESERVE_FRAMES", "TABLE_BITRATES", "budget_bits", "crc15", "cycle_bits",
            "cycle_payloads", "cycle_seconds", "fits", "frame_bits", "frame_seconds",
-           "max_cycle_rate", "rate_table", "stuff_count", "worst_frame_bits"]
+           "max_cycle_rate", "rate_table", "stations_budget_bits", "stations_cycle_bits",
+           "stations_fits", "stations_max_cycle_rate", "stuff_count", "worst_frame_bits"]

@@ -285,5 +285,25 @@ def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,
                             values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
+def station_status(name: str, hardware_id: str, *, alive: bool, nmt_state: str,
+                   emcy: list[str], counters: dict[str, int]) -> DiagnosticStatus:
+    """One station (XN-GW-CANOPEN) of several on the bus: heartbeat, NMT state, EMCY history.
+
+    ERROR while its heartbeat is missing (the station's joints go stale with it), WARN while
+    an EMCY is active (error register not zero), else OK.
+    """
+    if not alive:
+        level, message = ERROR, "gateway silent: no heartbeat"
+    elif emcy and not emcy[-1].startswith("0x0000"):
+        level, message = WARN, f"EMCY {emcy[-1]}"
+    else:
+        level, message = OK, f"heartbeat {nmt_state}"
+    values = {"gateway_alive": str(alive), "nmt_state": nmt_state,
+              "emcy_count": str(len(emcy)), "emcy_history": "; ".join(emcy[-8:])}
+    values.update({k: str(v) for k, v in counters.items()})
+    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
+                            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
 __all__ = ["ChannelCounters", "ChannelHealth", "bus_status", "channel_level", "channel_status",
-           "status_name"]
+           "station_status", "status_name"]

@@ -24,7 +24,7 @@ from ssi_bridge.gateway.simulation import BUS_FAULTS, RATE_FAULTS, FaultKind, co
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ActiveFault", "BUS_FAULTS", "FaultInjector", "FaultKind"]
+__all__ = ["ActiveFault", "BUS_FAULTS", "FaultInjector", "FaultKind", "StationFaults"]
 
 #: largest duration 0x4001 holds (UNSIGNED32 ms)
 MAX_DURATION = (2**32 - 1) / 1000.0
@@ -130,4 +130,48 @@ class FaultInjector:
 
     def clear_all(self) -> None:
         """Remove every injected fault (CLEAR_ALL over the bus)."""
+        self.inject(FaultKind.CLEAR_ALL, "")
+
+
+class StationFaults:
+    """Fault injection into several simulated stations: each joint's fault goes to its own.
+
+    A fault on a joint (GATEWAY_SILENT included) is sent to the station holding that joint's
+    module; CLEAR_ALL goes to every station; a bus fault without a joint to the first one.
+
+    :param injectors: one :class:`FaultInjector` per station node id, first station first
+    :param joints: the node's joints (their ``station``)
+    """
+
+    def __init__(self, injectors: dict[int, FaultInjector],
+                 joints: dict[str, JointSettings]) -> None:
+        self._injectors = injectors
+        self._joints = joints
+
+    @property
+    def active(self) -> list[ActiveFault]:
+        """The faults in force on every station."""
+        return [f for inj in self._injectors.values() for f in inj.active]
+
+    def inject(self, kind: int, joint: str, rate: float = 0.0, duration: float = 0.0) -> str:
+        """Route the fault to the joint's station (see :meth:`FaultInjector.inject`)."""
+        if kind == FaultKind.CLEAR_ALL:
+            for inj in self._injectors.values():
+                inj.inject(kind, joint, rate, duration)
+            return "all faults cleared on " + ", ".join(
+                f"station {sid}" for sid in self._injectors)
+        if joint in self._joints:
+            sid = self._joints[joint].station
+        elif joint:
+            raise ConfigError(f"unknown joint {joint!r}; joints: " + ", ".join(self._joints))
+        else:
+            sid = next(iter(self._injectors))
+        return f"station {sid}: " + self._injectors[sid].inject(kind, joint, rate, duration)
+
+    def expire(self) -> list[ActiveFault]:
+        """Forget faults whose duration has run out, on every station."""
+        return [f for inj in self._injectors.values() for f in inj.expire()]
+
+    def clear_all(self) -> None:
+        """CLEAR_ALL on every station."""
         self.inject(FaultKind.CLEAR_ALL, "")

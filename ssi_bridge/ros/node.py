@@ -19,7 +19,7 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
-from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.encoder.config import EncoderConfig
@@ -46,9 +46,10 @@ from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import (
-    OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, status_name,
+    OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, station_status,
+    status_name,
 )
-from ssi_bridge.ros.faults import FaultInjector
+from ssi_bridge.ros.faults import FaultInjector, StationFaults
 from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.joint_scale import JointScale
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
@@ -58,7 +59,7 @@ from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
 from ssi_bridge.ros.station import (
-    ChildStation, InProcessStation, start_station, with_station_bus,
+    ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
 )
 from ssi_bridge.ros.velocity import VelocityEstimator
 
@@ -138,17 +139,22 @@ class SsiBridgeNode(Node):
         self._start(s)
 
     def _check_wire(self, s: NodeSettings) -> None:
-        """Warn when publish_rate's SYNC cycles do not fit the wire at bus.bitrate (wire.py)."""
-        slots = max(j.slot for j in s.joints)
-        self.cycle_wire_s = wire.cycle_seconds(slots, s.bus_bitrate)
-        if s.listen_only or wire.fits(slots, s.bus_bitrate, s.publish_rate):
+        """Warn when publish_rate's SYNC cycles do not fit the wire at bus.bitrate (wire.py).
+
+        With several stations the budget is the bus's: one SYNC, every station's TPDOs.
+        """
+        counts = [max(j.slot for j in s.station_joints(sid)) for sid in s.station_ids]
+        self.cycle_wire_s = wire.frame_seconds(wire.stations_cycle_bits(counts), s.bus_bitrate)
+        if s.listen_only or wire.stations_fits(counts, s.bus_bitrate, s.publish_rate):
             return
+        what = (f"{counts[0]} slot(s)" if len(counts) == 1 else
+                f"{len(counts)} stations with {'+'.join(map(str, counts))} slots")
         self.get_logger().warning(
             f"publish_rate {s.publish_rate:g} Hz does not fit the CAN wire: one cycle of "
-            f"{slots} slot(s) (SYNC + TPDOs) takes up to {self.cycle_wire_s * 1e3:.3f} ms at "
+            f"{what} (SYNC + TPDOs) takes up to {self.cycle_wire_s * 1e3:.3f} ms at "
             f"{s.bus_bitrate} bit/s, plus {wire.SDO_RESERVE_FRAMES} frames reserved for register "
             f"traffic; the highest rate that fits is "
-            f"{wire.max_cycle_rate(slots, s.bus_bitrate):g} Hz (docs/canopen.md)")
+            f"{wire.stations_max_cycle_rate(counts, s.bus_bitrate):g} Hz (docs/canopen.md)")
 
     def _open_bus_side(self, s: NodeSettings) -> None:
         """The simulated station (if any), the master or listener, and per-joint state.
@@ -157,36 +163,50 @@ class SsiBridgeNode(Node):
         virtual bus as the fallback): the node starts it, waits for its boot-up, and from
         then on reaches it only over CAN, fault injection included (SDO 0x4000-0x4002).
         """
-        self.station: ChildStation | InProcessStation | None = None
-        self.faults: FaultInjector | None = None
+        self.station: ChildStation | InProcessStation | StationGroup | None = None
+        self.faults: FaultInjector | StationFaults | None = None
         #: the simulated encoders' models (frame layout and resolution), built from the params
         self.encoders = {j.name: joint_encoder(j) for j in s.joints} if s.simulation else {}
         if s.simulation:
-            self.station = start_station(s)
+            self.station = start_stations(s)
         n_slots = max(j.slot for j in s.joints)
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient
+        #: one client per station (node id -> client), all on one master: one SYNC per cycle
+        self.station_clients: dict[int, BridgeClient] = {}
+        self.master: CanMaster | None = None
         if s.listen_only:
             self.client = ListenOnlyClient(self.bus_config, s.node_id, n_slots)
             self.client.connect()
             if s.replay_can_log:
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
-            self.client = BridgeClient(self.bus_config, s.node_id, n_slots)
+            self.master = CanMaster(self.bus_config)
             try:
-                self.client.connect()
+                for sid in s.station_ids:
+                    slots = max(j.slot for j in s.station_joints(sid))
+                    self.station_clients[sid] = BridgeClient(self.master, sid, slots)
+                    self.station_clients[sid].connect()
             except Exception:
+                for client in self.station_clients.values():
+                    client.close()
+                self.master.close()
                 if self.station is not None:
                     self.station.stop()
                 raise
+            self.client = self.station_clients[s.station_ids[0]]
             if self.station is not None:
-                self.faults = FaultInjector(self.client, self.joints, self.encoders,
-                                            self.sim_time)
+                injectors = {sid: FaultInjector(
+                    client, {j.name: j for j in s.station_joints(sid)}, self.encoders,
+                    self.sim_time) for sid, client in self.station_clients.items()}
+                self.faults = (injectors[s.node_id] if len(injectors) == 1
+                               else StationFaults(injectors, self.joints))
             for joint in s.joints:
                 self._configure_para1(joint)
                 if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
-                    self.client.write_object(SSI_DIAG_MAPPING, joint.slot, joint.ssi_mask)
-                self.client.edit_output(joint.slot, idle_read)
+                    self.client_of(joint.name).write_object(SSI_DIAG_MAPPING, joint.slot,
+                                                            joint.ssi_mask)
+                self.client_of(joint.name).edit_output(joint.slot, idle_read)
         #: REG_PARA1 each module holds, as this node last wrote or read it back (one truth
         #: for the parameter, the scale and the velocity estimate: :meth:`change_para1`)
         self.para1 = {j.name: j.para1 for j in s.joints}
@@ -288,6 +308,11 @@ class SsiBridgeNode(Node):
             f"/diagnostics every {s.diagnostics_period:g} s; services under "
             f"{self.get_fully_qualified_name()}/")
 
+    def client_of(self, joint: str) -> BridgeClient | ListenOnlyClient:
+        """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
+        station = self.joints[joint].station
+        return self.station_clients.get(station, self.client)
+
     def _encoder_config(self, joint: JointSettings) -> EncoderConfig | None:
         """The joint's encoder layout (family + overrides) for the frame checks, if known."""
         if joint.name in self.encoders:
@@ -303,7 +328,7 @@ class SsiBridgeNode(Node):
         for joint in self.settings.joints:
             try:
                 self.frames[joint.name].set_cam(read_cam(
-                    lambda index: int(self.client.read_object(index, joint.slot))))
+                    lambda index: int(self.client_of(joint.name).read_object(index, joint.slot))))
             except SsiBridgeError as err:
                 self.get_logger().debug(f"{joint.name}: CAM objects not read: {err}")
 
@@ -313,13 +338,14 @@ class SsiBridgeNode(Node):
         This is what a CANopen master does at start-up; an invalid set is refused by the
         gateway with an SDO abort, which stops the node with the module's reason.
         """
-        current = int(self.client.read_object(ENCODER_CONFIG, joint.slot))
+        client = self.client_of(joint.name)
+        current = int(client.read_object(ENCODER_CONFIG, joint.slot))
         if current == joint.para1:
             return
         reason = validate_para1(joint.para1)
         if reason:
             raise ConfigError(f"{joint.name}.para1 0x{joint.para1:08X} is invalid: {reason}")
-        self.client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
+        client.write_object(ENCODER_CONFIG, joint.slot, joint.para1)
         self.get_logger().info(f"{logbridge.clip(joint.name, 80)}: REG_PARA1 0x{current:08X} -> "
                                f"0x{joint.para1:08X} "
                                f"(object 0x{ENCODER_CONFIG:04X}:{joint.slot})")
@@ -418,11 +444,13 @@ class SsiBridgeNode(Node):
             for done in self.faults.expire():
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
-        t_sync = self.client.sync()
+        t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
         # the TPDOs need their wire time and a starved station its turn: wait for them up to
         # 90 % of the period, at least 20 ms (a late cycle skips SYNC slots, counted in
-        # cycles_missed, instead of sending SYNCs nobody can answer), at most 50 ms
-        self.client.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
+        # cycles_missed, instead of sending SYNCs nobody can answer), at most 50 ms; the
+        # master wakes once every station's cycle is complete
+        assert self.master is not None
+        self.master.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync)
 
@@ -477,7 +505,7 @@ class SsiBridgeNode(Node):
         # while it is not (yet) STALE the cycle is not published and no estimate takes it in
         # (so a velocity window is always the published samples); a STALE joint's last value
         # is published with the others (its diagnostics say STALE), so joint_states goes on
-        samples = [(joint, self.client.latest(joint.slot)) for joint in self.settings.joints]
+        samples = [(joint, self.client_of(joint.name).latest(joint.slot)) for joint in self.settings.joints]
         limit = self.settings.stale_cycles
         transient = any(
             (sample is None or sample.sync_time < t_sync)
@@ -619,6 +647,7 @@ class SsiBridgeNode(Node):
         # flip it every few cycles: that one waits for the periodic message)
         levels += [(f.power_failure, f.encoder_error) if (f := c.frame) else None
                    for c in self.counters.values()]
+        levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
@@ -628,8 +657,8 @@ class SsiBridgeNode(Node):
         out = []
         for joint in s.joints:
             name = joint.name
-            hw = (f"{s.bus_interface}:{s.bus_channel} node {s.node_id} slot {joint.slot} "
-                  f"XN-1SSI")
+            hw = (f"{s.bus_interface}:{s.bus_channel} node {joint.station or s.node_id} "
+                  f"slot {joint.slot} XN-1SSI")
             extra = {"para1": f"0x{self.para1[name]:08X}",
                      "max_speed": f"{self.max_speed[name]:g}",
                      "velocity_window": str(s.velocity_window),
@@ -640,6 +669,8 @@ class SsiBridgeNode(Node):
             if self.para1_note[name] and st.level < WARN:
                 st.level, st.message = WARN, self.para1_note[name]
             out.append(st)
+        if len(self.station_clients) > 1:
+            return out + self._station_statuses()
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
         counters["clock_steps"] = self.clock_steps
@@ -658,6 +689,42 @@ class SsiBridgeNode(Node):
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
             extra_error=self._bus_problem()))
+        return out
+
+    def _station_statuses(self) -> list:
+        """Several stations: one bus status (master, SYNC, rate) and one per station."""
+        s = self.settings
+        fqn = self.get_fully_qualified_name()
+        assert self.master is not None
+        counters = dataclasses.asdict(self.master.counters)
+        counters.update(self.recorder.counters())
+        counters["clock_steps"] = self.clock_steps
+        counters["incomplete_cycles"] = self.incomplete_cycles
+        counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
+        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        counters.update(self.master.load.figures())
+        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
+        silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
+        out = [bus_status(
+            status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
+            f"{list(self.station_clients)}", alive=True, connected=self.master.network is not None,
+            achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
+            extra_error=self._bus_problem())]
+        if silent:
+            out[0].values.append(KeyValue(key="silent_stations", value=str(silent)))
+        for sid, client in self.station_clients.items():
+            node = client.node
+            nmt = node.nmt.state if node is not None else "UNKNOWN"
+            emcy = ([f"0x{e.code:04X} reg 0x{e.register:02X} {e.get_desc()}".strip()
+                     for e in node.emcy.log] if node is not None else [])
+            station_counters = {k: v for k, v in dataclasses.asdict(client.counters).items()
+                                if k not in ("frames", "syncs")}
+            out.append(station_status(
+                status_name(fqn, f"station {sid}"),
+                f"{s.bus_interface}:{s.bus_channel} node {sid} XN-GW-CANOPEN",
+                alive=client.gateway_alive, nmt_state=str(nmt), emcy=emcy,
+                counters=station_counters))
         return out
 
     def _bus_problem(self) -> str:
@@ -701,7 +768,7 @@ class SsiBridgeNode(Node):
             old = self.para1[joint]
             self.para1_changing(joint)
             try:
-                self.client.write_register(self.joints[joint].slot, Reg.REG_PARA1, value)
+                self.client_of(joint).write_register(self.joints[joint].slot, Reg.REG_PARA1, value)
             except BaseException:
                 self.adopt_para1(joint, old, wire_now())
                 raise
@@ -828,8 +895,11 @@ class SsiBridgeNode(Node):
             ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
             steps.append(("log replay", self.player.stop))
-        steps += [("recording", self.recorder.stop), ("live view", self.liveview.stop),
-                  ("bus", self.client.close)]
+        steps += [("recording", self.recorder.stop), ("live view", self.liveview.stop)]
+        steps += [(f"station {sid} client", c.close) for sid, c in self.station_clients.items()]
+        steps += [("bus", self.client.close)]
+        if self.master is not None:
+            steps.append(("master", self.master.close))
         if self.station is not None:
             steps.append(("simulated station", self.station.stop))
         for what, step in steps:

@@ -44,6 +44,8 @@ class NodeSettings:
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
     node_id: int = 1
+    #: node ids of the XN-GW-CANOPEN stations this master drives (() : just ``node_id``)
+    stations: tuple[int, ...] = ()
     storage_path: str = ""
     velocity_window: int = 5
     stale_cycles: int = 5
@@ -66,6 +68,15 @@ class NodeSettings:
     #: live view (ros/liveview.py): Foxglove WebSocket port, 0 = off; address it binds to
     foxglove_port: int = 0
     foxglove_address: str = "127.0.0.1"
+
+    @property
+    def station_ids(self) -> tuple[int, ...]:
+        """The stations' node ids, first one first (``(node_id,)`` unless ``stations``)."""
+        return self.stations or (self.node_id,)
+
+    def station_joints(self, node_id: int) -> tuple[JointSettings, ...]:
+        """The joints whose modules sit in station ``node_id``."""
+        return tuple(j for j in self.joints if j.station == node_id)
 
     @property
     def listen_only(self) -> bool:
@@ -138,6 +149,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "go STALE)", read_only=True)),
     "bus.node_id": (1, _describe("CANopen node id of the XN-GW-CANOPEN gateway",
                                  read_only=True, int_range=(1, 127))),
+    "stations": ([0], _describe(
+        "Node ids of the XN-GW-CANOPEN stations on the bus, driven by this one master (one "
+        "SYNC for all); [0]: just bus.node_id. A joint names its station in '<joint>.station'",
+        read_only=True)),
     "cpu_affinity": ([-1], _describe(
         "CPUs the whole node process runs on (e.g. [1]); [-1]: no pinning. Keeping the "
         "simulated station, the bus threads and the cycle on one core saves the cross-core "
@@ -182,6 +197,9 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
 JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
+    "station": (0, _describe("Node id of the station holding the joint's module (one of "
+                             "'stations'); 0: the first station", read_only=True,
+                             int_range=(0, 127))),
     "slot": (0, _describe("XN-1SSI module slot in the station (1-8, the object subindex); "
                           "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
     "family": ("GENERIC", _describe(
@@ -253,6 +271,13 @@ def _cpus(values: list[int]) -> tuple[int, ...]:
     return cpus
 
 
+def _stations(values: list[int], node_id: int) -> tuple[int, ...]:
+    """The ``stations`` list checked: CANopen node ids 1-127, unique; [0] -> (node_id,)."""
+    ids = tuple(int(v) for v in values if int(v) != 0) or (int(node_id),)
+    bad = [i for i in ids if not 1 <= i <= 127]
+    if bad or len(set(ids)) != len(ids):
+        raise ConfigError(f"stations {list(ids)}: unique CANopen node ids 1-127")
+    return ids
 #: parameters rclpy itself declares or reads, never reported as unknown
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 RCLPY_PREFIXES = ("qos_overrides.",)
@@ -299,10 +324,10 @@ def declare_parameters(node: Node) -> NodeSettings:
     names = [str(j) for j in values["joints"]]
     if len(set(names)) != len(names) or not all(names):
         raise ConfigError(f"joints {_echo(names)} must be non-empty, unique names")
-    if len(names) > 8:
-        raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")
+    stations = _stations(values["stations"], values["bus.node_id"])
     joints = []
-    for index, joint in enumerate(names):
+    per_station: dict[int, int] = {}
+    for joint in names:
         jv = {key: _declare(node, f"{joint}.{key}", d, desc)
               for key, (d, desc) in JOINT_PARAMETERS.items()}
         if jv["motion.kind"] not in MOTION_KINDS:
@@ -311,8 +336,16 @@ def declare_parameters(node: Node) -> NodeSettings:
             raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
         if jv["direction"] not in (1, -1):
             raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
+        station = jv["station"] or stations[0]
+        if station not in stations:
+            raise ConfigError(f"{joint}.station {station}: not one of stations {list(stations)}")
+        index = per_station[station] = per_station.get(station, 0) + 1
+        if index > 8:
+            raise ConfigError(f"station {station}: more than 8 joints; a station holds at most "
+                              "8 XN-1SSI modules")
         joints.append(JointSettings(
-            name=joint, slot=jv["slot"] or index + 1, family=jv["family"], code=jv["code"],
+            name=joint, station=station, slot=jv["slot"] or index, family=jv["family"],
+            code=jv["code"],
             cable_length=jv["cable_length"],
             para1=jv["para1"], ssi_mask=jv["ssi_mask"], steps_per_rev=jv["steps_per_rev"],
             revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
@@ -320,9 +353,16 @@ def declare_parameters(node: Node) -> NodeSettings:
             motion=MotionSettings(kind=jv["motion.kind"], velocity=jv["motion.velocity"],
                                   amplitude=jv["motion.amplitude"],
                                   frequency=jv["motion.frequency"], start=jv["motion.start"])))
-    slots = [j.slot for j in joints]
+    slots = [(j.station, j.slot) for j in joints]
     if len(set(slots)) != len(slots):
-        raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")
+        raise ConfigError("joints share a module slot: "
+                          f"{ {j.name: f'station {j.station} slot {j.slot}' for j in joints} }")
+    empty = [sid for sid in stations if not any(j.station == sid for j in joints)]
+    if empty:
+        raise ConfigError(f"stations {empty} hold no joint: name them in '<joint>.station'")
+    if len(stations) > 1 and (values["bus.listen_only"] or values["replay.can_log"]):
+        raise ConfigError("bus.listen_only / replay.can_log observe one station: use a single "
+                          "entry in stations")
     if values["foxglove.port"] and not str(values["foxglove.address"]).strip():
         raise ConfigError("foxglove.address is empty: give the address the live view binds to "
                           "(127.0.0.1: this host only)")
@@ -348,7 +388,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         simulation_start_timeout=values["simulation.start_timeout"],
         bus_interface=values["bus.interface"],
         bus_channel=values["bus.channel"], bus_bitrate=values["bus.bitrate"],
-        node_id=values["bus.node_id"], storage_path=values["storage_path"],
+        node_id=stations[0], stations=stations, storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],

@@ -223,9 +223,11 @@ class SessionRecorder:
         s = self._settings
         meta = {"package_version": __version__, "bus": f"{s.bus_interface}:{s.bus_channel}",
                 "bus_bitrate": str(s.bus_bitrate), "node_id": str(s.node_id),
+                "stations": ",".join(str(i) for i in s.station_ids),
                 "simulation": str(s.simulation), "publish_rate": f"{s.publish_rate:g}",
                 "can_log": "can_0.log" if s.record_can_log else ""}
         for j in s.joints:
-            meta[f"joint.{j.name}"] = (f"slot={j.slot} family={j.family} "
+            meta[f"joint.{j.name}"] = (f"station={j.station or s.node_id} slot={j.slot} "
+                                       f"family={j.family} "
                                        f"para1=0x{j.para1:08X}")
         return meta

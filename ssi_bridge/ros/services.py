@@ -314,7 +314,8 @@ class BridgeServices:
         """~/read_register: REG_RD_ADR handshake; REG_RD_ABORT becomes a refusal."""
         def body(joint: str) -> str:
             _check_address(request.address)
-            response.value = self.node.client.read_register(self._slot(joint), request.address)
+            response.value = self.node.client_of(joint).read_register(self._slot(joint),
+                                                                      request.address)
             return f"{_reg_name(request.address)} = 0x{response.value:08X} ({response.value})"
         return self._run("read_register", request, response, body,
                          f"address={request.address}", _reg_name(request.address))
@@ -326,7 +327,8 @@ class BridgeServices:
             if request.address == Reg.REG_PARA1:
                 # the one REG_PARA1 path: module, <joint>.para1, scale and velocity together
                 return self.node.change_para1(joint, request.value, "~/write_register")
-            self.node.client.write_register(self._slot(joint), request.address, request.value)
+            self.node.client_of(joint).write_register(self._slot(joint), request.address,
+                                                      request.value)
             return f"{_reg_name(request.address)} <- 0x{request.value:08X} accepted"
         return self._run("write_register", request, response, body,
                          f"address={request.address} value=0x{request.value:08X}",
@@ -345,7 +347,7 @@ class BridgeServices:
             if not -(1 << 31) <= target < (1 << 31):
                 raise ConfigError(f"position {request.position} is {target} counts, outside "
                                   "the Integer32 range of REG_SSI_POS")
-            client, slot = self.node.client, self._slot(joint)
+            client, slot = self.node.client_of(joint), self._slot(joint)
             old_offset = client.read_register(slot, Reg.REG_OFFSET)
             pos = client.read_register(slot, Reg.REG_SSI_POS)
             encoder = (pos + old_offset) & 0xFFFF_FFFF
@@ -373,7 +375,7 @@ class BridgeServices:
                 estimator = node.velocity[joint]
                 estimator.reset(after=math.inf, hold=True)  # REG_OFFSET may return to 0
                 try:
-                    node.client.write_register(slot, Reg.REG_SF, SF_LD48)
+                    node.client_of(joint).write_register(slot, Reg.REG_SF, SF_LD48)
                 finally:
                     estimator.reset(after=wire_now() + 0.05, hold=True)
                 return "LD48: retentive registers except REG_PARA1 restored to defaults"
@@ -384,8 +386,8 @@ class BridgeServices:
                 node.para1_changing(joint)
                 value = old
                 try:
-                    node.client.write_register(slot, Reg.REG_SF, SF_LD20)
-                    value = node.client.read_register(slot, Reg.REG_PARA1)
+                    node.client_of(joint).write_register(slot, Reg.REG_SF, SF_LD20)
+                    value = node.client_of(joint).read_register(slot, Reg.REG_PARA1)
                 finally:
                     node.adopt_para1(joint, value, wire_now())
             note = node.para1_note[joint]
@@ -399,7 +401,7 @@ class BridgeServices:
     def set_control(self, request: Any, response: Any) -> Any:
         """~/set_control: STOP, EN_CMPx and one-cycle CLR_CMPx pulses of the process output."""
         def body(joint: str) -> str:
-            self.node.client.set_control(
+            self.node.client_of(joint).set_control(
                 self._slot(joint), stop=request.stop, enable_cmp1=request.enable_cmp1,
                 enable_cmp2=request.enable_cmp2, clear_cmp1=request.clear_cmp1,
                 clear_cmp2=request.clear_cmp2)
@@ -445,7 +447,7 @@ class BridgeServices:
                 if b in ERROR_BITS and 0 <= last - i + shift < para.ssi_frame_len}
         if not bits:
             return ""  # no error bit in this layout: faults.py's own note says so
-        mask = self.node.client.read_register(self._slot(joint), Reg.REG_SSI_MASK)
+        mask = self.node.client_of(joint).read_register(self._slot(joint), Reg.REG_SSI_MASK)
         for x in range(4):
             byte = (mask >> (8 * x)) & 0xFF
             if byte & 0xC0 == 0xC0 and (byte & 0x1F) in bits:

@@ -217,6 +217,61 @@ class InProcessStation:
         self.station.stop()
 
 
+class StationGroup:
+    """The simulated stations of a bus with several XN-GW-CANOPEN gateways, one per node id.
+
+    Each station is its own device as on a real bus: one child process per station on
+    udp_multicast (a crash or stall of one does not take the others along), one in-process
+    :class:`Station` per node id on virtual. The node reaches each over CAN only.
+    """
+
+    def __init__(self, stations: dict[int, ChildStation | InProcessStation]) -> None:
+        self.stations = stations
+
+    @property
+    def pid(self) -> int | None:
+        """Process id of the first station's child (None in-process)."""
+        return next(iter(self.stations.values())).pid
+
+    @property
+    def pids(self) -> list[int]:
+        """Process ids of every station child."""
+        return [st.pid for st in self.stations.values() if st.pid is not None]
+
+    def problem(self) -> str | None:
+        """Why a station is not running (per node id), or None while all run."""
+        found = [f"station {sid}: {p}" for sid, st in self.stations.items()
+                 if (p := st.problem())]
+        return "; ".join(found) or None
+
+    def stop(self) -> None:
+        """Stop every station (idempotent)."""
+        for st in self.stations.values():
+            st.stop()
+
+
+def start_stations(s: NodeSettings) -> ChildStation | InProcessStation | StationGroup:
+    """Start one simulated station per entry of ``stations`` (a group when there are several).
+
+    A station gets only its own joints and its node id; a ``storage_path`` is suffixed with
+    ``.node<id>`` so the stations keep their registers apart.
+    """
+    ids = s.station_ids
+    if len(ids) == 1:
+        return start_station(s)
+    started: dict[int, ChildStation | InProcessStation] = {}
+    try:
+        for sid in ids:
+            joints = s.station_joints(sid)
+            path = f"{s.storage_path}.node{sid}" if s.storage_path else ""
+            started[sid] = start_station(dataclasses.replace(
+                s, joints=joints, node_id=sid, stations=(sid,), storage_path=path))
+    except BaseException:
+        StationGroup(started).stop()
+        raise
+    return StationGroup(started)
+
+
 def start_station(s: NodeSettings) -> ChildStation | InProcessStation:
     """Start the node's simulated station per ``simulation.transport`` and wait for it."""
     bus = station_bus(s)

@@ -49,6 +49,8 @@ def _fmt(value: float) -> str:
 class MonitorState:
     """What has been heard since the start and since the last report."""
 
+    #: the node's fully qualified name: its statuses are ``<node FQN>: <joint>`` and ``: bus``
+    node_fqn: str = "/ssi_bridge"
     joint_states: Any = None
     received: int = 0
     statuses: dict[str, Any] = field(default_factory=dict)
@@ -62,10 +64,10 @@ class MonitorState:
             self.statuses[status.name] = status
 
     def bus_status(self, joints: list[str]) -> Any:
-        """The ``ssi_bridge: bus`` status of the gateway the joints' statuses name."""
+        """The ``<node FQN>: bus`` status of the gateway the joints' statuses name."""
         prefixes = {s.hardware_id.split(" slot ", 1)[0] for j in joints
-                    if (s := self.statuses.get(f"ssi_bridge: {j}")) is not None}
-        bus = self.statuses.get("ssi_bridge: bus")
+                    if (s := self.statuses.get(f"{self.node_fqn}: {j}")) is not None}
+        bus = self.statuses.get(f"{self.node_fqn}: bus")
         if bus is None or (prefixes and not any(bus.hardware_id.startswith(p + " ")
                                                 for p in prefixes)):
             return None
@@ -87,7 +89,7 @@ class MonitorState:
         for i, name in enumerate(joints):
             pos = js.position[i] if i < len(js.position) else math.nan
             vel = js.velocity[i] if i < len(js.velocity) else math.nan
-            status = self.statuses.get(f"ssi_bridge: {name}")
+            status = self.statuses.get(f"{self.node_fqn}: {name}")
             diag = (f"{level_name(status.level):<5} {status.message}" if status is not None
                     else "(no diagnostics yet)")
             lines.append(f"  {name:<16} {_fmt(pos)} {_fmt(vel)}  {diag}")
@@ -152,9 +154,9 @@ def _run(args: argparse.Namespace, ros_args: list[str]) -> int:
 
     rclpy.init(args=["monitor", *ros_args])
     node = rclpy.create_node("ssi_bridge_monitor", start_parameter_services=False)
-    state = MonitorState()
     topic = joint_states_topic(args.namespace)
     fqn = f"/{args.namespace.strip('/')}/{args.node}".replace("//", "/")
+    state = MonitorState(node_fqn=fqn)
     node.create_subscription(JointState, topic, state.on_joint_states, 10)
     node.create_subscription(DiagnosticArray, "/diagnostics", state.on_diagnostics, 10)
     reports = [0]

@@ -1,7 +1,7 @@
 """The monitor command: what a newcomer sees of a running bridge in the terminal.
 
 Its report is built from the node's own joint_states and /diagnostics (docs/node.md: one
-status per joint named ``ssi_bridge: <joint>``, one ``ssi_bridge: bus``), so the levels it
+status per joint named ``<node FQN>: <joint>``, one ``<node FQN>: bus``), so the levels it
 prints are the ones the diagnostics carry, e.g. ERROR for a broken SSI data wire (000 "Error
 detection / messages": ERR_SSI).
 """
@@ -35,11 +35,11 @@ def test_report_shows_joints_levels_and_the_bus_load_of_this_bridge():
     state.on_joint_states(JointState(name=["lift", "tilt"], position=[1.5, -0.25],
                                      velocity=[0.5, float("nan")]))
     state.on_diagnostics(DiagnosticArray(status=[
-        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading",
+        _status("/ssi_bridge: lift", DiagnosticStatus.OK, "reading",
                 "virtual:a node 1 slot 1 XN-1SSI"),
-        _status("ssi_bridge: tilt", DiagnosticStatus.ERROR, "ERR_SSI: wire break",
+        _status("/ssi_bridge: tilt", DiagnosticStatus.ERROR, "ERR_SSI: wire break",
                 "virtual:a node 1 slot 2 XN-1SSI"),
-        _status("ssi_bridge: bus", DiagnosticStatus.OK, "cycling at 100.0 Hz",
+        _status("/ssi_bridge: bus", DiagnosticStatus.OK, "cycling at 100.0 Hz",
                 "virtual:a node 1 XN-GW-CANOPEN", bus_load_percent="12.5", sdo_aborts="0"),
     ]))
     lines = state.report("/ssi_bridge", "/joint_states", elapsed=1.0)
@@ -60,9 +60,9 @@ def test_report_ignores_the_bus_status_of_another_bridge_and_says_what_it_waits_
                                                           1.0, node_seen=False)[0]
     state.on_joint_states(JointState(name=["lift"], position=[0.0], velocity=[0.0]))
     state.on_diagnostics(DiagnosticArray(status=[
-        _status("ssi_bridge: lift", DiagnosticStatus.OK, "reading",
+        _status("/ssi_bridge: lift", DiagnosticStatus.OK, "reading",
                 "virtual:a node 1 slot 1 XN-1SSI"),
-        _status("ssi_bridge: bus", DiagnosticStatus.ERROR, "gateway silent",
+        _status("/ssi_bridge: bus", DiagnosticStatus.ERROR, "gateway silent",
                 "virtual:b node 1 XN-GW-CANOPEN")]))
     assert "bus: (no diagnostics yet)" in "\n".join(
         state.report("/ssi_bridge", "/joint_states", 1.0))

@@ -57,9 +57,9 @@ def test_power_failure_bit_in_status_diagnostics_and_events(running, probe):
     probe.wait_for(lambda: _channel(status, "pf").power_failure, 5.0, "power_failure", node)
     ch = _channel(status, "pf")
     assert ch.ssi_sts0 and ch.ssi_diag and ch.ssi_frame & 1 and ch.reg_ssi_pos == 2048
-    probe.wait_for(lambda: (st := _diag(diags, "ssi_bridge: pf")) is not None
+    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: pf")) is not None
                    and st.level == DiagnosticStatus.ERROR, 2 * PERIOD + 2, "ERROR level", node)
-    st = _diag(diags, "ssi_bridge: pf")
+    st = _diag(diags, "/ssi_bridge: pf")
     assert "POWER_FAILURE" in st.message
     assert {kv.key: kv.value for kv in st.values}["POWER_FAILURE"] == "True"
     probe.wait_for(lambda: any(e.kind == "encoder_status" and "POWER_FAILURE" in e.message
@@ -85,7 +85,7 @@ def test_noise_guard_flags_parity_errors_and_holds_the_position(running, probe):
     _inject(probe, node, kind=K.CLEAR_ALL)
     probe.wait_for(lambda: any(e.kind == "encoder_status" and "frame check failed" in e.message
                                for _, e in events), 5.0, "a frame check event", node)
-    probe.wait_for(lambda: (st := _diag(diags, "ssi_bridge: axis")) is not None
+    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: axis")) is not None
                    and "PARITY_ERROR" in {kv.key for kv in st.values}
                    and int({kv.key: kv.value for kv in st.values}["frame_errors"]) >= 5,
                    2 * PERIOD + 2, "frame_errors in /diagnostics", node)
@@ -116,7 +116,7 @@ def test_injected_invalid_para1_shows_err_para(running, probe):
     probe.wait_for(lambda: (ch := _channel(status, "joint1")) is not None and ch.err_para,
                    5.0, "ERR_PARA in ~/status", node)
     assert _channel(status, "joint1").sts_stop
-    probe.wait_for(lambda: (st := _diag(diags, "ssi_bridge: joint1")) is not None
+    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: joint1")) is not None
                    and st.level == DiagnosticStatus.ERROR and "ERR_PARA" in st.message,
                    2 * PERIOD + 2, "ERR_PARA in /diagnostics", node)
     _inject(probe, node, kind=K.CLEAR_ALL)

@@ -182,7 +182,7 @@ def test_every_topic_is_streamed_and_diagnostics_count_the_subscriptions(running
     event = next(r.msg for r in rx if r.topic == node.topic("~/events"))
     assert event.kind == "read_register" and event.success
     bus = next(s for r in rx if r.topic == "/diagnostics" for s in r.msg.status
-               if s.name == "ssi_bridge: bus")
+               if s.name == "/ssi_bridge: bus")
     assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == str(port)
 
 
@@ -224,10 +224,10 @@ def test_a_port_in_use_is_reported_and_the_bridge_keeps_publishing(running, prob
         port = taken.getsockname()[1]
         node = running({"foxglove.port": port})
         diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-        probe.wait_for(lambda: any(s.name == "ssi_bridge: bus" and s.level == DiagnosticStatus.ERROR
+        probe.wait_for(lambda: any(s.name == "/ssi_bridge: bus" and s.level == DiagnosticStatus.ERROR
                                    for _, d in diags for s in d.status), 10.0,
                        "the bus diagnostics ERROR naming the live view", node)
-    bus = next(s for _, d in diags for s in d.status if s.name == "ssi_bridge: bus")
+    bus = next(s for _, d in diags for s in d.status if s.name == "/ssi_bridge: bus")
     assert "live view off" in bus.message and str(port) in bus.message
     assert "Address already in use" in node.log()
     seen = probe.subscribe(JointState, node.topic("joint_states"))
@@ -248,9 +248,9 @@ def test_off_by_default_and_described_with_a_port_range(running, probe):
                         GetParameters.Request(names=names)).values
     assert (values[0].integer_value, values[1].string_value) == (0, "127.0.0.1")
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    probe.wait_for(lambda: any(s.name == "ssi_bridge: bus" for _, d in diags for s in d.status),
+    probe.wait_for(lambda: any(s.name == "/ssi_bridge: bus" for _, d in diags for s in d.status),
                    10.0, "bus diagnostics", node)
-    bus = next(s for _, d in diags for s in d.status if s.name == "ssi_bridge: bus")
+    bus = next(s for _, d in diags for s in d.status if s.name == "/ssi_bridge: bus")
     assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == "0"
     assert "live view" not in node.log()
 

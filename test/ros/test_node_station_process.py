@@ -67,7 +67,7 @@ def _wait(predicate, timeout: float, what: str) -> None:
 def _bus_status(diags):
     for _, arr in reversed(diags):
         for st in arr.status:
-            if st.name == "ssi_bridge: bus":
+            if st.name == "/ssi_bridge: bus":
                 return st
     return None
 
@@ -116,24 +116,24 @@ def test_faults_reach_the_child_station_over_the_bus(running, probe):
                     return st.level
         return None
     K = InjectFault.Request
-    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK, 10.0,
+    probe.wait_for(lambda: level("/ssi_bridge: joint1") == DiagnosticStatus.OK, 10.0,
                    "joint1 OK", node)
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      K(kind=K.DATA_WIRE_BREAK, duration=1.0))
     assert res.success and "for 1 s" in res.message, res.message
-    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.ERROR,
+    probe.wait_for(lambda: level("/ssi_bridge: joint1") == DiagnosticStatus.ERROR,
                    2 * PERIOD + 2, "joint1 ERROR from the wire break", node)
-    probe.wait_for(lambda: level("ssi_bridge: joint1") == DiagnosticStatus.OK,
+    probe.wait_for(lambda: level("/ssi_bridge: joint1") == DiagnosticStatus.OK,
                    1.0 + 2 * PERIOD + 3, "joint1 OK once the station ended the fault", node)
     res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.GATEWAY_SILENT))
     assert res.success, res.message
-    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.ERROR,
+    probe.wait_for(lambda: level("/ssi_bridge: bus") == DiagnosticStatus.ERROR,
                    2 * PERIOD + 2, "bus ERROR while the station is silent", node)
     refused = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.ENCODER_ERROR))
     assert not refused.success and "only CLEAR_ALL" in refused.message, refused.message
     res = probe.call(InjectFault, node.topic("~/inject_fault"), K(kind=K.CLEAR_ALL))
     assert res.success, res.message  # the silent station applied the clear, then answered
-    probe.wait_for(lambda: level("ssi_bridge: bus") == DiagnosticStatus.OK,
+    probe.wait_for(lambda: level("/ssi_bridge: bus") == DiagnosticStatus.OK,
                    3 * PERIOD + 3, "bus OK with the heartbeat back", node)
 
 
@@ -160,7 +160,7 @@ def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(runni
     def joint_level():
         for _, arr in reversed(diags):
             for st in arr.status:
-                if st.name == "ssi_bridge: joint1":
+                if st.name == "/ssi_bridge: joint1":
                     return st.level
         return None
     probe.wait_for(lambda: joint_level() == DiagnosticStatus.ERROR, 2 * PERIOD + 2,

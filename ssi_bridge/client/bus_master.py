@@ -1,0 +1,127 @@
+"""CanMaster: the one CANopen master of a bus, shared by the clients of several stations.
+
+A CANopen bus has exactly one SYNC producer and one NMT master (CiA 301). The master owns the
+bus, canopen's ``Network`` and the SYNC; each station (XN-GW-CANOPEN at its own node id) is
+a :class:`~ssi_bridge.client.master.BridgeClient` attached to it with its own RemoteNode, SDO
+client, heartbeat consumer, TPDO routes and slot table. :meth:`sync` sends ONE SYNC for all
+stations and starts the cycle in every attached client's slot table, so the per-cycle cost
+follows the number of slots (one table update per station, no extra frame).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import TYPE_CHECKING
+
+import can
+import canopen
+
+from ssi_bridge.client.load import BusLoad
+from ssi_bridge.client.receive import FrameListener
+from ssi_bridge.client.samples import ClientCounters, CycleGate
+from ssi_bridge.exceptions import BusError
+from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus
+from ssi_bridge.gateway.timebase import wire_now
+
+if TYPE_CHECKING:
+    from ssi_bridge.client.master import BridgeClient
+
+#: CiA 301 default COB-ID of SYNC (no node id: one producer per bus)
+SYNC_COB_ID = 0x80
+
+
+class CanMaster:
+    """The bus, its canopen network and the single SYNC producer.
+
+    :param bus: a :class:`BusConfig` (the master opens the bus) or an open bus it takes over
+    :param counters: where frames, SYNCs and CAN errors of the bus are counted
+    """
+
+    def __init__(self, bus: BusConfig | can.BusABC,
+                 counters: ClientCounters | None = None) -> None:
+        self._source: BusConfig | can.BusABC | None = bus
+        self.counters = counters if counters is not None else ClientCounters()
+        #: bus load from frame timestamps (one bus, so one figure for every station)
+        self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
+        self.bus: LossyBus | None = None
+        self.network: canopen.Network | None = None
+        #: one sender at a time on the network (SYNC, RPDOs of every station)
+        self.send_lock = threading.Lock()
+        self.clients: list[BridgeClient] = []
+        #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
+        self.gate = CycleGate()
+
+    def connect(self) -> None:
+        """Open the bus and start canopen's network (idempotent)."""
+        if self.network is not None:
+            return
+        inner = take_bus(self._source, "this master")
+        if not isinstance(self._source, BusConfig):
+            self._source = None  # a handed-over bus is taken once
+        self.bus = LossyBus(inner)
+        self.network = BridgeNetwork(self.bus)
+        self.network.listeners[:] = [FrameListener(self.network, self.counters, self.load)]
+        self.network.on_sent = self.load.add
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
+        self.network.connect()
+
+    def attach(self, client: BridgeClient) -> None:
+        """Register a station's client: its slot table takes part in every SYNC."""
+        if any(c.node_id == client.node_id for c in self.clients if c is not client):
+            raise ValueError(f"node id {client.node_id} already attached to this master")
+        if client not in self.clients:
+            self.clients.append(client)
+
+    def detach(self, client: BridgeClient) -> None:
+        """Take a station's client off the master (its RemoteNode off the network)."""
+        if client in self.clients:
+            self.clients.remove(client)
+        if self.network is not None:
+            self.network.nodes.pop(client.node_id, None)
+
+    def sync(self) -> float:
+        """Send one SYNC for every station; return its wire time (``gateway/timebase``).
+
+        On a simulated wire that is the SYNC frame's end-of-frame timestamp, where the modules
+        of every station latch; on a real interface the instant it was handed to the driver.
+        """
+        if self.network is None:
+            raise BusError("master not connected")
+        t = wire_now()
+        with self.gate.cond:
+            self.gate.open(len(self.clients))
+            for client in self.clients:
+                client.table.on_sync(t)
+        try:
+            with self.send_lock:
+                frame = self.network.send_message(SYNC_COB_ID, b"")
+        except can.CanError as err:
+            self.counters.can_errors += 1
+            raise BusError(f"could not send SYNC: {err}") from err
+        self.counters.syncs += 1
+        for client in self.clients:
+            if client.counters is not self.counters:
+                client.counters.syncs += 1
+        if frame is not None and frame.timestamp:
+            with self.gate.cond:
+                for client in self.clients:
+                    t = client.table.set_sync_time(frame.timestamp)
+        return t
+
+    def wait_cycle(self, timeout: float) -> bool:
+        """True once every station's images and positions arrived since the last SYNC."""
+        return self.gate.wait(timeout)
+
+    def send(self, cob_id: int, data: bytes) -> None:
+        """Send one frame under the send lock (raises can.CanError)."""
+        if self.network is None:
+            raise BusError("master not connected")
+        with self.send_lock:
+            self.network.send_message(cob_id, data)
+
+    def close(self) -> None:
+        """Shut the bus down (the gateways keep running)."""
+        if self.network is not None:
+            network, self.network = self.network, None
+            network.disconnect()
+        self.bus = None

@@ -1,0 +1,91 @@
+"""One CanMaster, two XN-GW-CANOPEN stations (node 1 with two modules, node 3 with one).
+
+CiA 301: one SYNC producer per bus; every other COB-ID carries the station's node id. The
+master's one SYNC makes both stations answer with their own TPDOs; a register handshake (000
+chapter 1) on station 3 slot 1 leaves station 1 slot 1 alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from ssi_bridge.client.boot import BootWatch
+from ssi_bridge.client.master import BridgeClient, CanMaster
+from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.settings import station_settings
+from ssi_bridge.gateway.station import Station
+from ssi_bridge.module.registers import Reg
+
+from .conftest import wait_for
+
+
+@pytest.fixture
+def rig(channel: str) -> Iterator[tuple[CanMaster, dict[int, BridgeClient], can.BusABC]]:
+    """Stations 1 (joints a, b) and 3 (joint c) on one virtual bus, one master, a sniffer."""
+    stations = [Station(station_settings({"joints": names, "bus.channel": channel,
+                                          "bus.node_id": sid}))
+                for sid, names in ((1, ["a", "b"]), (3, ["c"]))]
+    watch = open_bus(BusConfig(channel=channel))
+    for st in stations:
+        st.start()
+    try:
+        for sid in (1, 3):
+            BootWatch(watch, sid).wait(5.0)
+    finally:
+        watch.shutdown()
+    master = CanMaster(BusConfig(channel=channel))
+    clients = {1: BridgeClient(master, 1, 2), 3: BridgeClient(master, 3, 1)}
+    sniffer = open_bus(BusConfig(channel=channel))
+    for client in clients.values():
+        client.connect()
+    yield master, clients, sniffer
+    for client in clients.values():
+        client.close()
+    master.close()
+    sniffer.shutdown()
+    for st in stations:
+        st.stop()
+
+
+def _drain(bus: can.BusABC) -> list[can.Message]:
+    out = []
+    while (msg := bus.recv(0.0)) is not None:
+        out.append(msg)
+    return out
+
+
+def test_one_sync_serves_every_station(rig) -> None:
+    master, clients, sniffer = rig
+    _drain(sniffer)
+    for _ in range(5):
+        t = clients[3].sync()  # any client's sync() is the master's one SYNC
+        for sid, client in clients.items():
+            wait_for(lambda c=client: c.wait_cycle(0.05) or all(
+                (s := c.latest(slot)) is not None and s.sync_time >= t
+                for slot in range(1, c.slots + 1)), f"station {sid}: no TPDOs after SYNC")
+    frames = _drain(sniffer)
+    ids = [m.arbitration_id for m in frames]
+    assert ids.count(0x080) == 5
+    # TPDO1 of each station at 0x180 + its node id, TPDO2 only where slot 2 exists
+    assert ids.count(0x181) >= 5 and ids.count(0x183) >= 5 and ids.count(0x281) >= 5
+    assert 0x283 not in ids
+    assert master.counters.syncs == 5
+    assert clients[1].counters.syncs == clients[3].counters.syncs == 5
+
+
+def test_register_write_reaches_only_its_station(rig) -> None:
+    _, clients, _ = rig
+    before_1 = clients[1].read_register(1, Reg.REG_CMP1)
+    before_3 = clients[3].read_register(1, Reg.REG_CMP1)
+    clients[3].write_register(1, Reg.REG_CMP1, before_3 + 777)
+    assert clients[3].read_register(1, Reg.REG_CMP1) == before_3 + 777
+    assert clients[1].read_register(1, Reg.REG_CMP1) == before_1
+
+
+def test_a_node_id_is_attached_once(rig) -> None:
+    master, _, _ = rig
+    with pytest.raises(ValueError, match="node id 3 already attached"):
+        BridgeClient(master, 3, 1).connect()
