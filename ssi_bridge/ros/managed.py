@@ -126,13 +126,19 @@ class ManagedBridgeNode(SsiBridgeNode, LifecycleNode):
 
     def _close_bus_side(self) -> None:
         self.configured = False
-        steps: list[tuple[str, Callable[[], object]]] = []
+        steps: list[tuple[str, Callable[[], object]]] = [
+            (f"station {sid} client", c.close)
+            for sid, c in getattr(self, "station_clients", {}).items()]
         if getattr(self, "client", None) is not None:
             steps.append(("bus", self.client.close))
+        if getattr(self, "master", None) is not None:
+            steps.append(("master", self.master.close))
         if getattr(self, "station", None) is not None:
             steps.append(("simulated station", self.station.stop))
         self._run_steps(steps)
         self.station = None
+        self.station_clients = {}
+        self.master = None
 
     def _run_steps(self, steps: list[tuple[str, Callable[[], object]]]) -> None:
         for what, step in steps:
