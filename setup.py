@@ -27,6 +27,7 @@ setup(
     entry_points={
         "console_scripts": [
             f"ssi_bridge_node = {PACKAGE}.tools.ssi_bridge_node:main",
+            f"ssi_bridge_managed_node = {PACKAGE}.tools.ssi_bridge_managed_node:main",
             f"replay = {PACKAGE}.tools.replay:main",
             f"plot = {PACKAGE}.tools.plot:main",
             f"monitor = {PACKAGE}.tools.monitor:main",

@@ -244,15 +244,7 @@ class SsiBridgeNode(Node):
 
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._diag_group = MutuallyExclusiveCallbackGroup()
-        self.cycle: CycleThread | ObservedCycleThread
-        if isinstance(self.client, ListenOnlyClient):
-            self.cycle = ObservedCycleThread(
-                self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
-                ended=self.player.finished if self.player is not None else None,
-                on_end=self._on_replay_end,
-                silent_warning=None if self.player is not None else SILENT_WARNING_S)
-        else:
-            self.cycle = CycleThread(1.0 / s.publish_rate, self._on_cycle)
+        self.cycle = self._new_cycle(s)
         self.diag_timer = self.create_timer(s.diagnostics_period, self._on_diag_timer,
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self)
@@ -261,6 +253,16 @@ class SsiBridgeNode(Node):
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _new_cycle(self, s: NodeSettings) -> CycleThread | ObservedCycleThread:
+        """The cycle loop (not started): SYNC master, or observer of another master's SYNC."""
+        if isinstance(self.client, ListenOnlyClient):
+            return ObservedCycleThread(
+                self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
+                ended=self.player.finished if self.player is not None else None,
+                on_end=self._on_replay_end,
+                silent_warning=None if self.player is not None else SILENT_WARNING_S)
+        return CycleThread(1.0 / s.publish_rate, self._on_cycle)
 
     def _start_player_when_heard(self, timeout: float) -> None:
         """Start the log replay once joint_states has a subscriber (or ``timeout`` passed)."""

@@ -194,9 +194,16 @@ def _wait_for_callbacks(executor: MultiThreadedExecutor, node: Node,
                                       f"{one_line(task.exception())}")
 
 
-def main(args: list[str] | None = None) -> int:
-    """Run the node until interrupted; exit 0 on a clean stop, 1 with the reason otherwise."""
-    from ssi_bridge.ros.node import SsiBridgeNode
+def main(args: list[str] | None = None, managed: bool = False) -> int:
+    """Run the node until interrupted; exit 0 on a clean stop, 1 with the reason otherwise.
+
+    ``managed``: the lifecycle node (ssi_bridge_managed_node), which opens nothing until
+    configured.
+    """
+    if managed:
+        from ssi_bridge.ros.managed import ManagedBridgeNode as SsiBridgeNode
+    else:
+        from ssi_bridge.ros.node import SsiBridgeNode
 
     stops = StopRequests()
     stops.install()

@@ -81,7 +81,8 @@ def console_scripts() -> dict[str, str]:
     return scripts
 
 
-TOOLS = {n: m for n, m in console_scripts().items() if n != "ssi_bridge_node"}
+TOOLS = {n: m for n, m in console_scripts().items()
+         if n not in ("ssi_bridge_node", "ssi_bridge_managed_node")}  # ROS nodes: --ros-args
 
 
 def test_the_tools_are_found():

@@ -1,0 +1,129 @@
+"""The managed node (ssi_bridge_managed_node) driven through the standard lifecycle services.
+
+States and transitions are ROS 2's managed-node design (lifecycle_msgs): configure opens the
+bus (the simulated station is started), activate starts the SYNC cycle and publishing,
+deactivate stops publishing with the bus still open, cleanup closes the bus and stops the
+station's child process, shutdown ends in finalized.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import time
+from pathlib import Path
+
+import yaml
+from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from sensor_msgs.msg import JointState
+
+from .conftest import NodeProcess, dds_env, installed_executable
+
+RATE = 50.0
+
+
+def _start_managed(tmp_path: Path, domain_id: int, child_preexec, params: dict) -> NodeProcess:
+    values = {"bus.channel": f"test_{domain_id}_managed", "publish_rate": RATE,
+              "storage_path": str(tmp_path / "bank" / "retentive.json")}
+    values.update(params)
+    pfile = tmp_path / "params.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
+    log_path = tmp_path / "node.log"
+    env = dds_env(domain_id)
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(
+            [str(installed_executable("ssi_bridge_managed_node")), "--ros-args",
+             "--params-file", str(pfile)],
+            stdout=log, stderr=subprocess.STDOUT, env=env, cwd=tmp_path,
+            start_new_session=True, preexec_fn=child_preexec)
+    return NodeProcess(proc, domain_id, "", log_path, env=env)
+
+
+def _state(probe, node: NodeProcess) -> int:
+    return probe.call(GetState, node.topic("~/get_state"), GetState.Request()).current_state.id
+
+
+def _change(probe, node: NodeProcess, transition: int) -> bool:
+    request = ChangeState.Request(transition=Transition(id=transition))
+    return probe.call(ChangeState, node.topic("~/change_state"), request, timeout=30.0).success
+
+
+def _station_pid(node: NodeProcess, probe) -> int:
+    probe.wait_for(lambda: "simulated station up as process" in node.log(), 10.0,
+                   "the station's start line", node)
+    return int(re.findall(r"simulated station up as process (\d+)", node.log())[-1])
+
+
+def _quiet_for(msgs: list, seconds: float) -> int:
+    """How many joint_states arrived during ``seconds`` (a window, not a timed bound)."""
+    before = len(msgs)
+    time.sleep(seconds)
+    return len(msgs) - before
+
+
+def test_walk_through_the_lifecycle(tmp_path, domain_id, child_preexec, probe):
+    node = _start_managed(tmp_path, domain_id, child_preexec, {})
+    try:
+        msgs = probe.subscribe(JointState, node.topic("joint_states"))
+        probe.wait_for(lambda: "managed node: unconfigured" in node.log(), 30.0,
+                       "the node's start", node)
+        assert _state(probe, node) == State.PRIMARY_STATE_UNCONFIGURED
+        assert "simulated station up" not in node.log(), "unconfigured must open nothing"
+
+        assert _change(probe, node, Transition.TRANSITION_CONFIGURE), node.log()
+        assert _state(probe, node) == State.PRIMARY_STATE_INACTIVE
+        pid = _station_pid(node, probe)
+        assert Path(f"/proc/{pid}").exists(), "configure starts the simulated station"
+        assert _quiet_for(msgs, 1.0) == 0, "inactive: no joint_states"
+
+        for _ in range(2):  # active -> inactive -> active again
+            assert _change(probe, node, Transition.TRANSITION_ACTIVATE), node.log()
+            assert _state(probe, node) == State.PRIMARY_STATE_ACTIVE
+            start = len(msgs)
+            probe.wait_for(lambda: len(msgs) >= start + 10, 20.0, "joint_states while active",
+                           node)
+            assert _change(probe, node, Transition.TRANSITION_DEACTIVATE), node.log()
+            assert _state(probe, node) == State.PRIMARY_STATE_INACTIVE
+            time.sleep(0.3)  # messages already in flight when the cycle stopped
+            assert _quiet_for(msgs, 1.0) == 0, "inactive: no joint_states"
+            assert Path(f"/proc/{pid}").exists(), "deactivate keeps the bus (and station)"
+
+        assert _change(probe, node, Transition.TRANSITION_CLEANUP), node.log()
+        assert _state(probe, node) == State.PRIMARY_STATE_UNCONFIGURED
+        probe.wait_for(lambda: not Path(f"/proc/{pid}").exists(), 10.0,
+                       "the station process to end after cleanup", node)
+        assert "cleaned up: bus closed" in node.log()
+
+        # configure again opens a new bus side; activate publishes again
+        assert _change(probe, node, Transition.TRANSITION_CONFIGURE), node.log()
+        pid2 = _station_pid(node, probe)
+        assert pid2 != pid
+        assert _change(probe, node, Transition.TRANSITION_ACTIVATE), node.log()
+        start = len(msgs)
+        probe.wait_for(lambda: len(msgs) >= start + 10, 20.0, "joint_states after reconfigure",
+                       node)
+
+        assert _change(probe, node, Transition.TRANSITION_ACTIVE_SHUTDOWN), node.log()
+        assert _state(probe, node) == State.PRIMARY_STATE_FINALIZED
+        probe.wait_for(lambda: not Path(f"/proc/{pid2}").exists(), 10.0,
+                       "the station process to end after shutdown", node)
+        assert _quiet_for(msgs, 0.5) <= 1
+    finally:
+        code = node.stop()
+    assert code == 0, node.log()[-3000:]
+
+
+def test_failing_configure_stays_unconfigured(tmp_path, domain_id, child_preexec, probe):
+    # no simulated station and nothing else on the bus: the gateway never answers
+    node = _start_managed(tmp_path, domain_id, child_preexec, {"simulation": False})
+    try:
+        probe.wait_for(lambda: "managed node: unconfigured" in node.log(), 30.0,
+                       "the node's start", node)
+        assert not _change(probe, node, Transition.TRANSITION_CONFIGURE)
+        assert _state(probe, node) == State.PRIMARY_STATE_UNCONFIGURED
+        assert "configure failed:" in node.log()
+        assert node.proc.poll() is None, "a failed transition does not end the process"
+    finally:
+        code = node.stop()
+    assert code == 0, node.log()[-3000:]
