@@ -25,7 +25,9 @@ RATE = 50.0
 
 def _start_managed(tmp_path: Path, domain_id: int, child_preexec, params: dict) -> NodeProcess:
     values = {"bus.channel": f"test_{domain_id}_managed", "publish_rate": RATE,
-              "storage_path": str(tmp_path / "bank" / "retentive.json")}
+              "storage_path": str(tmp_path / "bank" / "retentive.json"),
+              # the station as a child process: its PID shows when cleanup closes the bus
+              "simulation.transport": "udp_multicast"}
     values.update(params)
     pfile = tmp_path / "params.yaml"
     pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
