@@ -250,16 +250,31 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
                        "ENCODER_ERROR": str(frame.encoder_error),
                        "PARITY_ERROR": str(frame.parity_error),
                        "FILLER_ERROR": str(frame.filler_error)})
-        if level < ERROR and frame.power_failure:
-            level, message = ERROR, "POWER_FAILURE: the encoder's PowerFail bit is set (003)"
-        elif level < WARN and (frame.parity_error or frame.filler_error or frame.encoder_error):
-            level = WARN
-            message = ("parity error (001 5.5.7)" if frame.parity_error else
-                       "bit that must be 0 read as 1 (004 3)" if frame.filler_error else
-                       "encoder error bit set")
+        level, message = _with_frame_findings(level, message, frame)
     return DiagnosticStatus(
         level=level, name=name, message=message, hardware_id=hardware_id,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def _with_frame_findings(level: int, message: str, frame: Any) -> tuple[int, str]:
+    """Raise level/message by what the frame check saw in the raw SSI frame.
+
+    The frame check sees a bit at once while the module's own status (SSI_DIAG ...) passes the
+    debounce first, so both findings are kept in the message rather than one hiding the other.
+    """
+    findings = [text for flag, text in (
+        (frame.parity_error, "parity error (001 5.5.7)"),
+        (frame.filler_error, "bit that must be 0 read as 1 (004 3)"),
+        (frame.encoder_error, "encoder error bit set in the frame")) if flag]
+    if frame.power_failure:
+        findings.insert(0, "POWER_FAILURE: the encoder's PowerFail bit is set (003)")
+        if level < ERROR:
+            return ERROR, "; ".join(findings)
+    if not findings:
+        return level, message
+    if level < WARN:
+        return WARN, "; ".join(findings)
+    return level, "; ".join([message, *findings])
 
 
 def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,

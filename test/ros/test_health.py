@@ -95,3 +95,30 @@ def test_module_errors_pass_through_debounced():
     assert levels[-1] == OK, "held less than 0.1 s"
     t, levels = _run(h, t, 20, sts=0x02)
     assert levels[-1] == ERROR and "ERR_SSI" in h.message
+
+
+def _status_with(sts, verdict):
+    from ssi_bridge.line.frame_check import FrameVerdict
+    from ssi_bridge.ros.diagnostics import ChannelCounters, channel_status
+
+    h = ChannelHealth(raise_after_s=0.0)
+    _run(h, 0.0, 30, sts=sts)
+    counters = ChannelCounters()
+    counters.frame = FrameVerdict(*verdict)
+    return channel_status("/n: a", "hw", counters, h, 0.0)
+
+
+def test_frame_findings_and_module_status_are_both_named():
+    # the frame check sees the encoder's error bit (004 2.3) at once; the module's SSI_DIAG
+    # (000 Table 3) follows after the debounce: neither message hides the other
+    from ssi_bridge.module.images import ModuleStatus
+
+    only_frame = _status_with(0, (False, False, False, True))
+    assert only_frame.level == WARN and only_frame.message == "encoder error bit set in the frame"
+    both = _status_with(int(ModuleStatus.SSI_DIAG), (False, False, False, True))
+    assert both.level == WARN
+    assert both.message.startswith("SSI_DIAG") and "encoder error bit set in the frame" in both.message
+    power = _status_with(int(ModuleStatus.SSI_DIAG), (False, False, True, False))
+    assert power.level == ERROR and power.message.startswith("POWER_FAILURE")
+    clean = _status_with(0, (False, False, False, False))
+    assert clean.level == OK and clean.message == "reading"
