@@ -87,9 +87,10 @@ NOTES = {
 def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
     """A bare rclpy timer publishing an N-joint JointState at ``rate``; runs until SIGINT."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
+
+    from ssi_bridge.tools.spin import spin_until_shutdown
 
     rclpy.init(args=None)
     node = rclpy.create_node(f"bench_bare_{os.getpid()}")
@@ -111,16 +112,7 @@ def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
         pub.publish(js)
 
     node.create_timer(1.0 / rate, tick)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_shutdown(node)
     return 0
 
 

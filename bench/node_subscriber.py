@@ -22,9 +22,10 @@ def main(argv: list[str]) -> int:
     topic, out_path, ready_path = argv[1], argv[2], argv[3]
 
     import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
+
+    from ssi_bridge.tools.spin import spin_until_shutdown
 
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                      reliability=ReliabilityPolicy.RELIABLE,
@@ -47,22 +48,14 @@ def main(argv: list[str]) -> int:
     rclpy.init(args=None)
     node = rclpy.create_node(f"bench_sub_{os.getpid()}")
     node.create_subscription(JointState, topic, on_msg, qos)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
+
+    def write_out() -> None:
         tmp = out_path + ".tmp"
         with open(tmp, "w") as f:
             f.write("".join(f"{r} {s}\n" for r, s in zip(recv, stamps)))
         os.replace(tmp, out_path)
-        try:
-            executor.shutdown(timeout_sec=1.0)
-            node.destroy_node()
-        finally:
-            rclpy.try_shutdown()
+
+    spin_until_shutdown(node, on_exit=write_out)
     return 0
 
 

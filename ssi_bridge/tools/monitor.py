@@ -149,8 +149,9 @@ def _run(args: argparse.Namespace, ros_args: list[str]) -> int:
     """Subscribe, report every ``args.period`` s until Ctrl-C or ``args.count`` reports."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import JointState
+
+    from ssi_bridge.tools.spin import spin_until_shutdown
 
     rclpy.init(args=["monitor", *ros_args])
     node = rclpy.create_node("ssi_bridge_monitor", start_parameter_services=False)
@@ -172,16 +173,7 @@ def _run(args: argparse.Namespace, ros_args: list[str]) -> int:
             rclpy.try_shutdown()
 
     node.create_timer(args.period, tick)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+    spin_until_shutdown(node)
     return 0
 
 
