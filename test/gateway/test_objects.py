@@ -88,7 +88,7 @@ def test_status_objects_follow_the_process_input(station) -> None:
 
 @pytest.mark.parametrize("flag_object", [0x5803, 0x5805])
 def test_flag_reset_by_writing(station, flag_object) -> None:
-    sdo, module = station.node.sdo, station.gateway.modules[0]
+    sdo = station.node.sdo
     sdo[0x6B20][1].raw = 1000  # CMP1 = current position
     sdo[0x2100][1].raw = int.from_bytes(bytes([0, 0, 0, 0, 0, 0, 0x01, 0]), "little")  # EN_CMP1
     station.sync()

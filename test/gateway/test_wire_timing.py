@@ -70,7 +70,7 @@ def test_sync_to_last_tpdo_takes_the_wire_time_of_the_formula(bitrate):
         client.connect()
         while sniffer.recv(0.05) is not None:
             pass
-        spans, expected, loads = [], [], []
+        spans, expected = [], []
         for _ in range(20):
             client.sync()
             assert client.wait_cycle(1.0)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from ssi_bridge.exceptions import RegisterError
 from ssi_bridge.line.readout import LineReadout
 from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput
-from ssi_bridge.module.registers import REGISTERS, Reg, describe_refusal
+from ssi_bridge.module.registers import REGISTERS, describe_refusal
 from ssi_bridge.module.xn1ssi import Xn1Ssi
 
 WRITABLE = [r for r, i in REGISTERS.items() if i.writable]

@@ -63,6 +63,16 @@ class NodeProcess:
         """Everything the node printed so far."""
         return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
 
+    def wait_for_log(self, text: str, timeout: float = 60.0) -> None:
+        """Readiness from the node's own log (no DDS discovery needed): wait for ``text``."""
+        deadline = time.monotonic() + timeout
+        while text not in self.log():
+            if self.proc.poll() is not None:
+                pytest.fail(f"node exited {self.proc.returncode} before {text!r}:\n{self.log()}")
+            if time.monotonic() > deadline:
+                pytest.fail(f"no {text!r} within {timeout} s:\n{self.log()[-3000:]}")
+            time.sleep(0.005)
+
     def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
         """Stop the process (SIGINT, then SIGKILL after ``timeout``); returns the exit code."""
         if self.proc.poll() is None:
@@ -251,3 +261,29 @@ def running(start_node: Callable[..., NodeProcess], probe: RosProbe) -> Callable
         return node
 
     return _run
+
+
+# -- /diagnostics and fault injection, as the node tests read and drive them ---------------------
+def latest_status(diags: list[tuple[float, Any]], name: str) -> Any:
+    """The newest DiagnosticStatus called ``name`` among received DiagnosticArrays, or None."""
+    for _, arr in reversed(diags):
+        for st in arr.status:
+            if st.name == name:
+                return st
+    return None
+
+
+def wait_for_level(probe: "RosProbe", node: NodeProcess, diags: list[tuple[float, Any]],
+                   name: str, level: bytes, timeout: float) -> None:
+    """Wait until the newest status ``name`` has ``level``."""
+    probe.wait_for(lambda: (st := latest_status(diags, name)) is not None and st.level == level,
+                   timeout, f"{name} at level {level!r}", node)
+
+
+def inject(probe: "RosProbe", node: NodeProcess, **fields: Any) -> Any:
+    """Call ``~/inject_fault`` with ``fields``; the reply, which must be a success."""
+    from ssi_bridge_msgs.srv import InjectFault
+
+    res = probe.call(InjectFault, node.topic("~/inject_fault"), InjectFault.Request(**fields))
+    assert res.success, res.message
+    return res

@@ -121,7 +121,7 @@ def test_layout_follows_the_aggregator_format(config: dict[str, Any],
                                               analyzers: dict[str, Any]) -> None:
     params = config["analyzers"]["ros__parameters"]
     assert params["path"] == "SSI Bridge"
-    assert set(analyzers) == {"joints", "bus"}
+    assert set(analyzers) == {"joints", "bus", "stations"}
     for key, (_path, p) in analyzers.items():
         assert p["type"] == GENERIC, key
         assert isinstance(p.get("path"), str) and p["path"], key
@@ -186,6 +186,27 @@ def test_bus_status_matches_only_the_bus_analyzer(analyzers: dict[str, Any]) -> 
     for chaff in p.get("remove_prefix", []):
         out = remove_leading_chaff(out, chaff)
     assert out == "/SSI Bridge/Bus/bus"
+
+
+@pytest.mark.parametrize("fqn", ["/ssi_bridge", "/cell/ssi_bridge"])
+@pytest.mark.parametrize("station", [1, 3, 127])
+def test_station_status_matches_only_the_stations_analyzer(analyzers: dict[str, Any],
+                                                           fqn: str, station: int) -> None:
+    """Several stations on one bus: "<node FQN>: station <node ID>" (the node's own name)."""
+    from ssi_bridge.ros.diagnostics import station_status, status_name
+
+    name = station_status(status_name(fqn, f"station {station}"), "hw", alive=True,
+                          nmt_state="OPERATIONAL", emcy=[], counters={}).name
+    assert f'status_name(fqn, f"station {{sid}}")' in NODE_SRC.read_text(), \
+        "node renamed its station status: update the config"
+    hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, name)]
+    assert hits == ["stations"], f"{name!r} matched by {hits}"
+    path, p = analyzers["stations"]
+    out = output_name(path, name)
+    for chaff in p.get("remove_prefix", []):
+        out = remove_leading_chaff(out, chaff)
+    prefix = fqn.rsplit("/", 1)[0].replace("/", " ").strip()
+    assert out == f"/SSI Bridge/Stations/{prefix + ' ssi_bridge: ' if prefix else ''}station {station}"
 
 
 @pytest.mark.parametrize("name", ["other_node: bus", "/other_node: bus", "/ssi_bridge",

@@ -16,45 +16,28 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault, WriteRegister
 
+from .conftest import inject, latest_status, wait_for_level
+
 PERIOD = 0.5
 K = InjectFault.Request
-
-
-def _level_of(diags, name):
-    for _, arr in reversed(diags):
-        for st in arr.status:
-            if st.name == name:
-                return st
-    return None
-
-
-def _wait_level(probe, node, diags, name, level, timeout):
-    probe.wait_for(lambda: (st := _level_of(diags, name)) is not None and st.level == level,
-                   timeout, f"{name} at level {level!r}", node)
-
-
-def _inject(probe, node, **kw):
-    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(**kw))
-    assert res.success, res.message
-    return res
 
 
 @pytest.mark.parametrize("kind", [K.DATA_WIRE_BREAK, K.CLOCK_WIRE_BREAK])
 def test_wire_faults_are_errors_until_cleared(running, probe, kind):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
-    _inject(probe, node, kind=kind)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    st = _level_of(diags, "/ssi_bridge: joint1")
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    inject(probe, node, kind=kind)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    st = latest_status(diags, "/ssi_bridge: joint1")
     assert "ERR_SSI" in st.message, st.message
-    _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    inject(probe, node, kind=K.CLEAR_ALL)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_power_failure_on_an_encoder_without_the_bit_says_so(running, probe):
     node = running()
-    res = _inject(probe, node, kind=K.POWER_FAILURE)
+    res = inject(probe, node, kind=K.POWER_FAILURE)
     assert "no power-fail bit" in res.message, res.message
 
 
@@ -62,11 +45,11 @@ def test_fault_with_a_duration_clears_itself(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     joints = probe.subscribe(JointState, node.topic("joint_states"))
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
-    res = _inject(probe, node, kind=K.DATA_WIRE_BREAK, duration=1.0)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    res = inject(probe, node, kind=K.DATA_WIRE_BREAK, duration=1.0)
     assert "for 1 s" in res.message
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 1.0 + 2 * PERIOD + 1)
     probe.wait_for(lambda: len(joints) > 0 and not math.isnan(joints[-1][1].velocity[0]), 2.0,
                    "a measured velocity after recovery", node)
     time.sleep(0.3)
@@ -87,38 +70,38 @@ def test_encoder_error_bit_via_reg_ssi_mask_warns(running, probe):
     ok = probe.call(WriteRegister, node.topic("~/write_register"),
                     WriteRegister.Request(address=51, value=0xC0))
     assert ok.success, ok.message
-    _wait_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 5.0)
-    _inject(probe, node, kind=K.ENCODER_ERROR)
+    wait_for_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 5.0)
+    inject(probe, node, kind=K.ENCODER_ERROR)
     # the frame check sees the bit at once; the module's SSI_DIAG follows after the debounce,
     # and the status then names both
-    probe.wait_for(lambda: (st := _level_of(diags, "/ssi_bridge: a")) is not None
+    probe.wait_for(lambda: (st := latest_status(diags, "/ssi_bridge: a")) is not None
                    and st.level == DiagnosticStatus.WARN and "SSI_DIAG" in st.message,
                    2 * PERIOD + 1, "WARN naming SSI_DIAG", node)
-    _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    inject(probe, node, kind=K.CLEAR_ALL)
+    wait_for_level(probe, node, diags, "/ssi_bridge: a", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_silent_gateway_is_a_bus_error_and_recovers(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 5.0)
-    _inject(probe, node, kind=K.GATEWAY_SILENT)
-    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
-    assert "silent" in _level_of(diags, "/ssi_bridge: bus").message
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
-    _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 3 * PERIOD + 2)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
+    wait_for_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 5.0)
+    inject(probe, node, kind=K.GATEWAY_SILENT)
+    wait_for_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.ERROR, 2 * PERIOD + 1)
+    assert "silent" in latest_status(diags, "/ssi_bridge: bus").message
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    inject(probe, node, kind=K.CLEAR_ALL)
+    wait_for_level(probe, node, diags, "/ssi_bridge: bus", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 2 * PERIOD + 1)
 
 
 def test_total_can_frame_loss_makes_the_joint_stale(running, probe):
     node = running({"diagnostics_period": PERIOD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
-    _inject(probe, node, kind=K.CAN_FRAME_LOSS, rate=1.0)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
-    _inject(probe, node, kind=K.CLEAR_ALL)
-    _wait_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 5.0)
+    inject(probe, node, kind=K.CAN_FRAME_LOSS, rate=1.0)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    inject(probe, node, kind=K.CLEAR_ALL)
+    wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 3 * PERIOD + 2)
 
 
 @pytest.mark.parametrize("request_, words", [

@@ -11,6 +11,8 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Event, Status
 from ssi_bridge_msgs.srv import InjectFault
 
+from .conftest import inject, latest_status
+
 REPO = Path(__file__).resolve().parents[2]
 K = InjectFault.Request
 PERIOD = 0.5
@@ -22,20 +24,6 @@ def _channel(status, joint):
             if ch.joint == joint:
                 return ch
     return None
-
-
-def _diag(diags, name):
-    for _, arr in reversed(diags):
-        for st in arr.status:
-            if st.name == name:
-                return st
-    return None
-
-
-def _inject(probe, node, **kw):
-    res = probe.call(InjectFault, node.topic("~/inject_fault"), K(**kw))
-    assert res.success, res.message
-    return res
 
 
 def test_power_failure_bit_in_status_diagnostics_and_events(running, probe):
@@ -52,19 +40,19 @@ def test_power_failure_bit_in_status_diagnostics_and_events(running, probe):
                    10.0, "a checked frame", node)
     ch = _channel(status, "pf")
     assert not ch.power_failure and ch.reg_ssi_pos == 2048  # 0.5 rev of 4096 steps
-    res = _inject(probe, node, kind=K.POWER_FAILURE)
+    res = inject(probe, node, kind=K.POWER_FAILURE)
     assert "no power-fail bit" not in res.message
     probe.wait_for(lambda: _channel(status, "pf").power_failure, 5.0, "power_failure", node)
     ch = _channel(status, "pf")
     assert ch.ssi_sts0 and ch.ssi_diag and ch.ssi_frame & 1 and ch.reg_ssi_pos == 2048
-    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: pf")) is not None
+    probe.wait_for(lambda: (st := latest_status(diags, "/ssi_bridge: pf")) is not None
                    and st.level == DiagnosticStatus.ERROR, 2 * PERIOD + 2, "ERROR level", node)
-    st = _diag(diags, "/ssi_bridge: pf")
+    st = latest_status(diags, "/ssi_bridge: pf")
     assert "POWER_FAILURE" in st.message
     assert {kv.key: kv.value for kv in st.values}["POWER_FAILURE"] == "True"
     probe.wait_for(lambda: any(e.kind == "encoder_status" and "POWER_FAILURE" in e.message
                                for _, e in events), 5.0, "a POWER_FAILURE event", node)
-    _inject(probe, node, kind=K.CLEAR_ALL)
+    inject(probe, node, kind=K.CLEAR_ALL)
     probe.wait_for(lambda: not _channel(status, "pf").power_failure, 5.0, "power back", node)
     probe.wait_for(lambda: any("clear again" in e.message for _, e in events), 5.0,
                    "a 'clear again' event", node)
@@ -79,13 +67,13 @@ def test_noise_guard_flags_parity_errors_and_holds_the_position(running, probe):
     events = probe.subscribe(Event, node.topic("~/events"))
     probe.wait_for(lambda: (ch := _channel(status, "axis")) is not None and ch.frame_checked,
                    10.0, "a checked frame", node)
-    _inject(probe, node, kind=K.BIT_NOISE, joint="axis", rate=0.01)
+    inject(probe, node, kind=K.BIT_NOISE, joint="axis", rate=0.01)
     probe.wait_for(lambda: _channel(status, "axis").frame_errors >= 5, 20.0,
                    "five frames failing the parity check", node)
-    _inject(probe, node, kind=K.CLEAR_ALL)
+    inject(probe, node, kind=K.CLEAR_ALL)
     probe.wait_for(lambda: any(e.kind == "encoder_status" and "frame check failed" in e.message
                                for _, e in events), 5.0, "a frame check event", node)
-    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: axis")) is not None
+    probe.wait_for(lambda: (st := latest_status(diags, "/ssi_bridge: axis")) is not None
                    and "PARITY_ERROR" in {kv.key for kv in st.values}
                    and int({kv.key: kv.value for kv in st.values}["frame_errors"]) >= 5,
                    2 * PERIOD + 2, "frame_errors in /diagnostics", node)
@@ -111,13 +99,13 @@ def test_injected_invalid_para1_shows_err_para(running, probe):
     node = running({"diagnostics_period": PERIOD})
     status = probe.subscribe(Status, node.topic("~/status"))
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    res = _inject(probe, node, kind=K.INVALID_PARA1)
+    res = inject(probe, node, kind=K.INVALID_PARA1)
     assert "INVALID_PARA1" in res.message
     probe.wait_for(lambda: (ch := _channel(status, "joint1")) is not None and ch.err_para,
                    5.0, "ERR_PARA in ~/status", node)
     assert _channel(status, "joint1").sts_stop
-    probe.wait_for(lambda: (st := _diag(diags, "/ssi_bridge: joint1")) is not None
+    probe.wait_for(lambda: (st := latest_status(diags, "/ssi_bridge: joint1")) is not None
                    and st.level == DiagnosticStatus.ERROR and "ERR_PARA" in st.message,
                    2 * PERIOD + 2, "ERR_PARA in /diagnostics", node)
-    _inject(probe, node, kind=K.CLEAR_ALL)
+    inject(probe, node, kind=K.CLEAR_ALL)
     probe.wait_for(lambda: not _channel(status, "joint1").err_para, 5.0, "ERR_PARA clear", node)

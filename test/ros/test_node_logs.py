@@ -20,16 +20,6 @@ REPO = Path(__file__).resolve().parents[2]
 LINE = re.compile(r"^\[(DEBUG|INFO|WARN|ERROR|FATAL)\] \[[0-9.]+\] \[([^\]]+)\]: (.*)$")
 
 
-def wait_for_log(node, text: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while text not in node.log():
-        if node.proc.poll() is not None:
-            pytest.fail(f"node exited {node.proc.returncode} before {text!r}:\n{node.log()}")
-        if time.monotonic() > deadline:
-            pytest.fail(f"no {text!r} within {timeout} s:\n{node.log()[-3000:]}")
-        time.sleep(0.01)
-
-
 def stop(node) -> str:
     """SIGINT, exit 0; the whole log."""
     node.proc.send_signal(signal.SIGINT)
@@ -56,7 +46,7 @@ def test_default_parameters_follow_the_cable_table():
 def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_node,
                                                                          params_file):
     node = start_node(params_file=params_file)
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     log = stop(node)
     parsed = lines(log)
     assert parsed, log
@@ -88,7 +78,7 @@ def test_params_file_problems_are_one_line_and_exit_1(start_node, tmp_path: Path
 
 def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
     node = start_node({"publish_rte": 50.0, "joint2.slot": 2, "bus.bitrte": 250000})
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     log = stop(node)
     warnings = [m for sev, _, m in lines(log) if sev == "WARN"]
     assert any("'publish_rte'" in w and "did you mean 'publish_rate'" in w for w in warnings), log
@@ -101,7 +91,7 @@ def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
 def test_a_huge_joint_name_is_not_echoed_in_full(start_node):
     name = "j" * 1_000_000
     node = start_node({"joints": [name]})
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     log = stop(node)
     assert len(log) < 20_000, f"{len(log)} characters of log"
     assert "(1000000 characters)" in log
@@ -111,7 +101,7 @@ def test_emcy_floods_are_one_line_per_second_per_slot_and_code(start_node):
     # the default REG_PARA1 (25-bit binary) on a 30-bit Gray AFM60: the module's SSI error bit
     # flaps, and the gateway sends an EMCY 0x7000 / 0x0000 pair per flap (~100 a second)
     node = start_node({"joint1.family": "AFM60_MULTI", "publish_rate": 1000.0})
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     deadline = time.monotonic() + 60.0
     while node.log().count("more in the last") < 4 and time.monotonic() < deadline:
         time.sleep(0.1)
@@ -130,7 +120,7 @@ def test_emcy_floods_are_one_line_per_second_per_slot_and_code(start_node):
 
 def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):
     node = start_node({"publish_rate": 10.0}, args=("--log-level", "debug"))
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     log = stop(node)
     names = {name for _, name, _ in lines(log)}
     assert {"ssi_bridge.canopen.network", "ssi_bridge.canopen.nmt"} <= names, sorted(names)
@@ -139,9 +129,9 @@ def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):
 
 def test_listen_only_on_a_silent_bus_says_so(start_node):
     node = start_node({"simulation": False, "bus.listen_only": True})
-    wait_for_log(node, "bridging")
+    node.wait_for_log("bridging")
     started = time.monotonic()
-    wait_for_log(node, "no SYNC on the bus", timeout=SILENT_WARNING_S + 30.0)
+    node.wait_for_log("no SYNC on the bus", timeout=SILENT_WARNING_S + 30.0)
     assert time.monotonic() - started >= SILENT_WARNING_S - 1.0, "not before the documented time"
     log = stop(node)
     assert log.count("no SYNC on the bus") == 1, "one warning, not one per period"

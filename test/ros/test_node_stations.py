@@ -16,6 +16,8 @@ import can
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
+
+from .conftest import latest_status, wait_for_level
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, StartRecording, StopRecording, WriteRegister,
 )
@@ -41,19 +43,6 @@ def _params(extra: dict | None = None) -> dict:
                        f"{joint}.motion.velocity": velocity, f"{joint}.motion.start": start})
     params.update(extra or {})
     return params
-
-
-def _status(diags, name):
-    for _, arr in reversed(diags):
-        for st in arr.status:
-            if st.name == name:
-                return st
-    return None
-
-
-def _wait_level(probe, node, diags, name, level, timeout):
-    probe.wait_for(lambda: (st := _status(diags, name)) is not None and st.level == level,
-                   timeout, f"{name} at level {level!r}", node)
 
 
 @pytest.mark.parametrize("transport", ["virtual", "udp_multicast"])
@@ -104,19 +93,19 @@ def test_a_silent_station_stales_only_its_joints(running, probe, transport):
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     for name in ("/ssi_bridge: station 1", "/ssi_bridge: station 3", "/ssi_bridge: a",
                  "/ssi_bridge: c"):
-        _wait_level(probe, node, diags, name, DiagnosticStatus.OK, 5.0)
+        wait_for_level(probe, node, diags, name, DiagnosticStatus.OK, 5.0)
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.GATEWAY_SILENT, joint="c"))
     assert res.success and "station 3" in res.message, res.message
-    _wait_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.ERROR,
+    wait_for_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.ERROR,
                 2 * PERIOD + 1)
-    _wait_level(probe, node, diags, "/ssi_bridge: c", DiagnosticStatus.STALE, 2 * PERIOD + 1)
-    assert "silent" in _status(diags, "/ssi_bridge: station 3").message
+    wait_for_level(probe, node, diags, "/ssi_bridge: c", DiagnosticStatus.STALE, 2 * PERIOD + 1)
+    assert "silent" in latest_status(diags, "/ssi_bridge: station 3").message
     n = len(diags)
     probe.wait_for(lambda: len(diags) > n + 2, 5.0, "diagnostics while station 3 is silent",
                    node)
     for name in ("/ssi_bridge: station 1", "/ssi_bridge: a", "/ssi_bridge: b"):
-        assert _status(diags, name).level == DiagnosticStatus.OK, _status(diags, name)
+        assert latest_status(diags, name).level == DiagnosticStatus.OK, latest_status(diags, name)
     # station 1's joints keep moving; c's position is the last one heard
     k = len(msgs)
     probe.wait_for(lambda: len(msgs) > k + 30, 5.0, "joint_states during the silence", node)
@@ -127,8 +116,8 @@ def test_a_silent_station_stales_only_its_joints(running, probe, transport):
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.CLEAR_ALL))
     assert res.success, res.message
-    _wait_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.OK, 3 * PERIOD + 2)
-    _wait_level(probe, node, diags, "/ssi_bridge: c", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    wait_for_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    wait_for_level(probe, node, diags, "/ssi_bridge: c", DiagnosticStatus.OK, 3 * PERIOD + 2)
 
 
 def test_one_sync_per_cycle_serves_both_stations(running, probe, tmp_path: Path):
@@ -195,15 +184,15 @@ def test_emcy_is_kept_per_station(running, probe):
     # only (000 "Error detection / messages", CiA 301 EMCY 0x080 + node id)
     node = running(_params())
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    _wait_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.OK, 5.0)
+    wait_for_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.OK, 5.0)
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.DATA_WIRE_BREAK, joint="c"))
     assert res.success, res.message
-    _wait_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.WARN,
+    wait_for_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.WARN,
                 2 * PERIOD + 1)
-    st3 = _status(diags, "/ssi_bridge: station 3")
+    st3 = latest_status(diags, "/ssi_bridge: station 3")
     assert "0x7000" in st3.message and "0x7000" in _value(st3, "emcy_history"), st3
-    st1 = _status(diags, "/ssi_bridge: station 1")
+    st1 = latest_status(diags, "/ssi_bridge: station 1")
     assert st1.level == DiagnosticStatus.OK and _value(st1, "emcy_count") == "0", st1
-    assert _status(diags, "/ssi_bridge: c").level == DiagnosticStatus.ERROR
-    assert _status(diags, "/ssi_bridge: a").level == DiagnosticStatus.OK
+    assert latest_status(diags, "/ssi_bridge: c").level == DiagnosticStatus.ERROR
+    assert latest_status(diags, "/ssi_bridge: a").level == DiagnosticStatus.OK

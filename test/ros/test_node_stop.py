@@ -23,17 +23,6 @@ REPO = Path(__file__).resolve().parents[2]
 ERROR = DiagnosticStatus.ERROR
 
 
-def wait_for_log(node, text: str, timeout: float = 60.0) -> None:
-    """Readiness from the node's own log (no DDS discovery needed): wait for ``text``."""
-    deadline = time.monotonic() + timeout
-    while text not in node.log():
-        if node.proc.poll() is not None:
-            pytest.fail(f"node exited {node.proc.returncode} before {text!r}:\n{node.log()}")
-        if time.monotonic() > deadline:
-            pytest.fail(f"no {text!r} within {timeout} s:\n{node.log()[-3000:]}")
-        time.sleep(0.005)
-
-
 def wait_for_rclpy_loading(node, timeout: float = 60.0) -> None:
     """Wait until the node process maps rclpy's C extension: main.py's handlers are in place
     (they are set before ``import rclpy``) and rclpy is being imported or initialised.
@@ -86,7 +75,7 @@ def test_double_sigint_10ms_apart_while_recording_exits_0_with_a_whole_bag(start
         node = start_node({"record.enabled": True, "record.root": str(root),
                            "record.path": f"run{run}", "record.can_log": True,
                            "publish_rate": 1000.0})
-        wait_for_log(node, "bridging")
+        node.wait_for_log("bridging")
         node.proc.send_signal(signal.SIGINT)
         time.sleep(0.01)
         node.proc.send_signal(signal.SIGINT)
@@ -113,7 +102,7 @@ def test_stop_signals_at_any_moment_of_start_up_and_shutdown(start_node, tmp_pat
         node = start_node({"record.enabled": True, "record.root": str(root),
                            "record.path": "bag", "record.can_log": True})
         if marker:
-            wait_for_log(node, marker)
+            node.wait_for_log(marker)
         else:
             wait_for_rclpy_loading(node)
         for sig in signals:
@@ -150,7 +139,7 @@ def test_can_log_write_error_is_an_error_at_once_and_everything_stays_clean(
     node = start_node({"record.enabled": True, "record.root": str(root), "record.path": "full",
                        "record.can_log": True, "publish_rate": 1000.0,
                        "joints": [f"j{i}" for i in range(1, 9)]}, preexec=file_size_limit)
-    wait_for_log(node, "CAN log stopped", timeout=120.0)
+    node.wait_for_log("CAN log stopped", timeout=120.0)
     failed_at = time.monotonic()
 
     def bus_errors() -> list[tuple[float, DiagnosticStatus]]:
