@@ -806,7 +806,6 @@ class SsiBridgeNode(Node):
 
     def _on_set_parameters(self, params: list) -> SetParametersResult:
         """Runtime changes (LIVE_*_PARAMETERS): checked together, then applied together."""
-        s = self.settings
         node_values: dict[str, Any] = {}
         para1: dict[str, int] = {}
         max_speed: dict[str, float] = {}

@@ -197,7 +197,7 @@ def test_station_status_matches_only_the_stations_analyzer(analyzers: dict[str, 
 
     name = station_status(status_name(fqn, f"station {station}"), "hw", alive=True,
                           nmt_state="OPERATIONAL", emcy=[], counters={}).name
-    assert f'status_name(fqn, f"station {{sid}}")' in NODE_SRC.read_text(), \
+    assert 'status_name(fqn, f"station {sid}")' in NODE_SRC.read_text(), \
         "node renamed its station status: update the config"
     hits = [key for key, (_path, p) in analyzers.items() if generic_match(p, name)]
     assert hits == ["stations"], f"{name!r} matched by {hits}"
