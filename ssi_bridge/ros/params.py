@@ -39,7 +39,7 @@ class NodeSettings:
     #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
     simulation_transport: str = "virtual"
     #: seconds the node waits for the simulated station's boot-up at start
-    simulation_start_timeout: float = 10.0
+    simulation_start_timeout: float = 30.0
     bus_interface: str = "virtual"
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
@@ -118,7 +118,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "group and port derived from bus.channel) or virtual (the station runs in the node's "
         "process on the virtual bus; also the fallback without multicast on loopback)",
         read_only=True)),
-    "simulation.start_timeout": (10.0, _describe(
+    "simulation.start_timeout": (30.0, _describe(
         "Seconds the node waits for the simulated station's boot-up message at start",
         read_only=True, float_range=(0.5, 120.0))),
     "bus.interface": ("virtual", _describe(
