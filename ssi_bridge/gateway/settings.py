@@ -77,6 +77,31 @@ class JointSettings:
     station: int = 0
 
 
+def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
+                      station: int = 0) -> JointSettings:
+    """One joint's settings from its values ``{"<key>": value}`` (the keys of JOINT_DEFAULTS).
+
+    The checks every reader of ``<joint>.*`` makes, whether the station reads a params file or
+    the node its declared parameters: one place, so both refuse the same values alike.
+    """
+    if jv["motion.kind"] not in MOTION_KINDS:
+        raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
+    if jv["code"] not in CODES:
+        raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
+    if jv["direction"] not in (1, -1):
+        raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
+    return JointSettings(
+        name=joint, slot=slot, station=station, family=str(jv["family"]), code=str(jv["code"]),
+        cable_length=float(jv["cable_length"]), para1=int(jv["para1"]),
+        ssi_mask=int(jv.get("ssi_mask", -1)), steps_per_rev=int(jv["steps_per_rev"]),
+        revolutions=int(jv["revolutions"]), measuring_step=float(jv["measuring_step"]),
+        direction=int(jv["direction"]),
+        motion=MotionSettings(kind=str(jv["motion.kind"]), velocity=float(jv["motion.velocity"]),
+                              amplitude=float(jv["motion.amplitude"]),
+                              frequency=float(jv["motion.frequency"]),
+                              start=float(jv["motion.start"])))
+
+
 def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSettings, ...]:
     """Joints from ``names`` and per-joint values ``{"<joint>.<key>": value}`` (checked)."""
     if not names or len(set(names)) != len(names) or not all(names):
@@ -86,25 +111,9 @@ def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSetti
     joints = []
     for index, joint in enumerate(names):
         jv = {key: values.get(f"{joint}.{key}", default) for key, default in JOINT_DEFAULTS.items()}
-        if jv["motion.kind"] not in MOTION_KINDS:
-            raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
-        if jv["code"] not in CODES:
-            raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
-        if jv["direction"] not in (1, -1):
-            raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
         if not 0 <= int(jv["slot"]) <= 8:
             raise ConfigError(f"{joint}.slot {jv['slot']}: 1-8 (0: position in joints + 1)")
-        joints.append(JointSettings(
-            name=joint, slot=int(jv["slot"]) or index + 1, family=str(jv["family"]),
-            code=str(jv["code"]), cable_length=float(jv["cable_length"]),
-            para1=int(jv["para1"]), steps_per_rev=int(jv["steps_per_rev"]),
-            revolutions=int(jv["revolutions"]), measuring_step=float(jv["measuring_step"]),
-            direction=int(jv["direction"]),
-            motion=MotionSettings(kind=str(jv["motion.kind"]),
-                                  velocity=float(jv["motion.velocity"]),
-                                  amplitude=float(jv["motion.amplitude"]),
-                                  frequency=float(jv["motion.frequency"]),
-                                  start=float(jv["motion.start"]))))
+        joints.append(joint_from_values(joint, jv, slot=int(jv["slot"]) or index + 1))
     slots = [j.slot for j in joints]
     if len(set(slots)) != len(slots):
         raise ConfigError(f"joints share a module slot: {dict(zip(names, slots))}")

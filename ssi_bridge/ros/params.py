@@ -19,8 +19,8 @@ from rclpy.node import Node
 from ssi_bridge.exceptions import ConfigError
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
-from ssi_bridge.gateway.settings import (  # noqa: F401 - re-exported
-    DEFAULT_PARA1, JointSettings, MotionSettings,
+from ssi_bridge.gateway.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
+    DEFAULT_PARA1, JointSettings, joint_from_values,
 )
 
 #: smallest record.max_size (bytes); the same floor as record/bag.py's MIN_SPLIT_SIZE
@@ -247,8 +247,6 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
                                     float_range=(-1e6, 1e6))),
 }
 
-MOTION_KINDS = ("constant", "still", "sine")
-CODES = ("", "binary", "gray")
 TRANSPORTS = ("udp_multicast", "virtual")
 
 
@@ -330,12 +328,6 @@ def declare_parameters(node: Node) -> NodeSettings:
     for joint in names:
         jv = {key: _declare(node, f"{joint}.{key}", d, desc)
               for key, (d, desc) in JOINT_PARAMETERS.items()}
-        if jv["motion.kind"] not in MOTION_KINDS:
-            raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
-        if jv["code"] not in CODES:
-            raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
-        if jv["direction"] not in (1, -1):
-            raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
         station = jv["station"] or stations[0]
         if station not in stations:
             raise ConfigError(f"{joint}.station {station}: not one of stations {list(stations)}")
@@ -343,16 +335,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         if index > 8:
             raise ConfigError(f"station {station}: more than 8 joints; a station holds at most "
                               "8 XN-1SSI modules")
-        joints.append(JointSettings(
-            name=joint, station=station, slot=jv["slot"] or index, family=jv["family"],
-            code=jv["code"],
-            cable_length=jv["cable_length"],
-            para1=jv["para1"], ssi_mask=jv["ssi_mask"], steps_per_rev=jv["steps_per_rev"],
-            revolutions=jv["revolutions"], measuring_step=jv["measuring_step"],
-            direction=jv["direction"],
-            motion=MotionSettings(kind=jv["motion.kind"], velocity=jv["motion.velocity"],
-                                  amplitude=jv["motion.amplitude"],
-                                  frequency=jv["motion.frequency"], start=jv["motion.start"])))
+        joints.append(joint_from_values(joint, jv, slot=jv["slot"] or index, station=station))
     slots = [(j.station, j.slot) for j in joints]
     if len(set(slots)) != len(slots):
         raise ConfigError("joints share a module slot: "
