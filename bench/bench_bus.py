@@ -19,7 +19,6 @@ shared and one run can be off by 1.5x.
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 import time
@@ -27,7 +26,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-RESULTS = Path(__file__).resolve().parent / "results" / "latest.jsonl"
+from benchlib import emit as _emit  # noqa: E402
+from benchlib import emit_record, save  # noqa: E402
+
 NODE_ID = 11
 ROUNDS = 300
 #: the PDO cycle's wire: 8 slots at 1 Mbit/s, at the highest rate that fits (wire.py)
@@ -36,18 +37,6 @@ CYCLE_SECONDS = 2.0
 CPU_CYCLES = 2000
 #: CPU budget per SYNC cycle (us) for 1 and 8 slots, the 1 kHz node's share for the bus
 CPU_GOAL_US = {1: 250.0, 8: 500.0}
-
-
-def _emit(records: list[dict], metric: str, value: float, unit: str,
-          baseline: float | None = None, note: str | None = None) -> None:
-    rec: dict = {"metric": metric, "value": round(value, 3), "unit": unit}
-    if baseline:
-        rec["baseline"] = round(baseline, 3)
-        rec["ratio"] = round(value / baseline, 3)
-    if note:
-        rec["note"] = note
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
 
 
 def _per_call_us(fn, rounds: int) -> float:
@@ -195,13 +184,9 @@ def main() -> None:
             pdo_cycle(records)
         for slots in (1, 8):
             cycle_cpu(records, slots, runs)
-    except Exception as err:  # a benchmark reports, it never fails the run
-        print(json.dumps({"metric": "bus_benchmark_error", "value": 0, "unit": "",
-                          "error": repr(err)}), flush=True)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with RESULTS.open("a", encoding="utf-8") as fh:
-        for rec in records:
-            fh.write(json.dumps(rec) + "\n")
+    except Exception as err:  # noqa: BLE001 - a benchmark reports, it never fails the run
+        emit_record(records, {"metric": "bus_benchmark_error", "error": repr(err)})
+    save(records)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 
 from __future__ import annotations
 
-import json
+import functools
 import os
 import random
 import signal
@@ -26,35 +26,20 @@ import subprocess
 import sys
 import tempfile
 import time
-import traceback
 from pathlib import Path
+
+from benchlib import cpu_seconds, emit, run_parts, save
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-RESULTS = HERE / "results" / "latest.jsonl"
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
 STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
+#: figures in s and us kept to the microsecond
+_emit = functools.partial(emit, digits=6)
 RATE_HZ = 1000.0
 WARMUP_S = 2.0
 MEASURE_S = 5.0
 ROUNDS = 1000
-
-
-def _emit(records: list[dict], metric: str, value: float, unit: str,
-          baseline: float | None = None, note: str = "") -> None:
-    rec: dict = {"metric": metric, "value": round(value, 6), "unit": unit}
-    if baseline:
-        rec["baseline"] = round(baseline, 6)
-        rec["ratio"] = round(value / baseline, 3)
-    if note:
-        rec["note"] = note
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
-
-
-def _cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -173,13 +158,13 @@ def node_run(transport: str, domain: int) -> dict:
             ex.spin_once(timeout_sec=0.01)
         kids = [int(c) for t in Path(f"/proc/{node.pid}/task").iterdir()
                 for c in (t / "children").read_text().split()]
-        cpu0 = _cpu_s(node.pid), sum(_cpu_s(k) for k in kids)
+        cpu0 = cpu_seconds(node.pid), sum(cpu_seconds(k) for k in kids)
         first = len(stamps)
         t0 = time.monotonic()
         while time.monotonic() < t0 + MEASURE_S:
             ex.spin_once(timeout_sec=0.01)
         window = time.monotonic() - t0
-        cpu1 = _cpu_s(node.pid), sum(_cpu_s(k) for k in kids)
+        cpu1 = cpu_seconds(node.pid), sum(cpu_seconds(k) for k in kids)
         got = stamps[first:]
     finally:
         node.send_signal(signal.SIGINT)
@@ -212,18 +197,8 @@ def node_compare(records: list[dict]) -> None:
 
 def main() -> None:
     records: list[dict] = []
-    for part in (startup, round_trip, node_compare):
-        try:
-            part(records)
-        except Exception as err:  # noqa: BLE001 - a bench never fails the run
-            rec = {"metric": part.__name__, "error": f"{type(err).__name__}: {err}"}
-            records.append(rec)
-            print(json.dumps(rec), flush=True)
-            traceback.print_exc()
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as fh:
-        for rec in records:
-            fh.write(json.dumps(rec) + "\n")
+    run_parts(records, (startup, round_trip, node_compare))
+    save(records)
 
 
 if __name__ == "__main__":
