@@ -62,7 +62,8 @@ def test_full_resolution_fills_all_28_data_bits() -> None:
 @pytest.mark.parametrize("override, why", [
     (dict(code=Code.GRAY), "binary"),                      # "As transmission code Binary must be selected"
     (dict(special_bits=(SpecialBit.ENCODER_ERROR,)), "special"),   # "ohne SSI-Sonderbits"
-    (dict(steps_per_rev=131072, revolutions_numerator=16), "singleturn"),  # 16 bits of steps
+    # 16 bits of steps per revolution at most
+    (dict(steps_per_rev=131072, revolutions_numerator=16), "singleturn"),
     (dict(data_bits=24), "data_bits 28"),                  # fixed 12 + 16 field layout
 ])
 def test_rules_of_the_check_sum_format(override: dict, why: str) -> None:
