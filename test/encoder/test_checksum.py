@@ -60,7 +60,8 @@ def test_full_resolution_fills_all_28_data_bits() -> None:
 
 
 @pytest.mark.parametrize("override, why", [
-    (dict(code=Code.GRAY), "binary"),                      # "As transmission code Binary must be selected"
+    # "As transmission code Binary must be selected"
+    (dict(code=Code.GRAY), "binary"),
     (dict(special_bits=(SpecialBit.ENCODER_ERROR,)), "special"),   # "ohne SSI-Sonderbits"
     # 16 bits of steps per revolution at most
     (dict(steps_per_rev=131072, revolutions_numerator=16), "singleturn"),
