@@ -17,6 +17,7 @@ Frame layout (MSB first on the wire)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -34,10 +35,12 @@ class Alignment(Enum):
 
 
 class FrameFormat(Enum):
-    """TR transmission format (001 §5.2.4); the checksum format is not modelled."""
+    """TR transmission format (001 §5.2.4)."""
 
     PLAIN = "no_special_format"
     REPEAT_26 = "26bit_repeat"
+    #: 001 §5.2.4.2: 28 data bits (12 revolutions + 16 steps) + 15 checksum bits, 43 clocks
+    CHECKSUM = "check_sum"
 
 
 class Negative(Enum):
@@ -116,6 +119,8 @@ ERROR_BITS = frozenset({
     SpecialBit.ERR_TEMPERATURE, SpecialBit.ENCODER_ERROR,
 })
 PARITY_BITS = frozenset({SpecialBit.EVEN_PARITY, SpecialBit.EVEN_ERROR_PARITY})
+#: checksum bits after the 28 data bits of the TR "Check sum" format (001 §5.2.4.2)
+CHECKSUM_BITS = 15
 CAM_BITS = (SpecialBit.CAM1, SpecialBit.CAM2, SpecialBit.CAM3, SpecialBit.CAM4)
 
 
@@ -240,10 +245,27 @@ class EncoderConfig:
                 bad("26-bit + repeat with parity: data + special bits must fill all 26 clocks")
             if len(self.special_bits) > 8:
                 bad("at most 8 special bits (001 §5.5)")
+        if self.frame_format is FrameFormat.CHECKSUM:
+            self._check_checksum_format(bad)
         if self.frame_bits > 64:
             bad(f"frame of {self.frame_bits} bits exceeds 64")
         if self.formation_period_s < 0 or self.min_pause_s < 0 or self.sync_delay_s < 0:
             bad("timing values must be >= 0")
+
+    def _check_checksum_format(self, bad: Callable[[str], None]) -> None:
+        """001 §5.2.4.2 / §5.2.1 rules of the "Check sum" format."""
+        if self.linear or self.alignment is not Alignment.TANNENBAUM or self.turn_bits != 12 \
+                or self.data_bits != 28:
+            bad("check sum format: 12 bits revolutions + 16 bits steps per revolution "
+                "(data_bits 28, turn_bits 12, Tannenbaum placement; 001 §5.2.4.2)")
+        if int(self.steps_per_rev) > 65536 or self.revolutions_numerator > 4096:
+            bad("check sum format: at most 65536 steps x 4096 revolutions (001 §5.2.4.2)")
+        if self.code is not Code.BINARY:
+            bad("check sum format: the transmit code must be binary (001 §5.2.4.2)")
+        if self.special_bits:
+            bad("check sum format: no SSI special bits (001 §5.2.4.2 'ohne SSI-Sonderbits')")
+        if self.trailing_zero_bits or self.shift_right or self.origin < 0:
+            bad("check sum format: no trailing zeros, shift or negative values (001 §5.2.4.2)")
 
     # -- derived figures -------------------------------------------------------------
     @cached_property
@@ -288,4 +310,6 @@ class EncoderConfig:
         """Number of bits the encoder sends per frame (clocks minus the pause-1 clock)."""
         if self.frame_format is FrameFormat.REPEAT_26:
             return 26
+        if self.frame_format is FrameFormat.CHECKSUM:
+            return self.position_bits + CHECKSUM_BITS
         return self.position_bits + len(self.special_bits)

@@ -24,10 +24,11 @@ import logging
 import math
 from typing import NamedTuple
 
+from ssi_bridge.encoder.checksum import code_word
 from ssi_bridge.encoder.codes import Code
 from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Alignment, Direction,
-                                       EncoderConfig, ErrorOutput, SpecialBit, SsiMode,
-                                       SyncReference)
+                                       EncoderConfig, ErrorOutput, FrameFormat, SpecialBit,
+                                       SsiMode, SyncReference)
 from ssi_bridge.encoder.layout import encode_area
 from ssi_bridge.encoder.motion import MotionProfile
 from ssi_bridge.encoder.special import SpecialState
@@ -119,6 +120,8 @@ class SsiEncoder:
         self._steps_per_unit = config.steps_per_unit
         self._flags_on_error = config.error_output is ErrorOutput.FLAGS
         self._area_shift = _plain_area_shift(config)
+        #: TR "Check sum" format: the 28 data bits are followed by their checksum (001 §5.2.4.2)
+        self._checksum = config.frame_format is FrameFormat.CHECKSUM
         #: frame = value << this, for a plain binary area and no special bits; else None
         self._plain_shift = (self._area_shift + self._fill
                              if self._area_shift is not None and self._special is None else None)
@@ -253,7 +256,8 @@ class SsiEncoder:
             area = encode_area(cfg, value)
         special = self._special
         if special is None:
-            return EncoderFrame(area << self._fill, self._frame_bits,
+            bits = code_word(area) if self._checksum else area << self._fill
+            return EncoderFrame(bits, self._frame_bits,
                                 value, pos, motion.velocity(ts), t, ts, _NO_FLAGS,
                                 bool(errors), self.power_failure)
         vel = motion.velocity(ts)

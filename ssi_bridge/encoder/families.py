@@ -19,8 +19,8 @@ from collections.abc import Callable
 from typing import Any
 
 from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.config import (Alignment, EncoderConfig, ErrorOutput, SpecialBit,
-                                       SsiMode, SyncReference)
+from ssi_bridge.encoder.config import (Alignment, EncoderConfig, ErrorOutput, FrameFormat,
+                                       SpecialBit, SsiMode, SyncReference)
 from ssi_bridge.encoder.encoder import SsiEncoder
 from ssi_bridge.encoder.motion import MotionProfile, Still
 from ssi_bridge.exceptions import ConfigError
@@ -160,6 +160,11 @@ FAMILIES: dict[str, Family] = {
         dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
              special_bits=(SpecialBit.ENCODER_ERROR, SpecialBit.EVEN_PARITY)),
         doc="001 §5.5.6/§5.5.7: 24 data bits + encoder error + even parity (26 bits)"),
+    "TR_CHECKSUM": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=28, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, frame_format=FrameFormat.CHECKSUM),
+        doc="001 §5.2.4.2: 12 revolution + 16 step bits + 15-bit checksum (43 clocks); "
+            "CRC-15 polynomial is a simulation choice (encoder/checksum.py)"),
 }
 FAMILIES["ATM90"] = FAMILIES["ATM60"]
 

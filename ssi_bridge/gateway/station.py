@@ -18,6 +18,7 @@ from typing import Any
 import can
 
 from ssi_bridge.encoder.codes import Code
+from ssi_bridge.encoder.config import Alignment
 from ssi_bridge.encoder.encoder import SsiEncoder
 from ssi_bridge.encoder.families import make_encoder
 from ssi_bridge.encoder.motion import ConstantVelocity, MotionProfile, Sine, Still
@@ -69,11 +70,15 @@ def count_factor(encoder: SsiEncoder, para1: int) -> float:
     frame (special and filler bits follow, 004 §2.3; SSI-SHIFT-RIGHT loses one more). The
     module clocks SSI_FRAME_LEN bits — fewer cut the frame's end, more read 0s after it
     (004 §3.6) — then shifts INVALID_BITS_LSB out (000 Table 19). So the step lands at bit
-    ``SSI_FRAME_LEN - frame_bits + lsb - INVALID_BITS_LSB`` of REG_SSI_POS.
+    ``SSI_FRAME_LEN - frame_bits + lsb - INVALID_BITS_LSB`` of REG_SSI_POS. A Tannenbaum
+    step field wider than the resolution ends in zeros (004 §3.4; the 16-bit step field of
+    the TR check sum format, 001 §5.2.4.2): the whole value sits ``field - n`` bits higher.
     """
     cfg = encoder.config
     p = Para1.decode(para1)
     lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
+    if cfg.alignment is Alignment.TANNENBAUM and cfg.origin >= 0:
+        lsb += cfg.data_bits - cfg.turn_bits - (int(cfg.steps_per_rev).bit_length() - 1)
     return 2.0 ** (p.ssi_frame_len - cfg.frame_bits + lsb - p.invalid_bits_lsb)
 
 

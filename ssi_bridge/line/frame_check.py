@@ -10,6 +10,10 @@ What a master can verify in one frame when it knows the encoder's layout:
   with 0"; §3.4 Tannenbaum "the MSB or LSB side is filled with "0""), leading zeros (001
   §5.2.4.1), "Logical 0V" special bits, and clocks beyond the frame (004 §3.6 "the additional
   bits are output with "0"");
+* the TR "Check sum" format (001 §5.2.4.2): the 15 checksum bits after the 28 data bits
+  ("Hammingdistanz von 6 ... erkennt ... bis zu 5 Fehler je Codewort"), with the polynomial
+  the simulation chose (encoder/checksum.py); a frame cut short (the XN-1SSI clocks at most
+  32 of its 43 bits, 000 Table 19) is checked on the checksum bits that were read;
 * status bits: the PowerFail bit (003 "The last data bit can be a PowerFail bit") and the
   error bits (004 §2.3, 001 §5.5.6).
 
@@ -20,8 +24,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ssi_bridge.encoder.config import (ERROR_BITS, PARITY_BITS, Alignment, EncoderConfig,
-                                       SpecialBit)
+from ssi_bridge.encoder.checksum import crc15
+from ssi_bridge.encoder.config import (CHECKSUM_BITS, ERROR_BITS, PARITY_BITS, Alignment,
+                                       EncoderConfig, FrameFormat, SpecialBit)
 
 
 class FrameVerdict(NamedTuple):
@@ -35,11 +40,13 @@ class FrameVerdict(NamedTuple):
     power_failure: bool
     #: an error bit of the encoder is active (004 §2.3, 001 §5.5.6)
     encoder_error: bool
+    #: the checksum bits read disagree with the data bits (001 §5.2.4.2); False without them
+    checksum_error: bool = False
 
     @property
     def corrupt(self) -> bool:
         """The frame cannot be what the encoder sent: do not use its position."""
-        return self.parity_error or self.filler_error
+        return self.parity_error or self.filler_error or self.checksum_error
 
 
 def _area_mask(cfg: EncoderConfig) -> int:
@@ -78,7 +85,9 @@ class FrameCheck:
         fill = n - cfg.position_bits - n_spec
         zero = ((1 << cfg.position_bits) - 1) & ~_area_mask(cfg)
         zero <<= n_spec + fill
-        zero |= (1 << fill) - 1
+        checksum = cfg.frame_format is FrameFormat.CHECKSUM
+        if not checksum:
+            zero |= (1 << fill) - 1
         self._pos: dict[SpecialBit, int] = {}
         for i, bit in enumerate(cfg.special_bits):
             at = fill + n_spec - 1 - i
@@ -96,6 +105,10 @@ class FrameCheck:
         self._parity_at: int | None = None
         if parity and self._pos[parity[0]] + self._shift >= 0:
             self._parity_at = self._pos[parity[0]] + self._shift
+        #: checksum bits read (0: none) and how many were cut off the end (001 §5.2.4.2)
+        self._cut = max(-self._shift, 0)
+        self._crc_read = max(CHECKSUM_BITS - self._cut, 0) if checksum else 0
+        self._crc_mask = (1 << self._crc_read) - 1
         self._power = self._bit_mask((SpecialBit.POWER_FAIL,))
         self._errors = self._bit_mask(tuple(ERROR_BITS))
 
@@ -116,6 +129,11 @@ class FrameCheck:
         """The frame as read carries a parity bit."""
         return self._parity_at is not None
 
+    @property
+    def checksum_bits(self) -> int:
+        """Checksum bits in the frame as read (15 when all 43 clocks are read, else fewer)."""
+        return self._crc_read
+
     def check(self, frame: int) -> FrameVerdict:
         """Verdict on one frame as read (``frame_len`` bits, first bit read = MSB)."""
         logical = frame ^ self._inverted
@@ -127,5 +145,14 @@ class FrameCheck:
             odd = bin(frame >> at).count("1") & 1
             inverted = (self._inverted >> at) & 1
             parity_error = odd != inverted
+        checksum_error = False
+        if self._crc_read:
+            # the data bits and the leading checksum bits read; compare with the checksum
+            # of the data bits (cut to the bits read)
+            word = frame >> max(self._shift, 0)
+            got = word & self._crc_mask
+            want = crc15(word >> self._crc_read) >> self._cut
+            checksum_error = got != want
         return FrameVerdict(parity_error, bool(frame & self._zero),
-                            bool(logical & self._power), bool(logical & self._errors))
+                            bool(logical & self._power), bool(logical & self._errors),
+                            checksum_error)

@@ -249,7 +249,8 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
         values.update({"POWER_FAILURE": str(frame.power_failure),
                        "ENCODER_ERROR": str(frame.encoder_error),
                        "PARITY_ERROR": str(frame.parity_error),
-                       "FILLER_ERROR": str(frame.filler_error)})
+                       "FILLER_ERROR": str(frame.filler_error),
+                       "CHECKSUM_ERROR": str(frame.checksum_error)})
         level, message = _with_frame_findings(level, message, frame)
     return DiagnosticStatus(
         level=level, name=name, message=message, hardware_id=hardware_id,
@@ -265,6 +266,7 @@ def _with_frame_findings(level: int, message: str, frame: Any) -> tuple[int, str
     findings = [text for flag, text in (
         (frame.parity_error, "parity error (001 5.5.7)"),
         (frame.filler_error, "bit that must be 0 read as 1 (004 3)"),
+        (frame.checksum_error, "checksum error (001 5.2.4.2)"),
         (frame.encoder_error, "encoder error bit set in the frame")) if flag]
     if frame.power_failure:
         findings.insert(0, "POWER_FAILURE: the encoder's PowerFail bit is set (003)")

@@ -3,8 +3,8 @@
 The XN-1SSI only runs the ZERO test (000 Table 19) and copies up to four frame bits into
 SSI_STS0..3 (REG_SSI_MASK, 000 Table 3). The bridge knows each joint's encoder layout (its
 family and overrides), so every cycle whose process input carries REG_SSI_FRAME (the idle
-read register, ``messages.IDLE_READ_REGISTER``) it checks parity (001 §5.5.7) and the bits
-that are always 0 (004 §3), and reads the PowerFail (003) and error bits (004 §2.3). A frame
+read register, ``messages.IDLE_READ_REGISTER``) it checks parity (001 §5.5.7), the TR
+checksum (001 §5.2.4.2) and the bits that are always 0 (004 §3), and reads the PowerFail (003) and error bits (004 §2.3). A frame
 that fails a check is not used for the joint's position. ROS-free.
 
 The CAM state (object 0x6B00, 000 Table 42) is computed per cycle from REG_SSI_POS and the
@@ -130,6 +130,7 @@ class ParityEvents:
         if self._last is not None and now - self._last < self.period:
             return None
         what = ("parity bit does not match (001 5.5.7)" if verdict.parity_error else
+                "checksum bits do not match (001 5.2.4.2)" if verdict.checksum_error else
                 "a bit the layout sends as 0 read as 1 (004 3)")
         text = (f"frame check failed {self._count} time(s) since the last report: {what}; "
                 "those cycles' positions were not used")

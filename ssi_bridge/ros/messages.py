@@ -58,6 +58,7 @@ def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
             v = watch.verdict
             m.frame_checked = True
             m.parity_error, m.filler_error = v.parity_error, v.filler_error
+            m.checksum_error = v.checksum_error
             m.power_failure, m.encoder_error = v.power_failure, v.encoder_error
         m.cam_state = watch.cam_state(int(sample.position))
         m.cam_enabled = watch.cam.enabled

@@ -23,6 +23,19 @@ def test_frame_from_reg_rd_data_is_checked() -> None:
     assert after.parity_error
 
 
+def test_checksum_frame_cut_to_32_clocks_is_checked() -> None:
+    # TR "Check sum" format (001 §5.2.4.2): 28 data + 15 checksum bits; the XN-1SSI clocks at
+    # most 32 (000 Table 19), so REG_SSI_FRAME holds the data and the first 4 checksum bits
+    enc = make_encoder("TR_CHECKSUM", Still(3.5 / 4096))
+    frame = enc.frame_at(0.0).bits >> (43 - 32)
+    watch = FrameWatch(enc.config, 0x20010420)     # SSI_FRAME_LEN 32, INVALID_BITS_LSB 4
+    _, after = watch.evaluate(_image(frame))
+    assert not after.corrupt
+    _, after = watch.evaluate(_image(frame ^ 1))   # the last checksum bit read
+    assert after.checksum_error and after.corrupt
+    assert "checksum" in watch.failures.failed(0.0, after)
+
+
 def test_no_check_without_the_frame_register() -> None:
     watch = FrameWatch(family_config("TR_PARITY"), 0x1A010200)
     assert watch.evaluate(_image(0x1234, adr=int(Reg.REG_SSI_POS))) is None

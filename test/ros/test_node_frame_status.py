@@ -1,5 +1,5 @@
 """The encoder's own status bits through the installed node: PowerFail (003), parity (001
-§5.5.7) under bit noise with config/noise_guard.yaml, ERR_PARA from an invalid REG_PARA1 at
+§5.5.7) under bit noise with config/noise_guard.yaml, the TR checksum (001 §5.2.4.2), ERR_PARA from an invalid REG_PARA1 at
 the module (000 "Error detection"), each in ~/status, /diagnostics and ~/events."""
 
 from __future__ import annotations
@@ -91,6 +91,33 @@ def test_noise_guard_flags_parity_errors_and_holds_the_position(running, probe):
                 assert by_stamp[key] == by_stamp[stamps[i - 1]]
                 held += 1
     assert held > 0, "no flagged cycle with both neighbours seen"
+
+
+def test_tr_checksum_errors_are_flagged_through_the_node(running, probe):
+    # TR "Check sum" format (001 §5.2.4.2): 28 data bits + 15 checksum bits = 43 clocks; the
+    # XN-1SSI reads 32 (000 Table 19): the data and 4 checksum bits. REG_PARA1 0x20010820:
+    # SSI_FRAME_LEN 32, INVALID_BITS_LSB 8 (4 checksum bits + the 4 trailing zeros of the
+    # 16-bit step field), DIS_ERR_SSI (clock 33 carries a checksum bit, not the final 0)
+    node = running({"joints": ["ck"], "ck.family": "TR_CHECKSUM", "ck.para1": 0x20010820,
+                    "ck.motion.kind": "still", "ck.motion.start": 0.5,
+                    "diagnostics_period": PERIOD})
+    status = probe.subscribe(Status, node.topic("~/status"), qos=500)
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    events = probe.subscribe(Event, node.topic("~/events"))
+    probe.wait_for(lambda: (ch := _channel(status, "ck")) is not None and ch.frame_checked,
+                   10.0, "a checked frame", node)
+    ch = _channel(status, "ck")
+    assert not ch.checksum_error and ch.reg_ssi_pos == 2048  # 0.5 rev of 4096 steps
+    inject(probe, node, kind=K.BIT_NOISE, joint="ck", rate=0.01)
+    probe.wait_for(lambda: any(m.channels[0].checksum_error for _, m in status), 20.0,
+                   "a checksum error in ~/status", node)
+    inject(probe, node, kind=K.CLEAR_ALL)
+    probe.wait_for(lambda: any(e.kind == "encoder_status" and "frame check failed" in e.message
+                               for _, e in events), 5.0, "a frame check event", node)
+    probe.wait_for(lambda: (st := latest_status(diags, "/ssi_bridge: ck")) is not None
+                   and "CHECKSUM_ERROR" in {kv.key for kv in st.values}
+                   and int({kv.key: kv.value for kv in st.values}["frame_errors"]) >= 1,
+                   2 * PERIOD + 2, "CHECKSUM_ERROR and frame_errors in /diagnostics", node)
 
 
 def test_injected_invalid_para1_shows_err_para(running, probe):
