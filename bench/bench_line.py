@@ -12,7 +12,6 @@ runs (up to ~1.7x seen on the shared 2-CPU VM), so compare figures from the same
 
 from __future__ import annotations
 
-import json
 import logging
 import statistics
 import sys
@@ -21,22 +20,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-RESULTS = Path(__file__).resolve().parent / "results" / "latest.jsonl"
+from benchlib import emit as _emit  # noqa: E402
+from benchlib import run_parts, save  # noqa: E402
+
 BIT_RATE = 1e6
 FRAME_BITS = 25
 TM = 20e-6
 PHYSICAL_FPS = 1.0 / ((FRAME_BITS + 1) / BIT_RATE + TM)
 PASSES = 5
-
-
-def _emit(records: list[dict], metric: str, value: float, unit: str,
-          baseline: float | None = None) -> None:
-    rec: dict = {"metric": metric, "value": round(value, 3), "unit": unit}
-    if baseline:
-        rec["baseline"] = round(baseline, 3)
-        rec["ratio"] = round(value / baseline, 3)
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
 
 
 def bench_scalar(records: list[dict], n: int = 30000) -> None:
@@ -90,21 +81,8 @@ def bench_batch(records: list[dict], n: int = 1_000_000) -> None:
 def main() -> int:
     logging.basicConfig(level=logging.ERROR)
     records: list[dict] = []
-    for bench in (bench_scalar, bench_batch):
-        try:
-            bench(records)
-        except Exception as err:  # a benchmark reports, it never fails
-            rec = {"metric": bench.__name__, "value": None, "unit": "", "error": repr(err)}
-            records.append(rec)
-            print(json.dumps(rec), flush=True)
-    try:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        with RESULTS.open("a", encoding="utf-8") as fh:
-            for rec in records:
-                fh.write(json.dumps(rec) + "\n")
-    except OSError as err:
-        print(json.dumps({"metric": "write_results", "value": None, "unit": "",
-                          "error": repr(err)}))
+    run_parts(records, (bench_scalar, bench_batch))
+    save(records)
     return 0
 
 
