@@ -24,9 +24,10 @@ from typing import Any
 
 import can
 import canopen
+from canopen.network import MessageListener
 
 from ssi_bridge.exceptions import BusError, ConfigError
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
 from ssi_bridge.gateway.wire import frame_bits
 
 logger = logging.getLogger(__name__)
@@ -240,8 +241,10 @@ class WireBus(can.BusABC):
                 return None, False
         else:
             msg = self._inner.recv(timeout)
-        if msg is not None and msg.timestamp:
-            self.wire.observe(msg.timestamp, msg.arbitration_id == SYNC_COB_ID)
+        if msg is not None:
+            end = frame_wire_time(msg)
+            if end:
+                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID)
         return msg, False
 
     def shutdown(self) -> None:
@@ -440,6 +443,25 @@ class WireMessage(can.Message):
         clone.bitrate_switch = self.bitrate_switch
         clone.error_state_indicator = self.error_state_indicator
         return clone
+
+
+class WireTimeListener(MessageListener):
+    """canopen's network listener, handing subscribers each frame's wire time.
+
+    canopen passes ``msg.timestamp`` on: on udp_multicast the receive time, late by however
+    long the sending process slept past the frame's end. This passes
+    :func:`~ssi_bridge.gateway.timebase.frame_wire_time` instead (the same value on every
+    other interface), so a station latches on the instant its SYNC was on the wire.
+    """
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Dispatch ``msg`` to the network's subscribers with its wire time."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            return
+        try:
+            self.network.notify(msg.arbitration_id, msg.data, frame_wire_time(msg))
+        except Exception as err:  # noqa: BLE001 - as canopen's: a callback must not stop it
+            logger.error("%s", err)
 
 
 class BridgeNetwork(canopen.Network):
