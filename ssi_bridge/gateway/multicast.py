@@ -32,8 +32,8 @@ import struct
 from dataclasses import dataclass
 
 import can
-import msgpack
 from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
+from can.interfaces.udp_multicast.utils import unpack_message
 
 from ssi_bridge.exceptions import ConfigError
 
@@ -63,38 +63,37 @@ class UdpFrame(can.Message):
 
     __slots__ = ("wire_time",)
 
+    @classmethod
+    def of(cls, msg: can.Message, timestamp: float, wire_time: float) -> UdpFrame:
+        """A copy of ``msg`` (fields and a new payload) with these two times."""
+        frame = _new_message(cls)
+        for name in _FIELDS:
+            setattr(frame, name, getattr(msg, name))
+        frame.data = bytearray(msg.data)
+        frame.timestamp = timestamp
+        frame.wire_time = wire_time
+        return frame
+
     def __copy__(self) -> UdpFrame:
-        return self._with_fields(bytearray(self.data))
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
 
     def __deepcopy__(self, memo: dict[int, object] | None) -> UdpFrame:
-        return self._with_fields(bytearray(self.data))
-
-    def _with_fields(self, data: bytearray) -> UdpFrame:
-        clone = _new_message(UdpFrame)
-        for name in _FIELDS:
-            setattr(clone, name, getattr(self, name))
-        clone.data = data
-        clone.wire_time = self.wire_time
-        return clone
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
 
 
-def wire_time_of(sent: object, received: float) -> float:
+def wire_time_of(sent: float, received: float) -> float:
     """The wire time of a frame the sender stamped ``sent`` and the kernel received at
     ``received``: ``sent`` when it is a plausible stamp (within :data:`WIRE_TIME_PLAUSIBLE`),
     else ``received``."""
-    if isinstance(sent, (int, float)) and sent > 0 and abs(received - sent) <= WIRE_TIME_PLAUSIBLE:
-        return float(sent)
+    if sent > 0 and abs(received - sent) <= WIRE_TIME_PLAUSIBLE:
+        return sent
     return received
 
 
 def unpack_frame(data: bytes, received: float) -> UdpFrame:
     """A python-can udp_multicast datagram as a :class:`UdpFrame` received at ``received``."""
-    fields = msgpack.unpackb(data, raw=False)
-    sent = fields.get("timestamp")
-    fields["timestamp"] = received
-    msg = UdpFrame(check=True, **fields)
-    msg.wire_time = wire_time_of(sent, received)
-    return msg
+    sent = unpack_message(data, check=True)  # its timestamp: the sender's
+    return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
 
 
 @dataclass(frozen=True)
