@@ -215,9 +215,15 @@ class WireBus(can.BusABC):
 
         ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
         the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
+        Otherwise they are ready at that SYNC's end, not when this thread got to them: the
+        simulated device answers on the wire's time line (after whatever else is on it), as
+        a real one does inside its SYNC's cycle. A sending thread that ran late (a station
+        process starved under load) then neither stamps its answer into the next SYNC's
+        cycle (where the master would count it) nor sleeps again for frames already over.
         """
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
-        if not self.wire.claim_all(ordered, wire_now(), answering):
+        ready = wire_now() if answering is None else answering
+        if not self.wire.claim_all(ordered, ready, answering):
             return False
         delivered = self.wire.delivered
         try:

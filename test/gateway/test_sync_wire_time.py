@@ -128,3 +128,36 @@ def test_a_station_latches_on_the_syncs_wire_time_not_on_its_late_arrival(channe
     finally:
         master.shutdown()
         station.stop()
+
+
+def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) -> None:
+    # CiA 301: synchronous TPDOs go out inside their SYNC's cycle. A station that gets to the
+    # SYNC late (a starved process) still puts them right after that SYNC on the wire, so a
+    # master counts them for it, not for a newer SYNC sent meanwhile (client/samples.py)
+    from ssi_bridge.client.master import BridgeClient
+    from ssi_bridge.gateway.wire import frame_bits
+
+    settings = station_settings({"joints": ["j"], "j.slot": 1,
+                                 "bus.interface": "udp_multicast", "bus.channel": channel})
+    station = Station(settings)
+    station.start()
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1)
+    master = open_udp_bus(channel)
+    try:
+        client.connect()  # OPERATIONAL, TPDO1 (image) and TPDO9 (positions) on SYNC
+        client.write_object(0x1017, 0, 0)  # no heartbeat: nothing else on the wire after it
+        client.close()
+        time.sleep(3 * LATE)
+        sync_wire = wire_now() - LATE
+        master.send(can.Message(arbitration_id=0x080, is_extended_id=False,
+                                timestamp=sync_wire))
+        got = [_recv(master, 0x181), _recv(master, 0x1E1)]
+        ends = sorted(frame_wire_time(m) for m in got)
+        # back to back from the SYNC's end: each frame its own length at the bit rate
+        first_len = min(frame_bits(m.arbitration_id, m.data) for m in got) / 500_000
+        assert ends[0] >= sync_wire + first_len - 1e-9
+        assert ends[-1] - sync_wire < 0.002  # not LATE after it, where the thread ran
+    finally:
+        master.shutdown()
+        client.close()
+        station.stop()
