@@ -145,7 +145,9 @@ def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) 
     master = open_udp_bus(channel)
     try:
         client.connect()  # OPERATIONAL, TPDO1 (image) and TPDO9 (positions) on SYNC
-        client.write_object(0x1017, 0, 0)  # no heartbeat: nothing else on the wire after it
+        # the station's heartbeat thread goes on sending (at its own "now"), also between the
+        # SYNC's end and the moment the station gets to the SYNC
+        client.write_object(0x1017, 0, 5)
         client.close()
         time.sleep(3 * LATE)
         sync_wire = wire_now() - LATE
@@ -161,3 +163,27 @@ def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) 
         master.shutdown()
         client.close()
         station.stop()
+
+
+def test_an_answer_goes_in_the_first_gap_after_its_sync() -> None:
+    # a heartbeat this process put on the wire 5 ms after the SYNC, before the station got
+    # to the SYNC: the answer fits in before it; where it does not fit, it goes after it
+    from ssi_bridge.gateway.bus import Wire
+    from ssi_bridge.gateway.wire import frame_bits
+
+    wire = Wire(500_000)
+    sync_end = 100.0
+    wire.observe(sync_end, sync=True, length=frame_bits(0x080, b"") / 500_000)
+    hb_end = wire.claim(frame_bits(0x701, b"\x05"), sync_end + 0.005)
+    tpdo = can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False)
+    assert wire.claim_all([tpdo], sync_end, answering=sync_end)
+    assert tpdo.timestamp == pytest.approx(sync_end + frame_bits(0x181, bytes(8)) / 500_000)
+    assert wire.busy_until == hb_end  # the wire's end is still the heartbeat's
+    # a gap too short for a burst of 100 frames: it goes after the heartbeat
+    burst = [can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False)
+             for _ in range(100)]
+    assert wire.claim_all(burst, sync_end, answering=sync_end)
+    assert burst[0].timestamp > hb_end
+    # a newer SYNC on the wire: no answer to the older one (CiA 301 synchronous window)
+    wire.observe(hb_end + 0.5, sync=True)
+    assert not wire.claim_all([tpdo], sync_end, answering=sync_end)
