@@ -34,7 +34,7 @@ from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.bus import BusConfig, take_bus
 from ssi_bridge.gateway.dictionary import MAX_SLOTS
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
 
 logger = logging.getLogger(__name__)
 
@@ -196,7 +196,8 @@ class ListenOnlyClient(can.Listener):
         """Dispatch one frame (notifier thread): SYNC, TPDOs, heartbeat, EMCY."""
         counters = self.counters
         counters.frames += 1
-        stamp = msg.timestamp or wire_now()
+        wire_t = frame_wire_time(msg)  # between processes: its sender's end of frame
+        stamp = wire_t or wire_now()
         if stamp > self._newest:
             self._newest = stamp
         if msg.is_error_frame:
@@ -206,12 +207,12 @@ class ListenOnlyClient(can.Listener):
             return
         can_id = msg.arbitration_id
         if can_id == SYNC_COB_ID:
-            self._on_sync(msg.timestamp)
+            self._on_sync(wire_t)
             return
         handler = self._routes.get(can_id)
         if handler is not None:
             self._last_seen = stamp
-            handler(can_id, msg.data, msg.timestamp)
+            handler(can_id, msg.data, wire_t)
             if self._open is not None and self.table.cycle_complete():
                 self._report(*self._open, True)
             return

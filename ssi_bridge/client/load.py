@@ -13,7 +13,7 @@ from collections import deque
 
 import can
 
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
 from ssi_bridge.gateway.wire import frame_bits
 
 SYNC_COB_ID = 0x080
@@ -34,7 +34,7 @@ class BusLoad:
             return
         bits = frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
         with self._lock:
-            self._frames.append((msg.timestamp or wire_now(), bits / self.bitrate,
+            self._frames.append((frame_wire_time(msg) or wire_now(), bits / self.bitrate,
                                  msg.arbitration_id == SYNC_COB_ID))
 
     def figures(self, now: float | None = None) -> dict[str, str]:

@@ -7,7 +7,10 @@ process input image of slot s (0x2000:s), TPDO 9.. = 0x6820 of a slot pair (Inte
 So :class:`TpdoRoutes` subscribes the client's handlers to those COB-IDs directly and, after
 every (re)configuration, takes canopen's ``PdoMap`` handlers that ``PdoMap.save`` subscribed
 off them again: each frame is handled once, from its raw bytes. The SDO configuration itself
-is unchanged. :class:`FrameListener` is canopen's network listener plus the frame counters.
+is unchanged. :class:`FrameListener` is canopen's network listener plus the frame counters;
+it hands the subscribers each frame's wire time (``gateway/timebase.frame_wire_time``), so a
+TPDO is matched to the SYNC it followed on the wire, not to the one current when it arrived
+(between processes the arrival is late by however long its sender slept past its end).
 """
 
 from __future__ import annotations
@@ -18,16 +21,16 @@ from functools import partial
 
 import can
 import canopen
-from canopen.network import MessageListener
 
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
+from ssi_bridge.gateway.bus import WireTimeListener
 from ssi_bridge.gateway.dictionary import tpdo_cob_base
 
 logger = logging.getLogger(__name__)
 
-#: a canopen network subscriber: (COB-ID, payload, receive timestamp)
+#: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
 #: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
 ImageHandler = Callable[[int, int, bytearray, float], None]
@@ -35,8 +38,8 @@ ImageHandler = Callable[[int, int, bytearray, float], None]
 PositionHandler = Callable[[list[int], int, bytearray, float], None]
 
 
-class FrameListener(MessageListener):
-    """canopen's listener feeding the network, counting every frame on the way.
+class FrameListener(WireTimeListener):
+    """canopen's listener feeding the network wire times, counting every frame on the way.
 
     One listener per frame instead of canopen's plus a separate counter: the notifier calls
     each listener for each frame of the bus.
@@ -56,7 +59,7 @@ class FrameListener(MessageListener):
             counters.can_errors += 1
         if self._load is not None:
             self._load.add(msg)
-        MessageListener.on_message_received(self, msg)
+        WireTimeListener.on_message_received(self, msg)
 
 
 class TpdoRoutes:

@@ -5,7 +5,9 @@ It opens its own python-can bus on the configured interface and channel — on t
 socket — so it records both directions (SYNC, SDO, PDO, EMCY, heartbeat) exactly as a
 bus analyser would. The file is python-can's format chosen by its suffix (``.log`` is the
 candump/can-utils text format, ``.asc`` Vector ASCII, ``.blf`` binary); ``can.LogReader``
-and ``can.Player`` read it back.
+and ``can.Player`` read it back. Each frame is logged at its wire time
+(``gateway/timebase.frame_wire_time``; on udp_multicast the sender's end of frame, not the
+receive time), so a replay stamps its cycles as the recorded session did.
 
 A write error (disk full, file size limit, I/O error) stops the sniffer at once: it reports
 the path and errno through ``on_error``, stops receiving and closes its bus (a virtual bus
@@ -16,6 +18,7 @@ last complete line so the file stays readable.
 from __future__ import annotations
 
 import logging
+import copy
 import os
 import threading
 from collections.abc import Callable
@@ -25,6 +28,7 @@ import can
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.timebase import frame_wire_time
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +74,10 @@ class _Tee(can.Listener):
     def on_message_received(self, msg: can.Message) -> None:
         if self.failed:
             return
+        wire_t = frame_wire_time(msg)
+        if wire_t != msg.timestamp:
+            msg = copy.copy(msg)
+            msg.timestamp = wire_t
         try:
             self.writer.on_message_received(msg)
         except (OSError, ValueError) as err:  # ValueError: the file was closed under us

@@ -17,6 +17,7 @@ import math
 import random
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from copy import deepcopy
 from dataclasses import dataclass
@@ -24,9 +25,10 @@ from typing import Any
 
 import can
 import canopen
+from canopen.network import MessageListener
 
 from ssi_bridge.exceptions import BusError, ConfigError
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
 from ssi_bridge.gateway.wire import frame_bits
 
 logger = logging.getLogger(__name__)
@@ -39,6 +41,8 @@ SIMULATED_INTERFACES = ("virtual", "udp_multicast")
 #: CiA 301 SYNC COB-ID (the wire remembers the newest SYNC for the synchronous window)
 SYNC_COB_ID = 0x080
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
+#: frames a wire remembers (start, end) to fit a late answer in behind its SYNC
+_RECENT_FRAMES = 64
 
 
 @dataclass(frozen=True)
@@ -113,6 +117,8 @@ class Wire:
         # frames on the wire not yet handed to the receivers (id -> end): a sender thread
         # that stalls after its frame ended delays the frame, not the wire's time line
         self._pending: dict[int, float] = {}
+        # (start, end) of the newest frames known here: where an answer to a SYNC fits
+        self._recent: deque[tuple[float, float]] = deque(maxlen=_RECENT_FRAMES)
 
     def claim(self, bits: int, ready: float) -> float:
         """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
@@ -120,7 +126,20 @@ class Wire:
             start = ready if ready > self.busy_until else self.busy_until
             end = start + bits / self.bitrate
             self.busy_until = end
+            self._recent.append((start, end))
             return end
+
+    def _first_gap(self, ready: float, length: float) -> float:
+        """The earliest start at or after ``ready`` where ``length`` s fit between the frames
+        known here (call under the lock)."""
+        start = ready
+        for s, e in sorted(self._recent):
+            if e <= start:
+                continue
+            if s >= start + length:
+                break
+            start = e
+        return start
 
     def claim_all(self, frames: Sequence[can.Message], ready: float,
                   answering: float | None = None) -> bool:
@@ -129,21 +148,31 @@ class Wire:
         ``answering`` is the wire time of the SYNC these frames answer: when a newer SYNC is
         already on the wire they are not sent (False). A CANopen device sends synchronous
         TPDOs inside the cycle of their SYNC (CiA 301 synchronous window), so a master can
-        tell which SYNC a TPDO belongs to by its order on the wire.
+        tell which SYNC a TPDO belongs to by its order on the wire. Such frames go in the
+        first gap after their SYNC long enough for them, not behind every frame known: a
+        station process that gets to its SYNCs late (starved) answers each where it would
+        have, before the heartbeat its other thread sent meanwhile, instead of behind it and
+        so inside a newer SYNC's cycle.
         """
+        rate = self.bitrate
+        lengths = [frame_bits(m.arbitration_id, m.data, m.is_remote_frame, m.dlc) / rate
+                   for m in frames]
         with self.lock:
-            if answering is not None and self.last_sync > answering:
-                return False
-            at = ready if ready > self.busy_until else self.busy_until
-            rate = self.bitrate
-            for msg in frames:
-                at += frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
-                                 msg.dlc) / rate
+            if answering is not None:
+                if self.last_sync > answering:
+                    return False
+                at = self._first_gap(ready, sum(lengths))
+            else:
+                at = ready if ready > self.busy_until else self.busy_until
+            for msg, length in zip(frames, lengths):
+                self._recent.append((at, at + length))
+                at += length
                 msg.timestamp = at
                 self._pending[id(msg)] = at
                 if msg.arbitration_id == SYNC_COB_ID:
                     self.last_sync = at
-            self.busy_until = at
+            if at > self.busy_until:
+                self.busy_until = at
             return True
 
     def delivered(self, msg: can.Message) -> None:
@@ -160,14 +189,16 @@ class Wire:
         with self.lock:
             return min(self._pending.values(), default=math.inf)
 
-    def observe(self, end: float, sync: bool = False) -> None:
-        """A frame of another process ended at ``end``: the wire was busy until then."""
+    def observe(self, end: float, sync: bool = False, length: float = 0.0) -> None:
+        """A frame of another process (``length`` s long) ended at ``end``: the wire was busy
+        until then."""
         if sync and end > self.last_sync:
             self.last_sync = end
         if end > self.busy_until:
             with self.lock:
                 if end > self.busy_until:
                     self.busy_until = end
+                    self._recent.append((end - length, end))
 
 
 _wires: dict[tuple[str, str, int], Wire] = {}
@@ -214,9 +245,15 @@ class WireBus(can.BusABC):
 
         ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
         the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
+        Otherwise they are ready at that SYNC's end, not when this thread got to them: the
+        simulated device answers on the wire's time line (in the first gap after its SYNC),
+        as a real one does inside its SYNC's cycle. A sending thread that ran late (a station
+        process starved under load) then neither stamps its answer into the next SYNC's
+        cycle (where the master would count it) nor sleeps again for frames already over.
         """
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
-        if not self.wire.claim_all(ordered, wire_now(), answering):
+        ready = wire_now() if answering is None else answering
+        if not self.wire.claim_all(ordered, ready, answering):
             return False
         delivered = self.wire.delivered
         try:
@@ -240,8 +277,14 @@ class WireBus(can.BusABC):
                 return None, False
         else:
             msg = self._inner.recv(timeout)
-        if msg is not None and msg.timestamp:
-            self.wire.observe(msg.timestamp, msg.arbitration_id == SYNC_COB_ID)
+        if msg is not None:
+            end = frame_wire_time(msg)
+            if end > self.wire.busy_until:  # a frame of another process: its place in time
+                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID, frame_bits(
+                    msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
+                    / self.wire.bitrate)
+            elif end:
+                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID)
         return msg, False
 
     def shutdown(self) -> None:
@@ -440,6 +483,25 @@ class WireMessage(can.Message):
         clone.bitrate_switch = self.bitrate_switch
         clone.error_state_indicator = self.error_state_indicator
         return clone
+
+
+class WireTimeListener(MessageListener):
+    """canopen's network listener, handing subscribers each frame's wire time.
+
+    canopen passes ``msg.timestamp`` on: on udp_multicast the receive time, late by however
+    long the sending process slept past the frame's end. This passes
+    :func:`~ssi_bridge.gateway.timebase.frame_wire_time` instead (the same value on every
+    other interface), so a station latches on the instant its SYNC was on the wire.
+    """
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Dispatch ``msg`` to the network's subscribers with its wire time."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            return
+        try:
+            self.network.notify(msg.arbitration_id, msg.data, frame_wire_time(msg))
+        except Exception as err:  # noqa: BLE001 - as canopen's: a callback must not stop it
+            logger.error("%s", err)
 
 
 class BridgeNetwork(canopen.Network):

@@ -32,7 +32,7 @@ from canopen.sdo import SdoAbortedError, SdoServer
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.gateway.aborts import SdoAbort
 from ssi_bridge.gateway.bus import (
-    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus,
+    NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, WireTimeListener, take_bus,
 )
 from ssi_bridge.gateway.dictionary import build_dictionary
 from ssi_bridge.gateway.emergency import Emergencies
@@ -131,6 +131,8 @@ class XnGateway:
             self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
+        # subscribers get each frame's wire time: a SYNC latches where it was on the wire
+        self.network.listeners[:] = [WireTimeListener(self.network)]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.network.add_node(self.node)
@@ -246,10 +248,11 @@ class XnGateway:
     def _acquisition_time(self, timestamp: float) -> float:
         """Model time at which the SYNC frame was on the wire: every module latches then.
 
-        A real XN-1SSI latches on the SYNC's arrival. The frame's timestamp is the wire time
-        its last bit was on the wire (``gateway/bus.py``; on udp_multicast and socketcan the
-        kernel's receive time), so the latch is that instant in the model clock: one
-        subtraction of a constant, no clock read, whenever this thread gets to run. (It used
+        A real XN-1SSI latches on the SYNC's arrival. ``timestamp`` is the wire time its last
+        bit was on the wire (``WireTimeListener``: on udp_multicast the sender's end of frame,
+        not the receive time, which is late by however long the sender slept past it; on
+        socketcan the kernel's receive time), so the latch is that instant in the model
+        clock: one subtraction of a constant, no clock read, whenever this thread gets to run. (It used
         to read the model clock and ``time.time()`` in two statements: a thread switch between
         them moved the latch back by the switch, into the previous burst's monoflop time, and
         the module saw a line held low: a false ERR_SSI.) Without a timestamp: now.

@@ -15,7 +15,11 @@ traffic. :class:`UdpCanBus` is that interface with three things a CAN wire needs
 
 The channel string is ``GROUP[:PORT][@INTERFACE_ADDRESS]``, e.g. ``239.74.163.2:43113@127.0.0.1``.
 Receive timestamps are the kernel's (``SO_TIMESTAMPNS``, ``time.time()`` base), as python-can
-sets them.
+sets them. The datagram also carries the sender's ``can.Message.timestamp`` (python-can packs
+it): on a :class:`~ssi_bridge.gateway.bus.WireBus` that is the frame's end on the simulated
+wire, stamped before the sender's thread slept until then and sent. A received frame is a
+:class:`UdpFrame` that keeps it as :attr:`UdpFrame.wire_time`: under CPU load the sender
+wakes late, so the receive time is late by as much, the wire time is not.
 """
 
 from __future__ import annotations
@@ -44,6 +48,52 @@ IP_MULTICAST_ALL = 49
 #: derived groups live in the administratively scoped 239.74.0.0/16 (RFC 2365)
 _DERIVED_NET = (239, 74)
 _DERIVED_PORTS = (40000, 60000)
+#: a sender's timestamp is taken as the frame's wire time only this close to its receive time
+#: (s): a python-can tool may send a frame with no stamp (0) or replay a logged one
+WIRE_TIME_PLAUSIBLE = 1.0
+
+_new_message = can.Message.__new__
+#: the fields of a can.Message (its __slots__ minus the weak-reference slot)
+_FIELDS = tuple(n for n in can.Message.__slots__ if n != "__weakref__")
+
+
+class UdpFrame(can.Message):
+    """A frame received on udp_multicast: the kernel's receive ``timestamp`` and the sender's
+    :attr:`wire_time` (its end on the wire, the instant every receiver shares)."""
+
+    __slots__ = ("wire_time",)
+
+    @classmethod
+    def of(cls, msg: can.Message, timestamp: float, wire_time: float) -> UdpFrame:
+        """A copy of ``msg`` (fields and a new payload) with these two times."""
+        frame = _new_message(cls)
+        for name in _FIELDS:
+            setattr(frame, name, getattr(msg, name))
+        frame.data = bytearray(msg.data)
+        frame.timestamp = timestamp
+        frame.wire_time = wire_time
+        return frame
+
+    def __copy__(self) -> UdpFrame:
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
+
+    def __deepcopy__(self, memo: dict[int, object] | None) -> UdpFrame:
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
+
+
+def wire_time_of(sent: float, received: float) -> float:
+    """The wire time of a frame the sender stamped ``sent`` and the kernel received at
+    ``received``: ``sent`` when it is a plausible stamp (within :data:`WIRE_TIME_PLAUSIBLE`),
+    else ``received``."""
+    if sent > 0 and abs(received - sent) <= WIRE_TIME_PLAUSIBLE:
+        return sent
+    return received
+
+
+def unpack_frame(data: bytes, received: float) -> UdpFrame:
+    """A python-can udp_multicast datagram as a :class:`UdpFrame` received at ``received``."""
+    sent = unpack_message(data, check=True)  # its timestamp: the sender's
+    return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
 
 
 @dataclass(frozen=True)
@@ -166,7 +216,7 @@ class UdpCanBus(UdpMulticastBus):
         if sender[:2] == self._multicast.own_address:
             return None, False  # our own frame looped back
         try:
-            msg = unpack_message(data, replace={"timestamp": timestamp}, check=True)
+            msg = unpack_frame(data, timestamp)
         except Exception as err:  # noqa: BLE001 - a foreign datagram on the group
             raise can.CanOperationError("could not unpack received message") from err
         if msg.is_fd:

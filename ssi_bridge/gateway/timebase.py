@@ -9,6 +9,11 @@ wire times, so no instant is ever moved from one clock into another by reading t
 switch interval). The same base holds in every process and, with NTP, on every host.
 
 * :func:`wire_now` reads the clock (one read).
+* :func:`frame_wire_time` is the instant a received frame was on the wire: its timestamp,
+  except on ``udp_multicast`` between processes, where the receive time is as late as the
+  sending process woke up (milliseconds under CPU load) and the frame carries its sender's
+  end-of-frame wire time instead (``gateway/multicast.py``). A station latches at the SYNC's
+  wire time, whatever its receive time.
 * :func:`to_ros_ns` is the conversion to ROS time: ROS system time *is* CLOCK_REALTIME, so it
   is the identity in nanoseconds. (With ``use_sim_time`` the node adds one offset it takes
   from the ``/clock`` message itself, see ``ros/stamps.py``.)
@@ -23,8 +28,17 @@ from __future__ import annotations
 
 import time
 
+import can
+
 #: the wire clock (CLOCK_REALTIME, s); python-can stamps frames in this base
 wire_now = time.time
+
+
+def frame_wire_time(msg: can.Message) -> float:
+    """The wire time (s) of a received frame: its sender's end of frame when the frame carries
+    one (``wire_time``, udp_multicast), else its timestamp (0.0: none)."""
+    wire = getattr(msg, "wire_time", 0.0)
+    return wire if wire else msg.timestamp
 
 
 def to_ros_ns(t: float) -> int:
@@ -48,4 +62,4 @@ class ModelClock:
         return wire_t - self.epoch
 
 
-__all__ = ["ModelClock", "to_ros_ns", "wire_now"]
+__all__ = ["ModelClock", "frame_wire_time", "to_ros_ns", "wire_now"]

@@ -118,9 +118,13 @@ class ChildStation:
         watch = open_bus(self.bus)  # listening before the station can send its boot-up
         try:
             t0 = time.monotonic()
+            # a process group of its own (a terminal's Ctrl-C reaches the node, which stops
+            # it) but the node's session: Linux schedules a session as one group (autogroup),
+            # so the station shares the node's CPU share as it does in-process; in a session
+            # of its own it waited up to 200 ms for the CPU beside two CPU burners
             self.proc = subprocess.Popen(
                 cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                preexec_fn=_die_with_parent, start_new_session=True, close_fds=True)
+                preexec_fn=_die_with_parent, process_group=0, close_fds=True)
             assert self.proc.stdin is not None
             self.proc.stdin.write(yaml.safe_dump(station_params(self.settings, self.bus))
                                   .encode())

@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 import can
+import pytest
 
 from ssi_bridge.client.sniffer import CanSniffer
 from ssi_bridge.gateway.bus import BusConfig
@@ -81,3 +82,28 @@ def test_a_full_disk_stops_the_log_cleanly_and_leaves_it_readable(tmp_path: Path
     frames = list(can.LogReader(str(path)))  # every line parses
     assert len(frames) == logged > 100
     assert all(f.arbitration_id == 0x181 for f in frames)
+
+
+def test_a_udp_multicast_frame_is_logged_at_its_senders_wire_time(tmp_path: Path):
+    # between processes the receive time is late by however long the sender slept past the
+    # frame's end; the log keeps the wire time, so a replay stamps cycles as recorded
+    import os
+
+    from ssi_bridge.gateway.multicast import derive_channel, open_udp_bus
+    from ssi_bridge.gateway.timebase import wire_now
+
+    channel = derive_channel(f"sniffer-udp-{os.getpid()}")
+    sniffer = CanSniffer(BusConfig(interface="udp_multicast", channel=channel),
+                         tmp_path / "can_0.log")
+    sender = open_udp_bus(channel)
+    try:
+        stamped = round(wire_now(), 3) - 0.030  # ms: the candump text keeps 6 decimals
+        sender.send(can.Message(arbitration_id=0x080, is_extended_id=False, timestamp=stamped))
+        deadline = time.monotonic() + 5.0
+        while sniffer.frames < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        sender.shutdown()
+        sniffer.stop()
+    (frame,) = list(can.LogReader(str(tmp_path / "can_0.log")))
+    assert frame.timestamp == pytest.approx(stamped, abs=1e-6)

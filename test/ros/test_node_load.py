@@ -4,7 +4,9 @@ On a loaded 2-core machine the bridge reported wire breaks (ERR_SSI, EMCY 0x7000
 that did not happen, stamps that went backwards and a silent gateway that was only a stalled
 process. With one time base (docs/node.md "Time") none of that may happen: 0 ERR_SSI / EMCY,
 0 non-increasing stamps, 0 "gateway silent", and every velocity sample within the bound of
-docs/node.md. Selectable with ``-m load``; part of ``make test``.
+docs/node.md. Selectable with ``-m load``; part of ``make test``. The station runs as
+``config/ssi_bridge.yaml`` says (in-process); ``SSI_BRIDGE_LOAD_TRANSPORT=udp_multicast`` runs
+it as the node's child process instead.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from sensor_msgs.msg import JointState
 
 REPO = Path(__file__).resolve().parents[2]
 RUN_S = float(os.environ.get("SSI_BRIDGE_LOAD_SECONDS", "60"))
+#: simulation.transport of the node under load ("": the params file's)
+TRANSPORT = os.environ.get("SSI_BRIDGE_LOAD_TRANSPORT", "")
 RATE = 1000.0
 #: the shipped station's shoulder: AFM60 sine, 0.25 rev at 0.2 Hz, 32768 steps per turn
 AMP = 2 * math.pi * 0.25
@@ -53,12 +57,13 @@ def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe, t
     # last published samples, so the check needs all of them
     from ssi_bridge.record.reader import Bag
 
+    params = {"publish_rate": RATE, "bus.bitrate": 1_000_000, "diagnostics_period": 0.5,
+              "record.enabled": True, "record.root": str(tmp_path / "rec"), "record.path": "load"}
+    if TRANSPORT:
+        params["simulation.transport"] = TRANSPORT
     burners = _burners(2)
     try:
-        node = running({"publish_rate": RATE, "bus.bitrate": 1_000_000,
-                        "diagnostics_period": 0.5, "record.enabled": True,
-                        "record.root": str(tmp_path / "rec"), "record.path": "load"},
-                       params_file=REPO / "config" / "ssi_bridge.yaml")
+        node = running(params, params_file=REPO / "config" / "ssi_bridge.yaml")
         diags = probe.subscribe(DiagnosticArray, "/diagnostics", qos=100)
         time.sleep(RUN_S)
     finally:
