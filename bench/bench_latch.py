@@ -21,6 +21,7 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import signal
@@ -32,32 +33,18 @@ import time
 import traceback
 from pathlib import Path
 
+from benchlib import emit, emit_record, percentile, save
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-RESULTS = HERE / "results" / "latest.jsonl"
 STATION_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "station"
 #: shaft speed (rev/s) of the one joint (GENERIC encoder, 8192 steps/rev, 4096 turns)
 VELOCITY = 10.0
 PERIOD_S = 0.002
 MEASURE_S = 3.0
 BURNER = "while True: pass"
-
-
-def _emit(records: list[dict], metric: str, value: float, unit: str,
-          baseline: float | None = None, note: str = "") -> None:
-    rec: dict = {"metric": metric, "value": round(value, 6), "unit": unit}
-    if baseline:
-        rec["baseline"] = round(baseline, 6)
-        rec["ratio"] = round(value / baseline, 3)
-    if note:
-        rec["note"] = note
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
-
-
-def _pct(values: list[float], q: float) -> float:
-    values = sorted(values)
-    return values[min(len(values) - 1, int(q * len(values)))] if values else float("nan")
+#: latch errors in us, kept to the nanosecond
+_emit = functools.partial(emit, digits=6)
 
 
 def _values(channel: str, interface: str) -> dict:
@@ -166,26 +153,21 @@ def main() -> None:
         inproc = inprocess_run(counts)
         load = f"{burners_n} CPU burner(s) beside"
         for q, name in ((0.5, "p50"), (0.99, "p99")):
-            _emit(records, f"latch_error_{name}_us", _pct(child, q), "us", _pct(inproc, q),
+            _emit(records, f"latch_error_{name}_us", percentile(child, q), "us", percentile(inproc, q),
                   f"|latch - SYNC wire time - run median|, {len(child)} cycles: station child "
                   f"on udp_multicast vs {len(inproc)} in-process on virtual; {load}; lower "
                   "is better")
-        _emit(records, "sync_receive_lag_p99_us", _pct(lags, 0.99), "us",
+        _emit(records, "sync_receive_lag_p99_us", percentile(lags, 0.99), "us",
               note=f"kernel receive minus wire time of {len(lags)} SYNCs on udp_multicast: "
                    f"what latching at the receive time would add; {load}")
     except Exception as err:  # noqa: BLE001 - a bench never fails the run
-        rec = {"metric": "latch", "error": f"{type(err).__name__}: {err}"}
-        records.append(rec)
-        print(json.dumps(rec), flush=True)
-        traceback.print_exc()
+        emit_record(records, {"metric": "latch", "error": f"{type(err).__name__}: {err}",
+                              "note": traceback.format_exc(limit=3)[-800:]})
     finally:
         for proc in burners:
             proc.kill()
             proc.wait()
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with open(RESULTS, "a", encoding="utf-8") as fh:
-        for rec in records:
-            fh.write(json.dumps(rec) + "\n")
+    save(records)
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import cpu_seconds, emit, run_parts, save
+from benchlib import cpu_seconds, emit, percentile, run_parts, save
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -40,11 +40,6 @@ RATE_HZ = 1000.0
 WARMUP_S = 2.0
 MEASURE_S = 5.0
 ROUNDS = 1000
-
-
-def _pct(values: list[float], q: float) -> float:
-    values = sorted(values)
-    return values[min(len(values) - 1, int(q * len(values)))]
 
 
 def startup(records: list[dict]) -> None:
@@ -122,7 +117,7 @@ def round_trip(records: list[dict]) -> None:
     client.close()
     station.stop()
     for q, name in ((0.5, "p50"), (0.99, "p99")):
-        _emit(records, f"sync_tpdo_{name}_us", _pct(udp, q), "us", _pct(virt, q),
+        _emit(records, f"sync_tpdo_{name}_us", percentile(udp, q), "us", percentile(virt, q),
               f"SYNC -> all TPDOs of the cycle, 1 slot, {len(udp)}/{ROUNDS} cycles complete; "
               "station child on udp_multicast vs in-process on virtual")
 

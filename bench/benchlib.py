@@ -64,6 +64,12 @@ def save(records: list[dict], path: Path = RESULTS) -> None:
         print(json.dumps({"metric": "results_file", "error": str(err)}), flush=True)
 
 
+def percentile(values: list[float], q: float) -> float:
+    """The ``q`` quantile (0..1) of ``values`` by rank (nan for none): no numpy needed."""
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float("nan")
+
+
 def cpu_seconds(pid: int) -> float:
     """utime + stime of ``pid`` (all its threads) in seconds, from /proc/<pid>/stat."""
     stat = Path(f"/proc/{pid}/stat").read_text()
