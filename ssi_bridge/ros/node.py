@@ -697,6 +697,7 @@ class SsiBridgeNode(Node):
             counters.update(meter.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         counters.update(self.liveview.counters())
         out.append(bus_status(
             status_name(fqn, "bus"),
@@ -720,6 +721,7 @@ class SsiBridgeNode(Node):
         counters.update(self.master.load.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
         out = [bus_status(
             status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
