@@ -6,9 +6,9 @@ Level mapping (docs/node.md has the table):
 condition                                           level
 =================================================  =========
 no fresh sample for ``stale_cycles`` cycles          STALE
->= 50 % of the cycles of the last 0.5 s stale        ERROR
+>= 50 % of the SYNCs of the last 0.5 s stale         ERROR
 ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
->= 10 % of the cycles of the last 0.5 s stale        WARN
+>= 10 % of the SYNCs of the last 0.5 s stale         WARN
 a jump beyond ``max_speed`` in the last 0.5 s        WARN
 STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
 otherwise                                           OK
@@ -19,7 +19,8 @@ achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
 has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
 so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
-better level held CLEAR_AFTER_S.
+better level held CLEAR_AFTER_S. The window and the debounce run on SYNC wire time, and every
+SYNC sent counts (one the node never handled as lost), so load does not thin the window.
 """
 
 from __future__ import annotations
@@ -95,12 +96,12 @@ def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
     return OK, "reading"
 
 
-#: window (s) over which the stale ratio and implausible jumps are counted
+#: window (s) of SYNC wire time over which the stale ratio and implausible jumps are counted
 RATIO_WINDOW_S = 0.5
-#: stale ratio (stale cycles / cycles in the window) at or above which a joint is WARN / ERROR
+#: stale ratio (lost share of the SYNCs in the window) at or above which a joint is WARN / ERROR
 STALE_RATIO_WARN = 0.10
 STALE_RATIO_ERROR = 0.50
-#: the ratio counts only over at least this many cycles, and from 2 windows after the first
+#: the ratio counts only over at least this many SYNCs, and from 2 windows after the first
 #: sample on (the cycles of the start-up say little about the link)
 MIN_WINDOW_CYCLES = 10
 #: a worse level is published once it held this long; a better one once it held this long
@@ -116,7 +117,14 @@ def status_name(node_fqn: str, item: str) -> str:
 class ChannelHealth:
     """One joint's level over time: stale ratio and jumps over a window, debounced changes.
 
-    :meth:`observe` runs every cycle (cheap: a deque of the window's cycles and a short list of
+    The window is wire time of the SYNCs, and its denominator is the SYNCs sent, not the
+    cycles the node got round to: :meth:`observe` takes the SYNC's wire time and sequence
+    number, and a SYNC the node never observed (a gap in the sequence) counts as wholly lost.
+    So a loaded node that handles fewer cycles sees the same ratio as the wire has, instead
+    of a thinned window. Each observed SYNC counts the share of the joint's data of that SYNC
+    that did not arrive (``lost``: 0, 1, or 1/2 for one of its two TPDOs).
+
+    :meth:`observe` runs every cycle (cheap: a deque of the window's SYNCs and a short list of
     level changes); :attr:`level` / :attr:`message` are what the diagnostics publish.
     """
 
@@ -125,10 +133,14 @@ class ChannelHealth:
         self.window_s = window_s
         self.raise_after_s = raise_after_s
         self.clear_after_s = clear_after_s
-        #: (time, stale, implausible) of each cycle in the window
-        self._cycles: deque[tuple[float, bool, bool]] = deque()
-        self.stale_in_window = 0
+        #: (SYNC wire time, lost share, SYNCs, implausible) per observed SYNC (or gap of them)
+        self._syncs: deque[tuple[float, float, int, bool]] = deque()
+        self.lost_in_window = 0.0
+        self.syncs_in_window = 0
         self.jumps_in_window = 0
+        #: the last observed SYNC (sequence number, wire time), for the gaps
+        self._last_seq: int | None = None
+        self._last_t = 0.0
         #: the raw level once a rise held RAISE_AFTER_S (falls at once)
         self._confirmed = STALE
         #: time of the first sample (the stale ratio counts from two windows after it)
@@ -144,32 +156,60 @@ class ChannelHealth:
         self._messages: dict[int, str] = {STALE: self.message}
 
     @property
+    def stale_in_window(self) -> float:
+        """SYNCs of the window without the joint's data (fractional: a lost TPDO of two)."""
+        return self.lost_in_window
+
+    @property
     def stale_ratio(self) -> float:
-        """Stale cycles / cycles over the window (0 before any cycle)."""
-        return self.stale_in_window / len(self._cycles) if self._cycles else 0.0
+        """Lost share of the SYNCs of the window (0 before any SYNC)."""
+        return self.lost_in_window / self.syncs_in_window if self.syncs_in_window else 0.0
 
     def observe(self, now: float, *, stale: bool, implausible: bool, sts: int | None,
-                consecutive_stale: int, stale_limit: int) -> int:
-        """Count one cycle and return the debounced level."""
-        cycles = self._cycles
-        cycles.append((now, stale, implausible))
-        self.stale_in_window += stale
+                consecutive_stale: int, stale_limit: int, seq: int | None = None,
+                lost: float | None = None) -> int:
+        """Count one SYNC and return the debounced level.
+
+        :param now: wire time of the SYNC (the window's clock)
+        :param stale: no complete fresh sample of this SYNC
+        :param seq: the SYNC's sequence number; SYNCs skipped since the last one count lost
+        :param lost: the share of the joint's data of this SYNC that is missing (default:
+            all of it when ``stale``)
+        """
+        share = (1.0 if stale else 0.0) if lost is None else min(max(lost, 0.0), 1.0)
+        syncs = self._syncs
+        if seq is not None:
+            last = self._last_seq
+            if last is not None and seq > last + 1:
+                missed = seq - last - 1  # SYNCs on the wire that the node never handled
+                syncs.append((0.5 * (self._last_t + now), float(missed), missed, False))
+                self.lost_in_window += missed
+                self.syncs_in_window += missed
+            self._last_seq = seq
+        self._last_t = now
+        syncs.append((now, share, 1, implausible))
+        self.lost_in_window += share
+        self.syncs_in_window += 1
         self.jumps_in_window += implausible
         horizon = now - self.window_s
-        while cycles and cycles[0][0] < horizon:
-            _t, was_stale, was_jump = cycles.popleft()
-            self.stale_in_window -= was_stale
+        while syncs and syncs[0][0] < horizon:
+            _t, was_lost, count, was_jump = syncs.popleft()
+            self.lost_in_window -= was_lost
+            self.syncs_in_window -= count
             self.jumps_in_window -= was_jump
+        if not syncs:
+            self.lost_in_window = 0.0  # no float residue once the window empties
         raw, message = channel_level(sts, consecutive_stale, stale_limit)
-        ratio = self.stale_in_window / len(cycles)
+        n = self.syncs_in_window
+        ratio = self.lost_in_window / n if n else 0.0
         if self._first_t is None and sts is not None:
             self._first_t = now
         settled = self._first_t is not None and now - self._first_t >= 2 * self.window_s
-        if raw != STALE and settled and len(cycles) >= MIN_WINDOW_CYCLES:
+        if raw != STALE and settled and n >= MIN_WINDOW_CYCLES:
             if ratio >= STALE_RATIO_ERROR and raw < ERROR:
-                raw, message = ERROR, self._ratio_text(ratio, len(cycles))
+                raw, message = ERROR, self._ratio_text(ratio, n)
             elif ratio >= STALE_RATIO_WARN and raw < WARN:
-                raw, message = WARN, self._ratio_text(ratio, len(cycles))
+                raw, message = WARN, self._ratio_text(ratio, n)
             elif self.jumps_in_window and raw < WARN:
                 raw, message = WARN, (f"position jumped faster than max_speed "
                                       f"({self.jumps_in_window} sample(s) in the last "
@@ -178,8 +218,9 @@ class ChannelHealth:
         return self._debounce(now, raw)
 
     def _ratio_text(self, ratio: float, n: int) -> str:
-        return (f"{ratio:.0%} of the last {n} cycles stale ({self.window_s:g} s; WARN from "
-                f"{STALE_RATIO_WARN:.0%}, ERROR from {STALE_RATIO_ERROR:.0%})")
+        return (f"{ratio:.0%} of the last {n} SYNCs' data stale or lost ({self.window_s:g} s "
+                f"of wire time; WARN from {STALE_RATIO_WARN:.0%}, ERROR from "
+                f"{STALE_RATIO_ERROR:.0%})")
 
     def _debounce(self, now: float, raw: int) -> int:
         """Two stages. ``confirmed`` follows the raw level down at once but up only when the

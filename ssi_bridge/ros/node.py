@@ -452,7 +452,7 @@ class SsiBridgeNode(Node):
         assert self.master is not None
         self.master.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
         self._cycle_times.append(t_sync)
-        self._publish_cycle(t_sync)
+        self._publish_cycle(t_sync, self.client.table.sync_seq)
 
     def _on_observed(self, cycle: ObservedCycle) -> None:
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
@@ -460,7 +460,7 @@ class SsiBridgeNode(Node):
             return
         self._cycle_times.append(wire_now())  # the achieved rate is the observed one
         try:
-            self._publish_cycle(cycle.sync_time)
+            self._publish_cycle(cycle.sync_time, cycle.seq)
         except RCLError:
             if self.context.ok():
                 raise
@@ -488,8 +488,12 @@ class SsiBridgeNode(Node):
         if self.settings.replay_exit_at_end:
             self._request_stop()
 
-    def _publish_cycle(self, t_sync: float) -> None:
-        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time)."""
+    def _publish_cycle(self, t_sync: float, seq: int | None = None) -> None:
+        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time).
+
+        ``seq`` is the SYNC's sequence number: the joints' health counts a SYNC it never saw
+        as lost (diagnostics.ChannelHealth).
+        """
         stamp_ns = self._stamp_ns(t_sync)
         if stamp_ns is None:
             return
@@ -512,7 +516,8 @@ class SsiBridgeNode(Node):
             and self.counters[joint.name].consecutive_stale + 1 < limit
             for joint, sample in samples)
         for joint, sample in samples:
-            self._update_joint(joint, t_sync, js, status, sample, publish=not transient)
+            self._update_joint(joint, t_sync, js, status, sample, publish=not transient,
+                               seq=seq)
         if transient:
             # a joint missed this SYNC but is not (yet) STALE: its value is an older latch
             # than this stamp, so the cycle is not published (a STALE joint's last value is)
@@ -530,26 +535,32 @@ class SsiBridgeNode(Node):
             self.publish_diagnostics()
         self._last_levels = levels
 
-    def _observe_health(self, name: str, now: float, *, stale: bool, implausible: bool) -> None:
+    def _observe_health(self, name: str, now: float, *, stale: bool, implausible: bool,
+                        seq: int | None = None, lost: float | None = None) -> None:
+        """One SYNC (wire time ``now``, number ``seq``) for the joint's windowed health."""
         counters = self.counters[name]
         self.health[name].observe(now, stale=stale, implausible=implausible,
                                   sts=counters.last_sts,
                                   consecutive_stale=counters.consecutive_stale,
-                                  stale_limit=self.settings.stale_cycles)
+                                  stale_limit=self.settings.stale_cycles, seq=seq, lost=lost)
 
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
                       status: Status | None, sample: ChannelSample | None,
-                      publish: bool = True) -> bool:
-        """Count the joint's sample of this cycle; with ``publish``, add it to ``js``."""
+                      publish: bool = True, seq: int | None = None) -> bool:
+        """Count the joint's sample of this cycle; with ``publish``, add it to ``js``.
+
+        Every cycle, published or not, counts for the joint's health at the SYNC's wire time.
+        """
         name = joint.name
         counters = self.counters[name]
-        now = wire_now()
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
-            self._observe_health(name, now, stale=True, implausible=False)
+            self._observe_health(name, t_sync, stale=True, implausible=False, seq=seq)
             return False
         fresh = sample.sync_time >= t_sync
+        # the share of the joint's two TPDOs (image, position) of this SYNC that is missing
+        lost = 0.0 if fresh else 0.5 if sample.newest_sync_time >= t_sync else 1.0
         if fresh:
             counters.samples += 1
             counters.consecutive_stale = 0
@@ -563,7 +574,10 @@ class SsiBridgeNode(Node):
         if sts & ERRORS:
             counters.error_cycles += 1
         if not publish:
-            return fresh  # the cycle is not published: a joint is not latched at its SYNC
+            # the cycle is not published (a joint is not latched at its SYNC); it still counts
+            self._observe_health(name, t_sync, stale=not fresh, implausible=False, seq=seq,
+                                 lost=lost)
+            return fresh
         estimator = self.velocity[name]
         # the estimator's scale is the one of the REG_PARA1 in force (change_para1 swaps both)
         position = estimator.scale.position(sample.position)
@@ -606,7 +620,8 @@ class SsiBridgeNode(Node):
             velocity = math.nan
         else:
             velocity = estimator.velocity
-        self._observe_health(name, now, stale=not fresh, implausible=implausible)
+        self._observe_health(name, t_sync, stale=not fresh, implausible=implausible, seq=seq,
+                             lost=lost)
         self.positions[name] = position
         js.name.append(name)
         js.position.append(position)
@@ -682,6 +697,7 @@ class SsiBridgeNode(Node):
             counters.update(meter.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         counters.update(self.liveview.counters())
         out.append(bus_status(
             status_name(fqn, "bus"),
@@ -705,6 +721,7 @@ class SsiBridgeNode(Node):
         counters.update(self.master.load.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
         out = [bus_status(
             status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "

@@ -5,33 +5,27 @@ failure into ``success: false`` with a message naming the joint, the register an
 no exception escapes into the executor. Each call is also recorded as an event.
 
 Requests are taken from DDS at once by the node's own thread and served in arrival order by
-one worker thread (:class:`RequestQueue`). Up to ``MAX_QUEUED`` requests wait; one more is
-refused at once with "busy: N queued". So a burst of calls is never lost in a DDS history
-that overflows while a handshake runs, and costs the cycle little CPU.
+one worker thread (:class:`~ssi_bridge.ros.request_queue.RequestQueue`). Up to ``MAX_QUEUED``
+requests wait; one more is refused at once with "busy: N queued". So a burst of calls is never
+lost in a DDS history that overflows while a handshake runs, and the worker's share of the
+process's CPU (its GIL time) is bounded so that the cycle keeps its rate through a burst.
 """
 
 from __future__ import annotations
 
-import logging
 import math
-import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from contextlib import ExitStack
-
 from builtin_interfaces.msg import Time
-from rclpy.callback_groups import CallbackGroup
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
 from ssi_bridge.gateway.timebase import wire_now
 from ssi_bridge.module.registers import Para1, Reg
 from ssi_bridge.ros.joint_scale import to_int32
+from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
@@ -41,166 +35,12 @@ from ssi_bridge_msgs.srv import (
 if TYPE_CHECKING:
     from ssi_bridge.ros.node import SsiBridgeNode
 
-logger = logging.getLogger(__name__)
-
 MAX_ADDRESS = 63
-#: KEEP_ALL: DDS keeps every request until the executor takes it (a KEEP_LAST history of
-#: depth N silently replaced the oldest of more than N waiting requests)
-SERVICE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
-                         reliability=ReliabilityPolicy.RELIABLE)
-#: requests waiting for the worker; one more is refused at once with "busy: N queued"
-MAX_QUEUED = 100
 #: fault kinds of ssi_bridge_msgs/srv/InjectFault that need a note on hidden effects
 ENCODER_ERROR = 3
 #: REG_SF signatures (000 "Resetting the register bank")
 SF_LD20 = 0x6C643230
 SF_LD48 = 0x6C643438
-
-
-class _Job:
-    """One request: run by the worker, then its reply sent with the request's header."""
-
-    __slots__ = ("run", "service", "response", "header")
-
-    def __init__(self, run: Callable[[], Any], service: Any, response: Any, header: Any) -> None:
-        self.run = run
-        self.service = service
-        self.response = response
-        self.header = header
-
-
-class _Detached(CallbackGroup):
-    """A callback group no executor runs: :class:`RequestQueue` takes these requests itself."""
-
-    def can_execute(self, entity: Any) -> bool:
-        return False
-
-    def beginning_execution(self, entity: Any) -> bool:
-        return False
-
-    def ending_execution(self, entity: Any) -> None:
-        pass
-
-
-class RequestQueue:
-    """Takes the requests of its services from DDS at once, serves them in arrival order.
-
-    rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
-    1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a
-    queue. Here a taker thread waits on the services alone and takes every waiting request
-    per wake-up (the calls rclpy's executor makes: ``service_take_request`` and
-    ``send_response``); a worker thread runs them one at a time and replies; beyond ``limit``
-    waiting requests the taker refuses at once.
-    """
-
-    def __init__(self, node: Any, limit: int = MAX_QUEUED, name: str = "ssi_services") -> None:
-        self.node = node
-        self.limit = limit
-        self.group = _Detached()
-        self._services: list[tuple[Any, Callable[[Any, Any], Any], Callable[..., Any]]] = []
-        self._jobs: deque[_Job] = deque()
-        self._lock = threading.Condition()
-        self._stopped = False
-        self._wake = node.create_guard_condition(lambda: None, callback_group=self.group)
-        self._worker = threading.Thread(target=self._work, name=name, daemon=True)
-        self._taker = threading.Thread(target=self._take, name=f"{name}_take", daemon=True)
-
-    def __len__(self) -> int:
-        return len(self._jobs)
-
-    def add(self, service: Any, handler: Callable[[Any, Any], Any],
-            refuse: Callable[[Any, Any, int], None]) -> None:
-        """Serve ``service`` (created in :attr:`group`); ``refuse`` fills a busy answer."""
-        self._services.append((service, handler, refuse))
-
-    def start(self) -> None:
-        """Start taking requests (after every service was added)."""
-        self._worker.start()
-        self._taker.start()
-
-    def stop(self) -> None:
-        """End both threads; waiting requests are not answered (the node is going)."""
-        with self._lock:
-            self._stopped = True
-            self._jobs.clear()
-            self._lock.notify()
-        self._wake.trigger()
-        for thread in (self._taker, self._worker):
-            if thread.is_alive() and thread is not threading.current_thread():
-                thread.join(2.0)
-
-    def _take(self) -> None:
-        context = self.node.context
-        while not self._stopped and context.ok():
-            try:
-                ready = self._wait(context)
-                for service, handler, refuse in self._services:
-                    if service.handle.pointer in ready:
-                        self._take_all(service, handler, refuse)
-            except Exception as err:  # noqa: BLE001 - shutdown invalidates the handles
-                if self._stopped or not context.ok():
-                    return
-                logger.error("service requests not taken: %s: %s", type(err).__name__, err)
-                time.sleep(0.1)
-
-    def _wait(self, context: Any) -> list[int]:
-        """Block until a request (or :meth:`stop`) arrives; the ready services' pointers."""
-        with ExitStack() as stack:
-            handles = [s.handle for s, _h, _r in self._services]
-            for handle in handles:
-                stack.enter_context(handle)
-            stack.enter_context(self._wake.handle)
-            stack.enter_context(context.handle)
-            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(handles), 0, context.handle)
-            wait_set.clear_entities()
-            for handle in handles:
-                wait_set.add_service(handle)
-            wait_set.add_guard_condition(self._wake.handle)
-            wait_set.wait(200_000_000)  # ns; also re-checks stop and the context
-            return wait_set.get_ready_entities("service")
-
-    def _take_all(self, service: Any, handler: Callable[[Any, Any], Any],
-                  refuse: Callable[[Any, Any, int], None]) -> None:
-        while True:
-            with service.handle:
-                taken = service.handle.service_take_request(service.srv_type.Request)
-            if taken is None or taken[1] is None:
-                return
-            request, header = taken
-            response = service.srv_type.Response()
-            with self._lock:
-                waiting = len(self._jobs)
-                if waiting < self.limit and not self._stopped:
-                    self._jobs.append(_Job(lambda r=request, a=response, h=handler: h(r, a),
-                                           service, response, header))
-                    self._lock.notify()
-                    continue
-            refuse(request, response, waiting)
-            self._send(service, response, header)
-
-    @staticmethod
-    def _send(service: Any, response: Any, header: Any) -> None:
-        try:
-            service.send_response(response, header)
-        except Exception as err:  # noqa: BLE001 - a client gone or shutdown
-            logger.debug("reply not sent: %s", err)
-
-    def _work(self) -> None:
-        while True:
-            with self._lock:
-                while not self._jobs and not self._stopped:
-                    self._lock.wait()
-                if self._stopped:
-                    return
-                job = self._jobs[0]
-            try:
-                job.run()
-            except Exception:  # noqa: BLE001 - handlers answer themselves; keep serving
-                logger.exception("service handler failed")
-            with self._lock:
-                if self._jobs and self._jobs[0] is job:
-                    self._jobs.popleft()
-            self._send(job.service, job.response, job.header)
 
 
 class BridgeServices:

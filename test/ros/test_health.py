@@ -1,7 +1,8 @@
 """ChannelHealth: windowed stale ratio and debounced levels (ROS-free, exact sequences).
 
-Thresholds as documented in docs/node.md: over the last 0.5 s, >= 10 % stale cycles is WARN,
->= 50 % ERROR; a worse level is published once it held 0.1 s, a better one once it held 1 s.
+Thresholds as documented in docs/node.md: over the SYNCs of the last 0.5 s of wire time,
+>= 10 % stale is WARN, >= 50 % ERROR; a worse level is published once it held 0.1 s, a better
+one once it held 1 s. Every SYNC sent counts: one the node never handled counts as lost.
 """
 
 from __future__ import annotations
@@ -122,3 +123,67 @@ def test_frame_findings_and_module_status_are_both_named():
     assert power.level == ERROR and power.message.startswith("POWER_FAILURE")
     clean = _status_with(0, (False, False, False, False))
     assert clean.level == OK and clean.message == "reading"
+
+
+def _run_syncs(health, t, seqs, lost=lambda seq: 0.0, limit=5):
+    """Observe the SYNCs numbered ``seqs`` (sent every PERIOD; others never handled)."""
+    levels = []
+    consecutive = 0
+    for seq in seqs:
+        share = lost(seq)
+        consecutive = consecutive + 1 if share else 0
+        levels.append(health.observe(t + seq * PERIOD, stale=share > 0, implausible=False,
+                                     sts=0, consecutive_stale=consecutive, stale_limit=limit,
+                                     seq=seq, lost=share))
+    return levels
+
+
+def test_syncs_the_node_never_handled_count_as_lost():
+    # a node that handles only every third SYNC on the wire (each with a fresh sample): the
+    # window holds every SYNC of its 0.5 s, and those never handled are lost data -> ERROR
+    h = ChannelHealth()
+    _run_syncs(h, 0.0, range(1, 201))
+    levels = _run_syncs(h, 0.0, range(203, 500, 3))
+    assert abs(h.stale_ratio - 2 / 3) < 0.02, h.stale_ratio
+    assert levels[-1] == ERROR and "stale" in h.message
+
+
+def test_every_second_sync_unseen_warns_within_half_a_second():
+    # half the SYNCs never handled and 30 % of the handled ones stale: 65 % of the wire's
+    # SYNCs carried no data; a count over the handled cycles only would say 30 %
+    h = ChannelHealth()
+    _run_syncs(h, 0.0, range(1, 201))
+    rng = random.Random(5)
+    levels = _run_syncs(h, 0.0, range(202, 500, 2),
+                        lost=lambda seq: 1.0 if rng.random() < 0.3 else 0.0)
+    assert ERROR in levels[:25], "ERROR within 0.5 s of wire time"
+    assert h.stale_ratio > 0.5
+
+
+def test_thirty_percent_loss_of_each_of_two_frames_is_warn():
+    # one joint's data of a SYNC are two TPDOs (process input image and REG_SSI_POS): 30 %
+    # frame loss misses both in 9 % of the SYNCs and one in 42 %; the ratio is the data's
+    # 30 %, WARN (a cycle count would be 51 %: ERROR one window, WARN the next)
+    h = ChannelHealth()
+    _run_syncs(h, 0.0, range(1, 201))
+    rng = random.Random(11)
+
+    def lost(seq):
+        return ((rng.random() < 0.3) + (rng.random() < 0.3)) / 2
+
+    levels = _run_syncs(h, 0.0, range(201, 601), lost=lost)
+    first = levels.index(WARN)
+    assert first * PERIOD <= 0.5, f"WARN after {first * PERIOD:.2f} s"
+    assert set(levels[first:]) == {WARN}, "a steady 30 % frame loss does not flap"
+    assert 0.1 <= h.stale_ratio < 0.5
+
+
+def test_a_loss_leaves_the_window_after_half_a_second_of_wire_time():
+    # each SYNC counts at its own wire time (the node passes the SYNC's, not when it got
+    # round to the cycle): a loss that ended more than 0.5 s of wire time ago is out
+    h = ChannelHealth()
+    _run_syncs(h, 0.0, range(1, 201))
+    _run_syncs(h, 0.0, range(201, 251), lost=lambda seq: 1.0 if seq % 2 else 0.0)
+    assert h.stale_ratio >= 0.4
+    _run_syncs(h, 0.0, range(251, 302))
+    assert h.stale_ratio == 0.0
