@@ -38,7 +38,6 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 from __future__ import annotations
 
 import ctypes
-import json
 import os
 import random
 import signal
@@ -49,9 +48,11 @@ import time
 import traceback
 from pathlib import Path
 
+from benchlib import cpu_seconds, save
+from benchlib import emit_record as emit
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-RESULTS = HERE / "results" / "latest.jsonl"
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
 SUBSCRIBER = HERE / "node_subscriber.py"
 LIVEVIEW_CLIENT = HERE / "liveview_client.py"
@@ -132,15 +133,6 @@ def _env(domain_id: int) -> dict[str, str]:
     env.pop("ROS_LOCALHOST_ONLY", None)
     env["PYTHONUNBUFFERED"] = "1"
     return env
-
-
-def _cpu_seconds(pid: int) -> float:
-    """utime + stime of ``pid`` in seconds (all its threads)."""
-    with open(f"/proc/{pid}/stat") as f:
-        stat = f.read()
-    fields = stat[stat.rindex(")") + 2:].split()
-    # fields[0] is field 3 (state); utime and stime are fields 14 and 15
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 _prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
@@ -229,9 +221,9 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
                                    f"publisher log: {_tail(pub_log)}")
             time.sleep(0.05)
         time.sleep(WARMUP_S)
-        cpu0, w0, m0 = _cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        cpu0, w0, m0 = cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
         time.sleep(MEASURE_S)
-        cpu1, w1, m1 = _cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        cpu1, w1, m1 = cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
         if pub.poll() is not None:
             raise RuntimeError(f"{tag}: publisher exited {pub.returncode}: {_tail(pub_log)}")
         _stop(sub)
@@ -288,11 +280,6 @@ def node_cmd(n_joints: int, domain_id: int, work: Path,
 def bare_cmd(n_joints: int) -> list[str]:
     return [sys.executable, str(Path(__file__).resolve()), "--bare", str(n_joints),
             str(case_rate(n_joints)), BARE_TOPIC]
-
-
-def emit(records: list[dict], rec: dict) -> None:
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
 
 
 def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: str = "") -> None:
@@ -426,9 +413,9 @@ def _wait_file(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str
 
 def _cpu_window(pid: int) -> tuple[float, float, int, int]:
     """(CPU s, elapsed s, wall ns start, wall ns end) of ``pid`` over LIVEVIEW_WINDOW_S."""
-    cpu0, m0, w0 = _cpu_seconds(pid), time.monotonic(), time.time_ns()
+    cpu0, m0, w0 = cpu_seconds(pid), time.monotonic(), time.time_ns()
     time.sleep(LIVEVIEW_WINDOW_S)
-    return _cpu_seconds(pid) - cpu0, time.monotonic() - m0, w0, time.time_ns()
+    return cpu_seconds(pid) - cpu0, time.monotonic() - m0, w0, time.time_ns()
 
 
 def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[str, list[float]]:
@@ -587,13 +574,7 @@ def main() -> int:
         service_burst.run(records)
     except Exception as err:  # noqa: BLE001
         emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}"})
-    try:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        with open(RESULTS, "a") as f:
-            for rec in records:
-                f.write(json.dumps(rec) + "\n")
-    except OSError as err:
-        print(json.dumps({"metric": "node_results_file", "error": str(err)}), flush=True)
+    save(records)
     return 0
 
 

@@ -18,24 +18,18 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).with_name("results") / "latest.jsonl"
+import benchlib
+
 T0 = 1_700_000_000_000_000_000
 N = 5000
 
 
 def emit(metric: str, value: float, unit: str, baseline: float | None = None,
          ratio_note: str = "") -> None:
-    """Print one JSON line and append it to bench/results/latest.jsonl."""
-    row: dict[str, object] = {"metric": metric, "value": round(value, 3), "unit": unit}
-    if baseline:
-        row.update(baseline=round(baseline, 3), ratio=round(value / baseline, 3))
-    if ratio_note:
-        row["note"] = ratio_note
-    line = json.dumps(row)
-    print(line, flush=True)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    with RESULTS.open("a", encoding="utf-8") as f:
-        f.write(line + "\n")
+    """Print one figure and append it to bench/results/latest.jsonl at once."""
+    rows: list[dict] = []
+    benchlib.emit(rows, metric, value, unit, baseline, ratio_note)
+    benchlib.save(rows)
 
 
 def cpu_seconds_per_second(work: Callable[[], None], seconds: float) -> float:

@@ -18,7 +18,6 @@ rate/latency cases. Prints JSON lines and appends them to bench/results/latest.j
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -135,11 +134,11 @@ def run(records: list[dict]) -> None:
                     raise RuntimeError(f"node not publishing: {bn._tail(work / 'node.log')}")
                 time.sleep(0.05)
             time.sleep(bn.WARMUP_S)
-            cpu0, m0 = bn._cpu_seconds(node.pid), time.monotonic()
+            cpu0, m0 = bn.cpu_seconds(node.pid), time.monotonic()
             time.sleep(BEFORE_S)
-            cpu1, m1 = bn._cpu_seconds(node.pid), time.monotonic()
+            cpu1, m1 = bn.cpu_seconds(node.pid), time.monotonic()
             result = burst(domain_id, f"{bn.NODE_NS}/ssi_bridge/read_register")
-            cpu2, m2 = bn._cpu_seconds(node.pid), time.monotonic()
+            cpu2, m2 = bn.cpu_seconds(node.pid), time.monotonic()
             time.sleep(0.2)
             bn._stop(procs[0])
         finally:
@@ -186,13 +185,7 @@ def main() -> int:
     except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
         bn.emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}",
                           "note": traceback.format_exc(limit=3)[-800:]})
-    try:
-        bn.RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        with open(bn.RESULTS, "a") as f:
-            for rec in records:
-                f.write(json.dumps(rec) + "\n")
-    except OSError as err:
-        print(json.dumps({"metric": "service_burst_results_file", "error": str(err)}), flush=True)
+    bn.save(records)
     return 0
 
 
