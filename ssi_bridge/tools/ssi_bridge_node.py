@@ -205,6 +205,9 @@ def main(args: list[str] | None = None, managed: bool = False) -> int:
     else:
         from ssi_bridge.ros.node import SsiBridgeNode
 
+    from ssi_bridge.tools.memprobe import start_from_env
+
+    start_from_env()
     stops = StopRequests()
     stops.install()
     reason = _init(args)
