@@ -4,9 +4,11 @@ A daemon thread appends one JSON line every ``SSI_BRIDGE_MEMPROBE_PERIOD`` secon
 and its anonymous part (``/proc/self/smaps_rollup``), glibc's malloc figures (``mallinfo2``:
 bytes in use, free bytes kept, mmapped blocks; the number of arenas from ``malloc_info``),
 the thread count, and with ``SSI_BRIDGE_MEMPROBE_TRACE=1`` the Python heap (tracemalloc) and
-its ten largest growths since the previous line. It separates Python-heap growth from C-level
-growth and, within C, memory in use from freed memory malloc keeps (fragmentation): the
-questions behind the soak benchmark's RSS slope. Off unless the variable is set.
+its ten largest growths since the previous line; with ``SSI_BRIDGE_MEMPROBE_TRIM=1`` it calls
+``malloc_trim(0)`` after each line (how much of the RSS is free memory malloc keeps). It
+separates Python-heap growth from C-level growth and, within C, memory in use from freed
+memory malloc keeps (fragmentation): the questions behind the soak benchmark's RSS slope.
+Off unless the variable is set.
 """
 
 from __future__ import annotations
@@ -140,6 +142,6 @@ def start_from_env() -> None:
     if trace:
         tracemalloc.start(1)
     period = float(os.environ.get(ENV_PERIOD, "30"))
-    threading.Thread(target=_loop, args=(path, period, trace,
-                                       os.environ.get(ENV_TRIM, "") not in ("", "0")), name="memprobe",
+    trim = os.environ.get(ENV_TRIM, "") not in ("", "0")
+    threading.Thread(target=_loop, args=(path, period, trace, trim), name="memprobe",
                      daemon=True).start()
