@@ -36,6 +36,7 @@ from rclpy.qos import QoSProfile
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
+from ssi_bridge.record.heap import release_free_memory
 from ssi_bridge.record.mcap_file import McapFile
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
@@ -247,6 +248,7 @@ class BagRecorder:
                         done.abandon()
                 raise RecordingError(f"{self._error}; the bag was left without a summary: "
                                      f"`replay --recover {self._directory}` rebuilds it")
+        release_free_memory()  # the session's writer and buffers (record/heap.py)
         info = self._info
         logger.info("closed %s: %d messages in %d file(s)", self._directory,
                     info.message_count, len(info.files))
@@ -338,6 +340,8 @@ class BagRecorder:
                     with self._lock:
                         self._fail(err)
                     return
+            if pending:
+                release_free_memory()  # what the split freed (record/heap.py)
             try:
                 if current is not None:
                     os.fsync(current.fileno())
