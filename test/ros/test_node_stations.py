@@ -194,5 +194,7 @@ def test_emcy_is_kept_per_station(running, probe):
     assert "0x7000" in st3.message and "0x7000" in _value(st3, "emcy_history"), st3
     st1 = latest_status(diags, "/ssi_bridge: station 1")
     assert st1.level == DiagnosticStatus.OK and _value(st1, "emcy_count") == "0", st1
-    assert latest_status(diags, "/ssi_bridge: c").level == DiagnosticStatus.ERROR
-    assert latest_status(diags, "/ssi_bridge: a").level == DiagnosticStatus.OK
+    st_c = latest_status(diags, "/ssi_bridge: c")
+    assert st_c.level == DiagnosticStatus.ERROR, st_c
+    st_a = latest_status(diags, "/ssi_bridge: a")
+    assert st_a.level == DiagnosticStatus.OK, st_a
