@@ -27,7 +27,6 @@ appended to bench/results/latest.jsonl; never fails (an error becomes a line wit
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -39,9 +38,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-import bench_node as bn  # noqa: E402 - the node harness (env, CPU, stop by PID)
+import bench_node as bn  # noqa: E402 - the node harness (env, stop by PID)
+from benchlib import cpu_seconds, save  # noqa: E402
+from benchlib import emit_record as emit  # noqa: E402
 
-RESULTS = HERE / "results" / "latest.jsonl"
 CONFIG = REPO / "config" / "ssi_bridge.yaml"
 RATE_HZ = 1000.0
 SPLIT_S = 60
@@ -128,7 +128,7 @@ def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path
                                    f"{bn._tail(pub_log)}")
             time.sleep(0.05)
         time.sleep(WARMUP_S)
-        cpu0, m0 = bn._cpu_seconds(node.pid), time.monotonic()
+        cpu0, m0 = cpu_seconds(node.pid), time.monotonic()
         samples: list[tuple[float, float]] = []
         end = m0 + minutes * 60.0
         while time.monotonic() < end:
@@ -137,7 +137,7 @@ def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path
                 raise RuntimeError(f"{tag}: node exited {node.returncode}: {bn._tail(pub_log)}")
             time.sleep(max(0.0, min(SAMPLE_S, end - time.monotonic())))
         samples.append((time.monotonic() - m0, rss_mb(node.pid)))
-        cpu1, m1 = bn._cpu_seconds(node.pid), time.monotonic()
+        cpu1, m1 = cpu_seconds(node.pid), time.monotonic()
         bn._stop(node, timeout=30.0)    # SIGINT: the node closes its bag
         if node.returncode != 0:
             raise RuntimeError(f"{tag}: node exited {node.returncode}: {bn._tail(pub_log)}")
@@ -181,11 +181,6 @@ def bag_figures(bag: Path, received: list[int]) -> dict:
             "bytes": sum(p.stat().st_size for p in files),
             "span_min": (hi - lo) / 60e9, "metadata_count": info["message_count"],
             "own_missed": own_missed}
-
-
-def emit(records: list[dict], rec: dict) -> None:
-    records.append(rec)
-    print(json.dumps(rec), flush=True)
 
 
 def report(records: list[dict], on: dict, off: dict, bag: dict, minutes: float) -> None:
@@ -256,13 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
         emit(records, {"metric": "soak", "error": f"{type(err).__name__}: {err}",
                        "note": traceback.format_exc(limit=3)[-800:]})
-    try:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        with open(RESULTS, "a") as f:
-            for rec in records:
-                f.write(json.dumps(rec) + "\n")
-    except OSError as err:
-        print(json.dumps({"metric": "soak_results_file", "error": str(err)}), flush=True)
+    save(records)
     return 0
 
 
