@@ -36,9 +36,6 @@ class ChannelSample:
     sync_time: float
     #: number of process input images received for this slot
     counter: int
-    #: wire time of the SYNC the newer of its two frames (image, position) answered: after
-    #: ``sync_time`` when only one of them arrived for the latest SYNC
-    newest_sync_time: float = 0.0
 
 
 @dataclass
@@ -263,9 +260,8 @@ class SlotTable:
                 return None
             # the sample is as old as the older of its two frames
             seq = min(st.image_seq, st.position_seq)
-            newest = max(st.image_seq, st.position_seq)
             return ChannelSample(slot, st.position, st.image, self._times.get(seq, 0.0),
-                                 st.image_count, self._times.get(newest, 0.0))
+                                 st.image_count)
 
     def loss(self, slot: int, seq: int) -> tuple[float, float] | None:
         """(wire time, share of the slot's two TPDOs missing) of SYNC ``seq``; None if unknown.

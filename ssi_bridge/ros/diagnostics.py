@@ -156,11 +156,6 @@ class ChannelHealth:
         self._messages: dict[int, str] = {STALE: self.message}
 
     @property
-    def stale_in_window(self) -> float:
-        """SYNCs of the window without the joint's data (fractional: a lost TPDO of two)."""
-        return self.lost_in_window
-
-    @property
     def stale_ratio(self) -> float:
         """Lost share of the SYNCs of the window (0 before any SYNC)."""
         return self.lost_in_window / self.syncs_in_window if self.syncs_in_window else 0.0

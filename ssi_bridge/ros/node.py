@@ -488,7 +488,7 @@ class SsiBridgeNode(Node):
         if self.settings.replay_exit_at_end:
             self._request_stop()
 
-    def _publish_cycle(self, t_sync: float, seq: int | None = None) -> None:
+    def _publish_cycle(self, t_sync: float, seq: int) -> None:
         """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time).
 
         ``seq`` is the SYNC's sequence number: the joints' health counts a SYNC it never saw
@@ -544,31 +544,24 @@ class SsiBridgeNode(Node):
                                   consecutive_stale=counters.consecutive_stale,
                                   stale_limit=self.settings.stale_cycles, seq=seq, lost=lost)
 
-    def _observe_cycle(self, joint: JointSettings, t_sync: float, seq: int | None,
-                       lost_now: float, *, implausible: bool) -> None:
+    def _observe_cycle(self, joint: JointSettings, seq: int, *, implausible: bool) -> None:
         """The joint's health for one cycle: the SYNC before this one, judged now.
 
         A cycle is published when its TPDOs are in or its wait is over; an answer that was on
         the wire in time but handled late (the station or the node starved of CPU) misses that
         wait. One cycle later it has been counted for its SYNC (by wire time), so the stale
-        ratio measures the bus, not the scheduler. Without a sequence (and for the very first
-        SYNC) the cycle's own ``lost_now`` counts.
+        ratio measures the bus, not the scheduler.
         """
-        if seq is not None:
-            if seq <= 1:
-                return  # judged with the next cycle
-            settled = self.client_of(joint.name).table.loss(joint.slot, seq - 1)
-            if settled is not None:
-                t_prev, lost = settled
-                self._observe_health(joint.name, t_prev, stale=lost > 0,
-                                     implausible=implausible, seq=seq - 1, lost=lost)
-                return
-        self._observe_health(joint.name, t_sync, stale=lost_now > 0, implausible=implausible,
-                             seq=seq, lost=lost_now)
+        settled = self.client_of(joint.name).table.loss(joint.slot, seq - 1)
+        if settled is None:
+            return  # the first SYNC: judged with the next cycle
+        t_prev, lost = settled
+        self._observe_health(joint.name, t_prev, stale=lost > 0, implausible=implausible,
+                             seq=seq - 1, lost=lost)
 
     def _update_joint(self, joint: JointSettings, t_sync: float, js: JointState,
                       status: Status | None, sample: ChannelSample | None,
-                      publish: bool = True, seq: int | None = None) -> bool:
+                      seq: int, publish: bool = True) -> bool:
         """Count the joint's sample of this cycle; with ``publish``, add it to ``js``.
 
         Every cycle, published or not, counts for the joint's health at the SYNC's wire time.
@@ -578,11 +571,9 @@ class SsiBridgeNode(Node):
         if sample is None:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1
-            self._observe_cycle(joint, t_sync, seq, 1.0, implausible=False)
+            self._observe_cycle(joint, seq, implausible=False)
             return False
         fresh = sample.sync_time >= t_sync
-        # the share of the joint's two TPDOs (image, position) of this SYNC that is missing
-        lost = 0.0 if fresh else 0.5 if sample.newest_sync_time >= t_sync else 1.0
         if fresh:
             counters.samples += 1
             counters.consecutive_stale = 0
@@ -597,7 +588,7 @@ class SsiBridgeNode(Node):
             counters.error_cycles += 1
         if not publish:
             # the cycle is not published (a joint is not latched at its SYNC); it still counts
-            self._observe_cycle(joint, t_sync, seq, lost, implausible=False)
+            self._observe_cycle(joint, seq, implausible=False)
             return fresh
         estimator = self.velocity[name]
         # the estimator's scale is the one of the REG_PARA1 in force (change_para1 swaps both)
@@ -641,7 +632,7 @@ class SsiBridgeNode(Node):
             velocity = math.nan
         else:
             velocity = estimator.velocity
-        self._observe_cycle(joint, t_sync, seq, lost, implausible=implausible)
+        self._observe_cycle(joint, seq, implausible=implausible)
         self.positions[name] = position
         js.name.append(name)
         js.position.append(position)
