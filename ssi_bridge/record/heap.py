@@ -23,19 +23,48 @@ import time
 logger = logging.getLogger(__name__)
 
 
+#: glibc's mallopt parameter for the number of malloc arenas, and the node's limit
+M_ARENA_MAX = -8
+MALLOC_ARENA_MAX = 2
+
+
+@functools.cache
+def libc() -> ctypes.CDLL | None:
+    """The C library (malloc and its tuning live there), or None where it cannot be loaded."""
+    name = ctypes.util.find_library("c")
+    try:
+        return ctypes.CDLL(name) if name else None
+    except OSError:
+        return None
+
+
 @functools.cache
 def _malloc_trim() -> ctypes._CFuncPtr | None:  # type: ignore[name-defined]
     """glibc's ``malloc_trim``, or None where the C library has none."""
-    name = ctypes.util.find_library("c")
-    if name is None or os.environ.get("SSI_BRIDGE_MALLOC_TRIM", "1") == "0":
+    lib = libc()
+    if lib is None or os.environ.get("SSI_BRIDGE_MALLOC_TRIM", "1") == "0":
         return None
     try:
-        trim = ctypes.CDLL(name).malloc_trim
-    except (OSError, AttributeError):
+        trim = lib.malloc_trim
+    except AttributeError:
         return None
     trim.argtypes = [ctypes.c_size_t]
     trim.restype = ctypes.c_int
     return trim
+
+
+def limit_malloc_arenas(limit: int = MALLOC_ARENA_MAX) -> None:
+    """At most ``limit`` glibc malloc arenas (default 8 per core); call before threads start.
+
+    A recording node's RSS grew by the free memory left in each thread's arena at every split
+    (docs/node.md, "Memory"); with fewer arenas that memory is reused by the other threads.
+    ``MALLOC_ARENA_MAX`` in the environment wins; not glibc: nothing to do.
+    """
+    if "MALLOC_ARENA_MAX" in os.environ:
+        return
+    mallopt = getattr(libc(), "mallopt", None)
+    if mallopt is not None:
+        mallopt(M_ARENA_MAX, limit)
 
 
 def release_free_memory() -> bool:

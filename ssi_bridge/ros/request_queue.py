@@ -1,11 +1,8 @@
 """The node's service requests: taken from DDS at once, served in order by one paced worker.
 
-rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
-1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a queue.
-:class:`RequestQueue` takes every waiting request per wake-up on a thread of its own, refuses
-those beyond its limit at once, and runs the rest one at a time on a worker thread that
-yields to the cycle: its CPU time (which is GIL time the cycle thread cannot have) is held to
-``cpu_share`` of the wall time.
+Why not rclpy's executor, and how the taker and the worker share the work:
+:class:`RequestQueue`. Both threads yield to the cycle: their CPU time (GIL time the cycle
+thread cannot have) is held to ``cpu_share`` of the wall time each.
 """
 
 from __future__ import annotations
@@ -31,10 +28,11 @@ SERVICE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
 #: requests waiting for the worker; one more is refused at once with "busy: N queued"
 MAX_QUEUED = 100
 #: the worker's and the taker's CPU time each at most this share of the wall time: after a
-#: request (a pass of the taker) that took c s of its CPU it rests c * (1 / share - 1) s. Every Python step of the node holds the GIL, so the
-#: process's CPU is one budget: unpaced, in a 1000-call burst at 1 kHz the worker ran 450
-#: reads/s and took 0.145 s/s, as much as the cycle thread, whose CPU fell from 0.25 to 0.15
-#: s/s (the process's stayed 0.5). Together the two threads now take at most 5 % of the time
+#: request (a pass of the taker) that took c s of its CPU it rests c * (1 / share - 1) s.
+#: Every Python step of the node holds the GIL, so the process's CPU is one budget: unpaced,
+#: in a 1000-call burst at 1 kHz the worker ran 450 reads/s and took 0.145 s/s, as much as
+#: the cycle thread, whose CPU fell from 0.25 to 0.15 s/s (the process's stayed 0.5).
+#: Together the two threads now take at most 5 % of the time
 SERVICE_CPU_SHARE = 0.025
 #: requests the taker takes of one service per pass before it rests: a pass of a whole burst
 #: (~170 requests, 16-43 ms of CPU) took the GIL from the cycle in one piece

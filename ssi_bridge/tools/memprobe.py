@@ -14,7 +14,6 @@ Off unless the variable is set.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import json
 import os
 import re
@@ -22,6 +21,8 @@ import threading
 import time
 import tracemalloc
 from typing import Any
+
+from ssi_bridge.record.heap import libc as heap_libc
 
 ENV_FILE = "SSI_BRIDGE_MEMPROBE"
 ENV_PERIOD = "SSI_BRIDGE_MEMPROBE_PERIOD"
@@ -33,11 +34,6 @@ class _Mallinfo2(ctypes.Structure):
     _fields_ = [(name, ctypes.c_size_t) for name in (
         "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
         "fordblks", "keepcost")]
-
-
-def _libc() -> ctypes.CDLL | None:
-    name = ctypes.util.find_library("c")
-    return ctypes.CDLL(name) if name else None
 
 
 def malloc_figures(libc: ctypes.CDLL) -> dict[str, Any]:
@@ -110,7 +106,7 @@ def regions() -> dict[str, float]:
 
 
 def _loop(path: str, period: float, trace: bool, trim: bool) -> None:
-    libc = _libc()
+    libc = heap_libc()
     t0 = time.monotonic()
     prev = tracemalloc.take_snapshot() if trace else None
     while True:

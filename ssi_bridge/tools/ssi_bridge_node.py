@@ -25,44 +25,22 @@ import threading
 import time
 from collections.abc import Callable
 
+from ssi_bridge.record.heap import limit_malloc_arenas
+
 #: the stop signals a launch system or a terminal sends
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: longest reason printed for a start-up error (an echoed 1 MB value stays readable)
 MAX_REASON = 400
 #: seconds a stop waits for callbacks still running (a register handshake takes < 1 s)
 CALLBACK_DRAIN_S = 5.0
-#: glibc malloc arenas (mallopt M_ARENA_MAX = -8); see _limit_malloc_arenas
-M_ARENA_MAX = -8
-MALLOC_ARENA_MAX = 2
 
 
 def _stopped_while_importing(signum: int, _frame: object) -> None:
     raise SystemExit(0)  # nothing is open yet: a stop request during start-up is a clean exit
 
 
-def _limit_malloc_arenas(limit: int = MALLOC_ARENA_MAX) -> None:
-    """At most ``limit`` glibc malloc arenas (default 8 per core), before any thread starts.
-
-    A recording node's RSS grew by the free memory left in each thread's arena at every split
-    (docs/node.md, "Memory"); with fewer arenas that memory is reused by the other threads.
-    ``MALLOC_ARENA_MAX`` in the environment wins; not glibc: nothing to do.
-    """
-    import ctypes
-    import ctypes.util
-    import os
-
-    if "MALLOC_ARENA_MAX" in os.environ:
-        return
-    name = ctypes.util.find_library("c")
-    try:
-        mallopt = ctypes.CDLL(name).mallopt if name else None
-    except (OSError, AttributeError):
-        mallopt = None
-    if mallopt is not None:
-        mallopt(M_ARENA_MAX, limit)
-
-
-_limit_malloc_arenas()
+# before rclpy starts its threads: at most 2 glibc malloc arenas (record/heap.py)
+limit_malloc_arenas()
 
 # importing rclpy takes a few hundred ms; until the node's own handlers are in place a stop
 # signal would otherwise end in a KeyboardInterrupt traceback (SIGINT) or exit 143 (SIGTERM)
