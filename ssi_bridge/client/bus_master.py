@@ -11,6 +11,7 @@ follows the number of slots (one table update per station, no extra frame).
 from __future__ import annotations
 
 import threading
+import time
 from typing import TYPE_CHECKING
 
 import can
@@ -108,9 +109,22 @@ class CanMaster:
                     t = client.table.set_sync_time(frame.timestamp)
         return t
 
-    def wait_cycle(self, timeout: float) -> bool:
-        """True once every station's images and positions arrived since the last SYNC."""
-        return self.gate.wait(timeout)
+    def wait_cycle(self, timeout: float, unanswered_timeout: float = 0.0) -> bool:
+        """True once every station's images and positions arrived since the last SYNC.
+
+        Waits ``timeout``; while a station has not answered this SYNC with a single frame (its
+        process starved, not its frames lost), up to ``unanswered_timeout`` in all. Frames lost
+        on the wire never come, so waiting for them would only delay the next SYNC: the SYNC
+        period stays the configured one under frame loss (CiA 301 0x1006 is a period).
+        """
+        start = time.monotonic()
+        if self.gate.wait(timeout):
+            return True
+        with self.gate.cond:
+            if all(client.table.answering for client in self.clients):
+                return False
+        left = unanswered_timeout - (time.monotonic() - start)
+        return left > 0 and self.gate.wait(left)
 
     def send(self, cob_id: int, data: bytes) -> None:
         """Send one frame under the send lock (raises can.CanError)."""

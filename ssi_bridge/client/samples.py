@@ -276,6 +276,15 @@ class SlotTable:
             got = self.slot(slot).answered.get(seq, 0)
             return at, 1.0 - ((got & IMAGE) + (got & POSITION) // 2) / 2
 
+    @property
+    def answering(self) -> bool:
+        """True once any TPDO answered the current SYNC.
+
+        A station's TPDOs follow the SYNC back to back, so a station that answered in part
+        lost the rest on the wire, while one that answered nothing is silent or starved of CPU.
+        """
+        return self._due < 2 * self.slots
+
     def cycle_complete(self) -> bool:
         """True when every slot's image and position arrived since the last SYNC."""
         return self._due == 0

@@ -445,12 +445,15 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
-        # the TPDOs need their wire time and a starved station its turn: wait for them up to
-        # 90 % of the period, at least 20 ms (a late cycle skips SYNC slots, counted in
-        # cycles_missed, instead of sending SYNCs nobody can answer), at most 50 ms; the
-        # master wakes once every station's cycle is complete
+        # the TPDOs need their wire time: wait for them up to 90 % of the period (at most
+        # 50 ms). A station that has not answered at all by then is starved of CPU, not
+        # lossy: it gets its turn, up to 20 ms in all (a late cycle skips SYNC slots, counted
+        # in cycles_missed, instead of sending SYNCs nobody can answer). Frames lost on the
+        # wire never come, so they do not hold up the next SYNC. The master wakes once every
+        # station's cycle is complete.
         assert self.master is not None
-        self.master.wait_cycle(min(max(0.9 / self.settings.publish_rate, 0.02), 0.05))
+        period = 1.0 / self.settings.publish_rate
+        self.master.wait_cycle(min(0.9 * period, 0.05), min(max(0.9 * period, 0.02), 0.05))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync, self.client.table.sync_seq)
 
