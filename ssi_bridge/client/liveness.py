@@ -4,7 +4,10 @@ CiA 301 heartbeat consumer: the gateway counts as silent after ``heartbeat_timeo
 heartbeat (4 producer periods, 0x1017 as the client configured it). A boot-up message (state
 0) or a heartbeat in any state but OPERATIONAL (the station was reset or restarted, 000
 chapter 4: it boots into PRE-OPERATIONAL with every PDO invalid) asks the supervisor thread to
-run ``configure()`` again. While no heartbeat comes at all the gateway is probed over SDO
+run ``configure()`` again, except one that still shows the state from before the master's NMT
+start within ``heartbeat_timeout`` after it: a device may have had that heartbeat queued for
+sending (a CAN controller's transmit mailbox) when the command came, so it is no state change.
+While no heartbeat comes at all the gateway is probed over SDO
 every 5 periods: a restarted station has its heartbeat producer off again (0x1017 = 0), so it
 only shows up by answering.
 """
@@ -38,6 +41,8 @@ class Liveness:
         self.state: int | None = None
         #: True while configure() runs (its own NMT commands must not re-trigger it)
         self.configuring = False
+        #: wire time at which the last configure() started the gateway (NMT OPERATIONAL)
+        self.started_at = 0.0
         self._reconfigure = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -94,6 +99,8 @@ class Liveness:
                            self._client.node_id)
             self._reconfigure.set()
         elif state != NMT_OPERATIONAL and not self.configuring:
+            if at - self.started_at <= self._client.heartbeat_timeout:
+                return  # sent before the NMT start took effect (see the module docstring)
             self._reconfigure.set()
 
     def _supervise(self) -> None:

@@ -160,7 +160,7 @@ class BridgeClient:
                 self.node.nmt.state = "OPERATIONAL"
             finally:
                 self._liveness.configuring = False
-            self._liveness.last_heartbeat = wire_now()
+            self._liveness.last_heartbeat = self._liveness.started_at = wire_now()
             self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))

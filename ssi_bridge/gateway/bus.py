@@ -43,6 +43,10 @@ SYNC_COB_ID = 0x080
 CIA_BITRATES = (10_000, 20_000, 50_000, 125_000, 250_000, 500_000, 800_000, 1_000_000)
 #: frames a wire remembers (start, end) to fit a late answer in behind its SYNC
 _RECENT_FRAMES = 64
+#: how long (s) a periodic frame that is due but not sent yet holds a receiver's view of the
+#: wire back (:meth:`Wire.owe`): longer than any starvation seen on a loaded machine, short
+#: enough that a producer thread that hangs is still noticed
+OWED_MAX_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,8 @@ class Wire:
         self._pending: dict[int, float] = {}
         # (start, end) of the newest frames known here: where an answer to a SYNC fits
         self._recent: deque[tuple[float, float]] = deque(maxlen=_RECENT_FRAMES)
+        # periodic producers of this process (key -> wire time their next frame is due)
+        self._owed: dict[int, float] = {}
 
     def claim(self, bits: int, ready: float) -> float:
         """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
@@ -180,14 +186,32 @@ class Wire:
         with self.lock:
             self._pending.pop(id(msg), None)
 
+    def owe(self, key: int, due: float | None) -> None:
+        """The periodic producer ``key`` sends its next frame at wire time ``due`` (None: it
+        sends nothing, e.g. muted or stopped)."""
+        with self.lock:
+            if due is None:
+                self._owed.pop(key, None)
+            else:
+                self._owed[key] = due
+
     def undelivered_since(self) -> float:
         """End of the oldest frame claimed in this process and not yet handed over (inf: none).
 
         A receiver has seen the wire only up to just before it: a frame with that time stamp
-        may still arrive (its sender's thread did not get to hand it over yet).
+        may still arrive (its sender's thread did not get to hand it over yet). A periodic
+        frame of this process that is due but not sent yet counts the same, for up to
+        :data:`OWED_MAX_S`: the simulated device's timer is hardware and sends on time; only
+        the thread standing in for it is late.
         """
         with self.lock:
-            return min(self._pending.values(), default=math.inf)
+            oldest = min(self._pending.values(), default=math.inf)
+            if self._owed:
+                horizon = wire_now() - OWED_MAX_S
+                for due in self._owed.values():
+                    if horizon < due < oldest:
+                        oldest = due
+            return oldest
 
     def observe(self, end: float, sync: bool = False, length: float = 0.0) -> None:
         """A frame of another process (``length`` s long) ended at ``end``: the wire was busy
@@ -306,6 +330,74 @@ def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
     return source
 
 
+class DuePeriodicTask:
+    """A simulated device's periodic frame (its heartbeat), on the schedule of its own timer.
+
+    A device's producer timer is hardware: its frames go out every ``period`` whatever else
+    happens. The thread standing in for it can be starved of CPU on a loaded machine, so
+    while its next frame is due but not sent the wire owes it (:meth:`Wire.owe`) and a
+    receiver on this wire does not judge the wire past that due time: the thread's delay is
+    not taken for the device's silence. A frame sent late is stamped when it is sent (the
+    wire's order is the receivers' order), and slots missed meanwhile are skipped, not sent
+    in a burst. A muted bus owes nothing (the "gateway silent" fault is a real silence).
+    Implements what canopen's ``PeriodicMessageTask`` uses: ``stop()``, ``modify_data(msg)``.
+    """
+
+    def __init__(self, bus: LossyBus, wire: Wire, msg: can.Message, period: float, *,
+                 autostart: bool = True) -> None:
+        if not period > 0:
+            raise ValueError(f"period {period} s must be > 0")
+        self.period = period
+        self._bus = bus
+        self._wire = wire
+        self._msg = msg
+        self._stopped = threading.Event()
+        self._thread: threading.Thread | None = None
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Send the first frame now and then every period until :meth:`stop`."""
+        if self._thread is not None and self._thread.is_alive():
+            return
+        self._stopped.clear()
+        self._thread = threading.Thread(target=self._run, daemon=True,
+                                        name=f"periodic-0x{self._msg.arbitration_id:03X}")
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop sending; the wire owes nothing more (does not wait for the thread)."""
+        self._stopped.set()
+        self._wire.owe(id(self), None)
+
+    def modify_data(self, msg: can.Message) -> None:
+        """Send ``msg``'s data from the next frame on (canopen's ``update``: a new NMT state)."""
+        self._msg = msg
+
+    def _run(self) -> None:
+        key, bus, wire, period = id(self), self._bus, self._wire, self.period
+        due = wire_now()
+        try:
+            while not self._stopped.is_set():
+                wait = due - wire_now()
+                if wait > 0 and self._stopped.wait(wait):
+                    break
+                m = self._msg
+                try:
+                    bus.send(can.Message(arbitration_id=m.arbitration_id, data=bytes(m.data),
+                                         is_extended_id=m.is_extended_id,
+                                         is_remote_frame=m.is_remote_frame, dlc=m.dlc))
+                except (can.CanError, BusError) as err:
+                    logger.debug("periodic frame 0x%03X not sent: %s", m.arbitration_id, err)
+                due += period
+                late = wire_now() - due
+                if late > 0:
+                    due += period * math.ceil(late / period)  # skip the slots missed
+                wire.owe(key, None if bus.muted else due)
+        finally:
+            wire.owe(key, None)
+
+
 class LossyBus(can.BusABC):
     """A bus wrapper that drops frames at ``loss_rate`` (seeded) and can be muted.
 
@@ -361,6 +453,19 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
+    def _send_periodic_internal(self, msgs: can.Message | Sequence[can.Message], period: float,
+                                duration: float | None = None, autostart: bool = True,
+                                modifier_callback: Callable[[can.Message], None] | None = None,
+                                ) -> Any:
+        """On a simulated wire one periodic frame (canopen's heartbeat producer) runs on its
+        due times (:class:`DuePeriodicTask`); anything else as python-can does it."""
+        wire = getattr(self._inner, "wire", None)
+        single = msgs if isinstance(msgs, can.Message) else (msgs[0] if len(msgs) == 1 else None)
+        if wire is None or single is None or duration is not None or modifier_callback:
+            return super()._send_periodic_internal(msgs, period, duration, autostart,
+                                                   modifier_callback)
+        return DuePeriodicTask(self, wire, single, period, autostart=autostart)
+
     def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None) -> bool:
         """Send frames ready together (the wire orders them) minus those muted or dropped."""
         if self.muted:
@@ -387,11 +492,17 @@ class LossyBus(can.BusABC):
             msg = self._inner._recv_internal(timeout)[0]
         else:
             msg = super().recv(timeout)
+        # what this side has seen of the wire, never past a frame of this process that is
+        # still on its way (claimed, or a periodic frame due): it may land behind this one
         if msg is None:
-            self.rx_idle_at = wire_now()
+            self.rx_idle_at = min(wire_now(), self._undelivered_since())
         elif msg.timestamp > self.rx_latest:
-            self.rx_latest = msg.timestamp
+            self.rx_latest = min(msg.timestamp, self._undelivered_since())
         return msg
+
+    def _undelivered_since(self) -> float:
+        wire = getattr(self._inner, "wire", None)
+        return wire.undelivered_since() if wire is not None else math.inf
 
     def seen_until(self) -> float:
         """Wire time up to which every frame on the wire has been handled by this side.

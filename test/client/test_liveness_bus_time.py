@@ -1,13 +1,15 @@
-"""Liveness measured on the bus: a stalled receive thread is not a silent gateway;
-a gateway that really stops sending is still found silent, and never before the timeout."""
+"""Liveness measured on the bus: a stalled receive thread, or a starved heartbeat producer
+thread of the simulated station, is not a silent gateway; a gateway that really stops sending
+(or a producer stuck for good) is still found silent, and never before the timeout."""
 
 from __future__ import annotations
 
+import threading
 import time
 
 import can
 
-from ssi_bridge.gateway.bus import BusConfig, open_bus
+from ssi_bridge.gateway.bus import OWED_MAX_S, BusConfig, open_bus
 from ssi_bridge.gateway.timebase import wire_now
 
 STALL_COB = 0x123
@@ -54,3 +56,81 @@ def test_a_really_silent_gateway_is_found_after_the_timeout(station) -> None:
     while not client.gateway_alive and time.monotonic() < deadline:
         time.sleep(0.005)
     assert client.gateway_alive
+
+
+def _stall_station_sends(gateway, seconds: float) -> None:
+    """Hold the station's send path for ``seconds``, as a starved station thread would be held:
+    its frames wait behind the loss check's lock (a loss rate that drops nothing)."""
+    gateway.bus.loss_rate = 1e-12
+    with gateway.bus._rng_lock:
+        time.sleep(seconds)
+
+
+def test_a_starved_heartbeat_producer_is_not_a_silent_gateway(station) -> None:
+    """The XN-GW's heartbeat timer is hardware (CiA 301 0x1017); the thread standing in for it
+    may be starved. While its next heartbeat is due but not sent, the wire owes it."""
+    gateway, client, _ = station
+    period = client.heartbeat_ms / 1000.0
+    beats: list[float] = []
+    client.network.subscribe(0x700 + client.node_id, lambda _cob, _data, ts: beats.append(ts))
+    time.sleep(3 * period)
+    assert client.gateway_alive
+    stall_s = 3 * client.heartbeat_timeout
+    seen_false = 0
+    stall = threading.Thread(target=_stall_station_sends, args=(gateway, stall_s))
+    stall.start()
+    end = time.monotonic() + stall_s + 0.3
+    while time.monotonic() < end:
+        seen_false += not client.gateway_alive
+        time.sleep(0.005)
+    stall.join()
+    released = wire_now()
+    time.sleep(4 * period)
+    assert seen_false == 0, f"gateway reported silent {seen_false} times during a stall"
+    # the producer goes on after the stall on its period, without a burst of the slots missed
+    after = [b for b in beats if b >= released - period]
+    assert 2 <= len(after) <= 6, after
+    assert min(b - a for a, b in zip(after, after[1:])) > 0.5 * period, after
+
+
+def test_a_heartbeat_producer_stuck_for_good_is_found_silent(station) -> None:
+    """A producer held up beyond OWED_MAX_S owes nothing any more: the gateway goes silent."""
+    gateway, client, _ = station
+    assert client.gateway_alive
+    stall = threading.Thread(target=_stall_station_sends,
+                             args=(gateway, OWED_MAX_S + 2 * client.heartbeat_timeout + 0.3))
+    stall.start()
+    try:
+        deadline = time.monotonic() + OWED_MAX_S + 2 * client.heartbeat_timeout + 0.2
+        while client.gateway_alive and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert not client.gateway_alive, "a producer stuck for good was never found silent"
+    finally:
+        stall.join()
+
+
+def _configurations_after(client, seconds: float) -> int:
+    deadline = time.monotonic() + seconds
+    start = client.counters.configurations
+    while time.monotonic() < deadline and client.counters.configurations == start:
+        time.sleep(0.005)
+    return client.counters.configurations - start
+
+
+def test_a_heartbeat_queued_before_the_nmt_start_is_no_state_change(station, channel) -> None:
+    """A PRE-OPERATIONAL heartbeat (CiA 301 state 127) on the wire within the heartbeat timeout
+    after the master's NMT start was queued before the command took effect: no re-configuration.
+    One later than that is the station's real state: re-configured."""
+    gateway, client, _ = station
+    poke = open_bus(BusConfig(channel=channel, node_id=5))
+    stale = can.Message(arbitration_id=0x700 + client.node_id, data=bytes([127]),
+                        is_extended_id=False)
+    try:
+        client.configure()
+        poke.send(stale)
+        assert _configurations_after(client, 2 * client.heartbeat_timeout) == 0
+        time.sleep(client.heartbeat_timeout)
+        poke.send(stale)
+        assert _configurations_after(client, 2.0) == 1
+    finally:
+        poke.shutdown()
