@@ -40,6 +40,8 @@ class NodeSettings:
     simulation_transport: str = "virtual"
     #: seconds the node waits for the simulated station's boot-up at start
     simulation_start_timeout: float = 30.0
+    #: SCHED_FIFO priority of the station child process (0: normal scheduling)
+    simulation_station_priority: int = 10
     bus_interface: str = "virtual"
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
@@ -121,6 +123,11 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "simulation.start_timeout": (30.0, _describe(
         "Seconds the node waits for the simulated station's boot-up message at start",
         read_only=True, float_range=(0.5, 120.0))),
+    "simulation.station_priority": (10, _describe(
+        "simulation.transport udp_multicast: SCHED_FIFO priority of the station child process, "
+        "which stands in for hardware that never waits for a CPU (0: normal scheduling; needs "
+        "CAP_SYS_NICE or an rtprio limit, else the node says so and schedules it normally)",
+        read_only=True, int_range=(0, 99))),
     "bus.interface": ("virtual", _describe(
         "python-can interface (virtual, socketcan, pcan, kvaser, ...)", read_only=True)),
     "bus.channel": ("ssi_bridge", _describe(
@@ -369,6 +376,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         simulation=values["simulation"],
         simulation_transport=values["simulation.transport"],
         simulation_start_timeout=values["simulation.start_timeout"],
+        simulation_station_priority=values["simulation.station_priority"],
         bus_interface=values["bus.interface"],
         bus_channel=values["bus.channel"], bus_bitrate=values["bus.bitrate"],
         node_id=stations[0], stations=stations, storage_path=values["storage_path"],
