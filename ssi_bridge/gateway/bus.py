@@ -409,6 +409,8 @@ class LossyBus(can.BusABC):
     def __init__(self, inner: can.BusABC, loss_rate: float = 0.0, *, seed: int | None = 0,
                  drop_received: bool = False) -> None:
         self._inner = inner
+        #: the simulated wire under this bus (a WireBus's), None on a real interface
+        self._wire: Wire | None = getattr(inner, "wire", None)
         self._rng = random.Random(seed)
         self._rng_lock = threading.Lock()
         self.loss_rate = loss_rate
@@ -459,7 +461,7 @@ class LossyBus(can.BusABC):
                                 ) -> Any:
         """On a simulated wire one periodic frame (canopen's heartbeat producer) runs on its
         due times (:class:`DuePeriodicTask`); anything else as python-can does it."""
-        wire = getattr(self._inner, "wire", None)
+        wire = self._wire
         single = msgs if isinstance(msgs, can.Message) else (msgs[0] if len(msgs) == 1 else None)
         if wire is None or single is None or duration is not None or modifier_callback:
             return super()._send_periodic_internal(msgs, period, duration, autostart,
@@ -494,15 +496,14 @@ class LossyBus(can.BusABC):
             msg = super().recv(timeout)
         # what this side has seen of the wire, never past a frame of this process that is
         # still on its way (claimed, or a periodic frame due): it may land behind this one
+        wire = self._wire
         if msg is None:
-            self.rx_idle_at = min(wire_now(), self._undelivered_since())
+            now = wire_now()
+            self.rx_idle_at = now if wire is None else min(now, wire.undelivered_since())
         elif msg.timestamp > self.rx_latest:
-            self.rx_latest = min(msg.timestamp, self._undelivered_since())
+            ts = msg.timestamp
+            self.rx_latest = ts if wire is None else min(ts, wire.undelivered_since())
         return msg
-
-    def _undelivered_since(self) -> float:
-        wire = getattr(self._inner, "wire", None)
-        return wire.undelivered_since() if wire is not None else math.inf
 
     def seen_until(self) -> float:
         """Wire time up to which every frame on the wire has been handled by this side.
@@ -511,9 +512,8 @@ class LossyBus(can.BusABC):
         (:meth:`Wire.undelivered_since`): its sender's thread may be the one stalled.
         """
         seen = max(self.rx_latest, self.rx_idle_at)
-        wire = getattr(self._inner, "wire", None)
-        if wire is not None:
-            seen = min(seen, wire.undelivered_since())
+        if self._wire is not None:
+            seen = min(seen, self._wire.undelivered_since())
         return seen
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
