@@ -72,6 +72,10 @@ ENCODER_CONFIG = 0x5801
 #: REG_SSI_MASK object (000 Table 35)
 SSI_DIAG_MAPPING = 0x5840
 
+#: the cycle waits at least this many times its worst-case wire time for the TPDOs (the
+#: rest is the receive path: a datagram between processes, the notifier thread)
+WIRE_WAIT_FACTOR = 1.2
+
 #: parameters that change at run time (every other one is read-only in its descriptor)
 LIVE_NODE_PARAMETERS = ("publish_rate", "diagnostics_period", "frame_id", "velocity_window",
                         "stale_cycles")
@@ -446,14 +450,18 @@ class SsiBridgeNode(Node):
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
         # the TPDOs need their wire time: wait for them up to 90 % of the period (at most
-        # 50 ms). A station that has not answered at all by then is starved of CPU, not
-        # lossy: it gets its turn, up to 20 ms in all (a late cycle skips SYNC slots, counted
-        # in cycles_missed, instead of sending SYNCs nobody can answer). Frames lost on the
-        # wire never come, so they do not hold up the next SYNC. The master wakes once every
-        # station's cycle is complete.
+        # 50 ms), and never less than the cycle's wire time: a frame is not lost before its
+        # end on the wire, and a SYNC sent while the cycle's TPDOs are still on the wire only
+        # delays them (a publish_rate that does not fit runs at the rate that does). A station
+        # that has not answered at all by then is starved of CPU, not lossy: it gets its
+        # turn, up to 20 ms in all (a late cycle skips SYNC slots, counted in cycles_missed,
+        # instead of sending SYNCs nobody can answer). Frames lost on the wire never come, so
+        # they do not hold up the next SYNC. The master wakes once every station's cycle is
+        # complete.
         assert self.master is not None
         period = 1.0 / self.settings.publish_rate
-        self.master.wait_cycle(min(0.9 * period, 0.05), min(max(0.9 * period, 0.02), 0.05))
+        first = max(min(0.9 * period, 0.05), WIRE_WAIT_FACTOR * self.cycle_wire_s)
+        self.master.wait_cycle(first, max(min(max(0.9 * period, 0.02), 0.05), first))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync, self.client.table.sync_seq)
 
