@@ -203,7 +203,11 @@ class UdpCanBus(UdpMulticastBus):
         endpoint = parse_channel(channel)
         # python-can's constructor opens sockets on every interface: replaced right away
         can.BusABC.__init__(self, endpoint.channel, **kwargs)  # type: ignore[arg-type]
-        self._multicast = _GroupSockets(endpoint, hop_limit)
+        try:
+            self._multicast = _GroupSockets(endpoint, hop_limit)
+        except BaseException:
+            self._is_shutdown = True  # nothing opened: no "not properly shut down" warning
+            raise
         self._can_protocol = can.CanProtocol.CAN_20
         self.endpoint = endpoint
         self.channel_info = f"udp_multicast {endpoint.channel}"

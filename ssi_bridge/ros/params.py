@@ -37,7 +37,7 @@ class NodeSettings:
     frame_id: str = ""
     simulation: bool = True
     #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
-    simulation_transport: str = "virtual"
+    simulation_transport: str = "udp_multicast"
     #: seconds the node waits for the simulated station's boot-up at start
     simulation_start_timeout: float = 30.0
     #: SCHED_FIFO priority of the station child process (0: normal scheduling)
@@ -114,7 +114,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "true: start the simulated encoders, XN-1SSI modules and gateway (a station of its "
         "own, see simulation.transport) and drive it over CAN; "
         "false: talk to a real XN-GW-CANOPEN station", read_only=True)),
-    "simulation.transport": ("virtual", _describe(
+    "simulation.transport": ("udp_multicast", _describe(
         "How the node reaches its simulated station, always over CAN only: udp_multicast "
         "(the station runs as a child process on python-can's udp_multicast bus on loopback, "
         "group and port derived from bus.channel) or virtual (the station runs in the node's "

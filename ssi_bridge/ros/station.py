@@ -29,7 +29,7 @@ from typing import Any
 import yaml
 
 from ssi_bridge.client.boot import BootWatch
-from ssi_bridge.exceptions import GatewayUnavailable
+from ssi_bridge.exceptions import BusError, GatewayUnavailable
 from ssi_bridge.gateway.bus import BusConfig, open_bus
 from ssi_bridge.gateway.multicast import derive_channel
 from ssi_bridge.gateway.settings import JOINT_DEFAULTS, JointSettings, StationSettings
@@ -131,7 +131,11 @@ class ChildStation:
         """Spawn the station and wait for its boot-up (GatewayUnavailable with the reason)."""
         cmd = [sys.executable, "-m", "ssi_bridge.tools.station", "--params-file", "-",
                "--parent-pid", str(os.getpid())]
-        watch = open_bus(self.bus)  # listening before the station can send its boot-up
+        try:
+            watch = open_bus(self.bus)  # listening before the station can send its boot-up
+        except BusError as err:
+            raise BusError(f"{err} (where loopback has no multicast, run the simulated station "
+                           "in the node's process: simulation.transport:=virtual)") from err
         try:
             t0 = time.monotonic()
             # a process group of its own (a terminal's Ctrl-C reaches the node, which stops

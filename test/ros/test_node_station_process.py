@@ -9,6 +9,7 @@ hardware, and the in-process ``virtual`` fallback still reaches the station only
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import time
@@ -165,6 +166,28 @@ def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(runni
         return None
     probe.wait_for(lambda: joint_level() == DiagnosticStatus.ERROR, 2 * PERIOD + 2,
                    "joint1 ERROR from the injected wire break", node)
+
+
+def test_without_multicast_on_loopback_the_default_names_the_fallback(tmp_path, domain_id):
+    """A fresh network namespace has its loopback down: no multicast, so no station child."""
+    ns = f"ssibnomc{os.getpid() % 100000}"
+    if shutil.which("ip") is None:
+        pytest.skip("the `ip` tool (iproute2) is not installed")
+    made = subprocess.run(["ip", "netns", "add", ns], capture_output=True, text=True)
+    if made.returncode != 0:
+        pytest.skip(f"`ip netns add` not permitted here: {made.stderr.strip()}")
+    try:
+        out = subprocess.run(
+            ["ip", "netns", "exec", ns, str(installed_executable("ssi_bridge_node")),
+             "--ros-args", "-p", f"storage_path:={tmp_path / 'bank.json'}"],
+            capture_output=True, text=True, timeout=120, env=dds_env(domain_id))
+    finally:
+        subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+    text = out.stdout + out.stderr
+    assert out.returncode == 1, text
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "cannot start" in lines[0], text
+    assert "simulation.transport:=virtual" in lines[0], text
 
 
 def _start_station(tmp_path: Path, params: dict, *extra: str) -> subprocess.Popen:
