@@ -108,6 +108,10 @@ def raise_priority(pid: int, priority: int) -> bool:
     return True
 
 
+#: seconds a stop waits for the ended child's last log lines
+FORWARD_DRAIN_S = 2.0
+
+
 class ChildStation:
     """The ``station`` program as a child process of the node, on the given bus."""
 
@@ -116,6 +120,7 @@ class ChildStation:
         self.bus = bus
         self.proc: subprocess.Popen[bytes] | None = None
         self._stderr: deque[str] = deque(maxlen=20)
+        self._forwarder: threading.Thread | None = None
         self._stopping = False
         #: exit code once the child has ended, else None
         self.exit_code: int | None = None
@@ -149,7 +154,9 @@ class ChildStation:
             self.proc.stdin.write(yaml.safe_dump(station_params(self.settings, self.bus))
                                   .encode())
             self.proc.stdin.close()
-            threading.Thread(target=self._forward_log, name="station-log", daemon=True).start()
+            self._forwarder = threading.Thread(target=self._forward_log, name="station-log",
+                                               daemon=True)
+            self._forwarder.start()
             threading.Thread(target=self._reap, name="station-reaper", daemon=True).start()
             BootWatch(watch, self.bus.node_id).wait(timeout, self.problem)
             self.start_time = time.monotonic() - t0
@@ -209,17 +216,19 @@ class ChildStation:
         return f"simulated station process exited with code {self.exit_code}{last}"
 
     def stop(self) -> None:
-        """SIGTERM, then SIGKILL after 3 s; waits for the child (idempotent)."""
+        """SIGTERM, then SIGKILL after 3 s; waits for the child and for its last log lines
+        (e.g. "gateway node 1 stopped") to reach the node's log (idempotent)."""
         self._stopping = True
         proc = self.proc
-        if proc is None or proc.poll() is not None:
-            return
-        proc.terminate()
-        try:
-            proc.wait(3.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(2.0)
+        if proc is not None and proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(3.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(2.0)
+        if self._forwarder is not None and self._forwarder is not threading.current_thread():
+            self._forwarder.join(FORWARD_DRAIN_S)  # stderr ends with the child
 
 
 class InProcessStation:
