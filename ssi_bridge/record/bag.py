@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.writer import CompressionType
 from rclpy.qos import QoSProfile
 
 from ssi_bridge import __version__
@@ -38,6 +37,7 @@ from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
 from ssi_bridge.record.heap import release_free_memory
 from ssi_bridge.record.mcap_file import McapFile
+from ssi_bridge.record.mcap_write import ChunkBuffers
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
     BagInfo,
@@ -55,8 +55,8 @@ __all__ = ["CONFIG_METADATA_NAME", "MIN_SPLIT_SIZE", "BagRecorder", "BagSummary"
 
 logger = logging.getLogger(__name__)
 
-COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
-                "none": CompressionType.NONE, "": CompressionType.NONE}
+#: the node's compression names -> the Chunk record's
+COMPRESSIONS = {"zstd": "zstd", "lz4": "lz4", "none": "", "": ""}
 #: default QoS of a topic added without one (rclpy's default publisher profile)
 DEFAULT_QOS = QoSProfile(depth=10)
 #: name of the MCAP metadata record holding the session configuration
@@ -89,11 +89,12 @@ class _Topic:
 class BagRecorder:
     """Write one bag; thread-safe ``write`` from any thread (e.g. the node's 1 kHz timer)."""
 
-    def __init__(self, directory: Path, info: BagInfo, compression: CompressionType,
+    def __init__(self, directory: Path, info: BagInfo, compression: str,
                  chunk_size: int, split: SplitPolicy, flush_period_s: float) -> None:
         self._directory = directory
         self._info = info
-        self._compression = compression
+        #: the open chunk's buffers and the compressor, kept for the whole session
+        self._chunks = ChunkBuffers(compression)
         self._chunk_size = chunk_size
         self._split = split
         self._lock = threading.Lock()
@@ -265,7 +266,7 @@ class BagRecorder:
         """
         entry = FileInfo(file_name(self._directory.name, len(self._info.files)))
         path = self._directory / entry.path
-        file = McapFile.create(path, entry, self._compression, self._chunk_size,
+        file = McapFile.create(path, entry, self._chunks, self._chunk_size,
                                f"ssi_bridge {__version__}")
         try:
             if self._info.custom_data:

@@ -2,7 +2,9 @@
 
 A bag split into several files writes each through its own :class:`McapFile`, so the chunk
 index the writer keeps for the summary belongs to the open file and is released when the
-file is finished; nothing per chunk outlives its file.
+file is finished; nothing per chunk outlives its file. The chunk buffers (and the
+compressor) are the session's (:class:`~ssi_bridge.record.mcap_write.ChunkBuffers`), handed
+from file to file, so neither a chunk nor a split allocates them anew.
 """
 
 from __future__ import annotations
@@ -12,29 +14,29 @@ import os
 from pathlib import Path
 from typing import BinaryIO
 
-from mcap.writer import CompressionType, Writer
-
+from ssi_bridge.record.mcap_write import ChunkBuffers, McapWriter
 from ssi_bridge.record.metadata import FileInfo
 
 
 class McapFile:
     """An MCAP file open for writing, profile ``ros2``; ``info`` counts what it holds."""
 
-    def __init__(self, path: Path, stream: BinaryIO, writer: Writer, info: FileInfo) -> None:
+    def __init__(self, path: Path, stream: BinaryIO, writer: McapWriter, info: FileInfo) -> None:
         self.path = path
         self.info = info
         self._stream = stream
-        self._writer: Writer | None = writer
+        self._writer: McapWriter | None = writer
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
 
     @classmethod
-    def create(cls, path: Path, info: FileInfo, compression: CompressionType, chunk_size: int,
+    def create(cls, path: Path, info: FileInfo, chunks: ChunkBuffers, chunk_size: int,
                library: str) -> McapFile:
-        """Create ``path`` (it must not exist) and write the MCAP magic and header."""
+        """Create ``path`` (it must not exist) and write the MCAP magic and header; its
+        chunks go through ``chunks`` (compressed as those say)."""
         stream = open(path, "xb")  # noqa: SIM115 - closed in sync_close() / abandon()
         try:
-            writer = Writer(stream, chunk_size=chunk_size, compression=compression)
+            writer = McapWriter(stream, chunks, chunk_size)
             writer.start(profile="ros2", library=library)
         except OSError:
             with contextlib.suppress(OSError):
@@ -51,7 +53,7 @@ class McapFile:
         """The file descriptor (for fsync)."""
         return self._stream.fileno()
 
-    def _live(self) -> Writer:
+    def _live(self) -> McapWriter:
         if self._writer is None:
             raise ValueError(f"{self.path} is finished")
         return self._writer
