@@ -25,7 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from ssi_bridge.record.heap import limit_malloc_arenas
+from ssi_bridge.record.heap import fix_mmap_threshold, limit_malloc_arenas
 
 #: the stop signals a launch system or a terminal sends
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -39,8 +39,10 @@ def _stopped_while_importing(signum: int, _frame: object) -> None:
     raise SystemExit(0)  # nothing is open yet: a stop request during start-up is a clean exit
 
 
-# before rclpy starts its threads: at most 2 glibc malloc arenas (record/heap.py)
+# before rclpy starts its threads: at most 2 glibc malloc arenas, and a fixed mmap threshold
+# so that large short-lived blocks never stay in the heap (record/heap.py)
 limit_malloc_arenas()
+fix_mmap_threshold()
 
 # importing rclpy takes a few hundred ms; until the node's own handlers are in place a stop
 # signal would otherwise end in a KeyboardInterrupt traceback (SIGINT) or exit 143 (SIGTERM)
