@@ -93,7 +93,7 @@ class BagRecorder:
                  chunk_size: int, split: SplitPolicy, flush_period_s: float) -> None:
         self._directory = directory
         self._info = info
-        #: the open chunk's buffers and the compressor, kept for the whole session
+        #: the open chunk's buffers, kept for the whole session
         self._chunks = ChunkBuffers(compression)
         self._chunk_size = chunk_size
         self._split = split

@@ -1,10 +1,10 @@
-"""One MCAP file of a bag being written: its stream, its mcap writer and its channel ids.
+"""One MCAP file of a bag being written: its stream, its MCAP writer and its channel ids.
 
 A bag split into several files writes each through its own :class:`McapFile`, so the chunk
 index the writer keeps for the summary belongs to the open file and is released when the
-file is finished; nothing per chunk outlives its file. The chunk buffers (and the
-compressor) are the session's (:class:`~ssi_bridge.record.mcap_write.ChunkBuffers`), handed
-from file to file, so neither a chunk nor a split allocates them anew.
+file is finished; nothing per chunk outlives its file. The chunk buffers are the session's
+(:class:`~ssi_bridge.record.mcap_write.ChunkBuffers`), handed from file to file, so neither
+a chunk nor a split allocates them anew.
 """
 
 from __future__ import annotations

@@ -7,9 +7,11 @@ those short-lived blocks of a few hundred kB, freed on other threads and among l
 ones, left glibc's heap with free memory it could not give back and the RSS grew with every
 split (docs/recording.md, "Memory over hours"). Here the open chunk's records and its message
 indexes are written with ``struct.pack_into`` into :class:`ChunkBuffers`, which grow to the
-size a chunk needs and are then reused for every chunk of every file of the session; the
-zstd context is reused as well, and the chunk index is packed bytes, not objects. What is
-left per chunk is the compressed bytes, freed as soon as they are written.
+size a chunk needs and are then reused for every chunk of every file of the session, and the
+chunk index is packed bytes, not objects. What is left per chunk is the compressor's work
+space and the compressed bytes, freed as soon as the chunk is written: with the node's fixed
+mmap threshold (``record/heap.py``) both are mappings of their own that leave nothing
+behind.
 
 Record layouts (little endian; opcode u8, record length u64, then the fields) follow
 https://mcap.dev/spec; files are read back by the ``mcap`` reader and ``rosbags`` in tests.
@@ -87,14 +89,16 @@ class ChunkBuffers:
     grow to a chunk's size and are then reused for every chunk of every file of the session
     (not thread-safe: the bag's lock guards it).
 
-    Also the session's compressor, so a zstd context is made once, not per chunk.
+    A zstd context is made per chunk, not kept: kept, its ~1.5 MB of tables stayed mapped
+    and grew resident page by page as chunks hashed into them (+1.1 MB/10 min in
+    bench/heap_split.py, still rising after 4 min); made per chunk, it is one mapping taken
+    and given back (0.5 ms more per chunk, twice a second).
     """
 
     def __init__(self, compression: str, capacity: int = INITIAL_CAPACITY) -> None:
         if compression not in ("zstd", "lz4", ""):
             raise ValueError(f"compression {compression!r}: zstd, lz4 or ''")
         self.compression = compression
-        self._zstd = zstandard.ZstdCompressor() if compression == "zstd" else None
         self.records = bytearray(capacity)
         self.used = 0
         #: channel id -> [entries buffer, bytes used]
@@ -151,8 +155,8 @@ class ChunkBuffers:
         """The chunk's records as they go into the Chunk record (a view when uncompressed:
         valid until the next write)."""
         view = memoryview(self.records)[:self.used]
-        if self._zstd is not None:
-            return self._zstd.compress(view)
+        if self.compression == "zstd":
+            return zstandard.ZstdCompressor().compress(view)
         if self.compression == "lz4":
             return lz4.frame.compress(view)
         return view
