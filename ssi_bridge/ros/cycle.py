@@ -15,6 +15,34 @@ from collections.abc import Callable
 
 logger = logging.getLogger(__name__)
 
+#: a cycle longer on the wire than its period waits at least this many times its worst-case
+#: wire time for the TPDOs (the rest is the receive path: a datagram between processes, the
+#: notifier thread)
+WIRE_WAIT_FACTOR = 1.2
+#: at most this long (s) for one cycle's TPDOs
+MAX_WAIT_S = 0.05
+#: a station that has answered nothing is given up to this long (s): starved, not lossy
+STARVED_WAIT_S = 0.02
+
+
+def cycle_waits(period: float, cycle_wire_s: float) -> tuple[float, float]:
+    """How long (s) one cycle waits for its TPDOs: (in any case, while a station has not
+    answered the SYNC at all).
+
+    Up to 90 % of the period, the next SYNC going out at the period boundary. A cycle longer
+    on the wire than the period waits its wire time instead: a frame is not lost before its
+    end on the wire, and a SYNC sent while the cycle's TPDOs are still on it would only delay
+    them, so a publish_rate that does not fit runs complete cycles at the rate that does
+    (the cycle thread skips to the next slot), while one that fits keeps its period. A station
+    that has answered nothing is starved of CPU rather than lossy and gets its turn, up to
+    :data:`STARVED_WAIT_S`. Frames lost on the wire never come, so they do not hold up the next
+    SYNC.
+    """
+    first = min(0.9 * period, MAX_WAIT_S)
+    if cycle_wire_s > period:
+        first = max(first, WIRE_WAIT_FACTOR * cycle_wire_s)
+    return first, max(min(max(0.9 * period, STARVED_WAIT_S), MAX_WAIT_S), first)
+
 
 class LoopThread:
     """A daemon thread running ``_run`` until :meth:`stop`; the loops of the node share it."""

@@ -44,7 +44,7 @@ from ssi_bridge.gateway import wire
 from ssi_bridge.module.images import ModuleStatus, ProcessInput
 from ssi_bridge.module.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
-from ssi_bridge.ros.cycle import CycleThread
+from ssi_bridge.ros.cycle import CycleThread, cycle_waits
 from ssi_bridge.ros.diagnostics import (
     OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, station_status,
     status_name,
@@ -71,10 +71,6 @@ ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 ENCODER_CONFIG = 0x5801
 #: REG_SSI_MASK object (000 Table 35)
 SSI_DIAG_MAPPING = 0x5840
-
-#: the cycle waits at least this many times its worst-case wire time for the TPDOs (the
-#: rest is the receive path: a datagram between processes, the notifier thread)
-WIRE_WAIT_FACTOR = 1.2
 
 #: parameters that change at run time (every other one is read-only in its descriptor)
 LIVE_NODE_PARAMETERS = ("publish_rate", "diagnostics_period", "frame_id", "velocity_window",
@@ -449,19 +445,11 @@ class SsiBridgeNode(Node):
                 self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
                                         True, "fault duration over, cleared")
         t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
-        # the TPDOs need their wire time: wait for them up to 90 % of the period (at most
-        # 50 ms), and never less than the cycle's wire time: a frame is not lost before its
-        # end on the wire, and a SYNC sent while the cycle's TPDOs are still on the wire only
-        # delays them (a publish_rate that does not fit runs at the rate that does). A station
-        # that has not answered at all by then is starved of CPU, not lossy: it gets its
-        # turn, up to 20 ms in all (a late cycle skips SYNC slots, counted in cycles_missed,
-        # instead of sending SYNCs nobody can answer). Frames lost on the wire never come, so
-        # they do not hold up the next SYNC. The master wakes once every station's cycle is
-        # complete.
+        # the TPDOs need their wire time (cycle.cycle_waits); a late cycle skips SYNC slots,
+        # counted in cycles_missed, instead of sending SYNCs nobody can answer. The master
+        # wakes once every station's cycle is complete.
         assert self.master is not None
-        period = 1.0 / self.settings.publish_rate
-        first = max(min(0.9 * period, 0.05), WIRE_WAIT_FACTOR * self.cycle_wire_s)
-        self.master.wait_cycle(first, max(min(max(0.9 * period, 0.02), 0.05), first))
+        self.master.wait_cycle(*cycle_waits(1.0 / self.settings.publish_rate, self.cycle_wire_s))
         self._cycle_times.append(t_sync)
         self._publish_cycle(t_sync, self.client.table.sync_seq)
 

@@ -7,7 +7,8 @@ import time
 
 import pytest
 
-from ssi_bridge.ros.cycle import CycleThread
+from ssi_bridge.gateway import wire
+from ssi_bridge.ros.cycle import CycleThread, cycle_waits
 
 
 def test_runs_on_an_absolute_schedule_and_stops():
@@ -61,3 +62,23 @@ def test_a_failing_step_does_not_end_the_loop():
 def test_period_must_be_positive():
     with pytest.raises(ValueError):
         CycleThread(0.0, lambda: None)
+
+
+@pytest.mark.parametrize("slots, bitrate, rate_hz, fits", [
+    (1, 500_000, 1000.0, True),    # 0.57 ms of wire per cycle
+    (2, 500_000, 1000.0, True),    # 0.92 ms: fits the 1 ms period, keeps 1 kHz
+    (8, 500_000, 1000.0, False),   # 3.35 ms
+    (8, 1_000_000, 480.0, True),   # 1.68 ms of a 2.08 ms period
+    (8, 125_000, 100.0, False),    # 13.4 ms of a 10 ms period
+])
+def test_a_cycle_waits_for_its_wire_time_only_when_it_does_not_fit_the_period(
+        slots, bitrate, rate_hz, fits):
+    """docs/canopen.md "Highest cycle rate": the worst-case SYNC + TPDOs of the slots."""
+    period, on_wire = 1.0 / rate_hz, wire.cycle_seconds(slots, bitrate)
+    assert (on_wire <= period) is fits
+    first, starved = cycle_waits(period, on_wire)
+    if fits:  # the next SYNC goes out at the period boundary, after the cycle's frames
+        assert first == pytest.approx(0.9 * period)
+    else:  # no SYNC while the cycle's TPDOs are on the wire: the wait outlasts them
+        assert first >= on_wire > period
+    assert starved >= first and starved <= max(first, 0.05)
