@@ -64,11 +64,7 @@ def limit_malloc_arenas(limit: int = MALLOC_ARENA_MAX) -> None:
     (docs/node.md, "Memory"); with fewer arenas that memory is reused by the other threads.
     ``MALLOC_ARENA_MAX`` in the environment wins; not glibc: nothing to do.
     """
-    if "MALLOC_ARENA_MAX" in os.environ:
-        return
-    mallopt = getattr(libc(), "mallopt", None)
-    if mallopt is not None:
-        mallopt(M_ARENA_MAX, limit)
+    _mallopt_unless_set("MALLOC_ARENA_MAX", M_ARENA_MAX, limit)
 
 
 def fix_mmap_threshold(threshold: int = MMAP_THRESHOLD) -> None:
@@ -82,11 +78,17 @@ def fix_mmap_threshold(threshold: int = MMAP_THRESHOLD) -> None:
     heap stayed flat over 13 splits. Setting it turns glibc's adjustment off; a
     ``MALLOC_MMAP_THRESHOLD_`` in the environment wins; not glibc: nothing to do.
     """
-    if "MALLOC_MMAP_THRESHOLD_" in os.environ:
+    _mallopt_unless_set("MALLOC_MMAP_THRESHOLD_", M_MMAP_THRESHOLD, threshold)
+
+
+def _mallopt_unless_set(variable: str, param: int, value: int) -> None:
+    """glibc ``mallopt(param, value)`` unless the environment sets ``variable`` (it wins);
+    nothing where the C library has no mallopt."""
+    if variable in os.environ:
         return
     mallopt = getattr(libc(), "mallopt", None)
     if mallopt is not None:
-        mallopt(M_MMAP_THRESHOLD, threshold)
+        mallopt(param, value)
 
 
 def release_free_memory() -> bool:

@@ -242,11 +242,6 @@ class McapWriter:
     def add_message(self, channel_id: int, log_time_ns: int, data: bytes,
                     publish_time_ns: int, sequence: int) -> None:
         """A Message into the open chunk; the chunk is written once it exceeds the size."""
-        if self.message_count == 0:
-            self._start_ns = self._end_ns = log_time_ns
-        else:
-            self._start_ns = min(self._start_ns, log_time_ns)
-            self._end_ns = max(self._end_ns, log_time_ns)
         self.message_count += 1
         self._channel_counts[channel_id] = self._channel_counts.get(channel_id, 0) + 1
         self._chunks.add_message(channel_id, sequence, log_time_ns, publish_time_ns, data)
@@ -262,8 +257,13 @@ class McapWriter:
                                              _U64.pack(len(rec)), _string(name)))
 
     def _write_chunk(self) -> None:
-        if self._chunks.messages:
-            self._chunk_indexes.append(self._chunks.write_chunk(self._stream))
+        chunks = self._chunks
+        if chunks.messages:
+            # the file's message time span is its chunks' (each keeps its own)
+            first = not self._chunk_indexes
+            self._start_ns = chunks.start_ns if first else min(self._start_ns, chunks.start_ns)
+            self._end_ns = chunks.end_ns if first else max(self._end_ns, chunks.end_ns)
+            self._chunk_indexes.append(chunks.write_chunk(self._stream))
 
     def flush(self) -> None:
         """Write the open chunk (if it holds a message) and flush the stream."""
