@@ -13,6 +13,8 @@ import threading
 import time
 from collections.abc import Callable
 
+from ssi_bridge.ros.realtime import fifo_this_thread, name_this_thread, scheduling_of_this_thread
+
 logger = logging.getLogger(__name__)
 
 #: a cycle longer on the wire than its period waits at least this many times its worst-case
@@ -45,11 +47,19 @@ def cycle_waits(period: float, cycle_wire_s: float) -> tuple[float, float]:
 
 
 class LoopThread:
-    """A daemon thread running ``_run`` until :meth:`stop`; the loops of the node share it."""
+    """A daemon thread running ``_run`` until :meth:`stop`; the loops of the node share it.
 
-    def __init__(self, name: str) -> None:
+    :param name: the thread's name, also its kernel name (``top -H`` shows it)
+    :param priority: SCHED_FIFO priority the thread asks for (0: normal scheduling); whether
+        it got it is :attr:`scheduling`, and a refusal is logged once at INFO
+    """
+
+    def __init__(self, name: str, priority: int = 0) -> None:
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread = threading.Thread(target=self._main, name=name, daemon=True)
+        self.priority = priority
+        #: the thread's scheduling once it runs ("SCHED_FIFO 5", "normal"; "" before)
+        self.scheduling = ""
 
     def start(self) -> None:
         """Start the thread (once)."""
@@ -60,6 +70,15 @@ class LoopThread:
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)
+
+    def _main(self) -> None:
+        name_this_thread(self._thread.name)
+        if not fifo_this_thread(self.priority):
+            logger.info("%s thread runs with normal scheduling: SCHED_FIFO %d not permitted "
+                        "(needs CAP_SYS_NICE or an rtprio limit; cycle_priority 0 skips this)",
+                        self._thread.name, self.priority)
+        self.scheduling = scheduling_of_this_thread()
+        self._run()
 
     def _run(self) -> None:
         raise NotImplementedError
@@ -74,10 +93,10 @@ class CycleThread(LoopThread):
     """
 
     def __init__(self, period: float, step: Callable[[], None], name: str = "ssi_cycle",
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, priority: int = 0) -> None:
         if not period > 0:
             raise ValueError(f"cycle period {period} s must be > 0")
-        super().__init__(name)
+        super().__init__(name, priority)
         self.period = period
         self._step = step
         self._clock = clock

@@ -261,8 +261,9 @@ class SsiBridgeNode(Node):
                 self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
                 ended=self.player.finished if self.player is not None else None,
                 on_end=self._on_replay_end,
-                silent_warning=None if self.player is not None else SILENT_WARNING_S)
-        return CycleThread(1.0 / s.publish_rate, self._on_cycle)
+                silent_warning=None if self.player is not None else SILENT_WARNING_S,
+                priority=s.cycle_priority)
+        return CycleThread(1.0 / s.publish_rate, self._on_cycle, priority=s.cycle_priority)
 
     def _start_player_when_heard(self, timeout: float) -> None:
         """Start the log replay once joint_states has a subscriber (or ``timeout`` passed)."""
@@ -702,6 +703,7 @@ class SsiBridgeNode(Node):
         counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = self.client.table.late_frames
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        counters["cycle_scheduling"] = self.cycle.scheduling
         meter = getattr(self.client, "load", None)
         if meter is not None:
             counters.update(meter.figures())
@@ -728,6 +730,7 @@ class SsiBridgeNode(Node):
         counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
+        counters["cycle_scheduling"] = self.cycle.scheduling
         counters.update(self.master.load.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals

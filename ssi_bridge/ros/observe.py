@@ -38,16 +38,17 @@ class ObservedCycleThread(LoopThread):
     :param on_end: called once after ``ended`` is set and the last cycle was handled
     :param silent_warning: seconds without SYNC before the silent-bus warning; None: never
         (a log replay says when it ends instead)
+    :param priority: SCHED_FIFO priority of the thread (0: normal scheduling)
     """
 
     def __init__(self, client: ListenOnlyClient, period: float,
                  step: Callable[[ObservedCycle], None], quiet: Callable[[], None], *,
                  ended: threading.Event | None = None,
                  on_end: Callable[[], None] | None = None,
-                 silent_warning: float | None = SILENT_WARNING_S) -> None:
+                 silent_warning: float | None = SILENT_WARNING_S, priority: int = 0) -> None:
         if not period > 0:
             raise ValueError(f"cycle period {period} s must be > 0")
-        super().__init__("ssi_observe")
+        super().__init__("ssi_observe", priority)
         self.period = period
         self._client = client
         self._step = step

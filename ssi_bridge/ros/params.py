@@ -60,6 +60,8 @@ class NodeSettings:
     record_max_size: int = 0
     record_max_duration: int = 0
     cpu_affinity: tuple[int, ...] = ()
+    #: SCHED_FIFO priority of the cycle thread (0: normal scheduling)
+    cycle_priority: int = 5
     #: observe another master's traffic (or a replayed log) instead of driving the bus
     bus_listen_only: bool = False
     #: a CAN log (python-can format) to replay on a private virtual channel; implies listen-only
@@ -164,6 +166,12 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "CPUs the whole node process runs on (e.g. [1]); [-1]: no pinning. Keeping the "
         "simulated station, the bus threads and the cycle on one core saves the cross-core "
         "hand-offs of every cycle (docs/node.md, Performance)", read_only=True)),
+    "cycle_priority": (5, _describe(
+        "SCHED_FIFO priority of the node's cycle thread (SYNC, TPDO wait, publish), as a "
+        "ros2_control loop has: on a busy machine the cycle does not wait behind other "
+        "processes (0: normal scheduling; needs CAP_SYS_NICE or an rtprio limit, else the node "
+        "says so once and schedules it normally). Below simulation.station_priority: the "
+        "simulated hardware answers first", read_only=True, int_range=(0, 99))),
     "storage_path": ("", _describe(
         "File holding the retentive registers of the simulated modules (000: REG_PARA1, "
         "limits, offset, mask); empty: keep them in memory only", read_only=True)),
@@ -385,7 +393,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         record_path=values["record.path"], record_compression=values["record.compression"],
         record_can_log=values["record.can_log"], record_max_size=values["record.max_size"],
         record_max_duration=values["record.max_duration"], bus_listen_only=values["bus.listen_only"],
-        cpu_affinity=_cpus(values["cpu_affinity"]),
+        cpu_affinity=_cpus(values["cpu_affinity"]), cycle_priority=values["cycle_priority"],
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
         replay_wait_for_subscribers=values["replay.wait_for_subscribers"],

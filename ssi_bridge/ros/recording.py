@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import BusError, RecordingError
+from ssi_bridge.ros.realtime import normal_this_thread
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -142,6 +143,7 @@ class SessionRecorder:
         ``replay --recover`` (said in the log)."""
         from ssi_bridge.record.recover import recover_bag
 
+        normal_this_thread()  # started by the cycle thread: not at its real-time priority
         if sniffer is not None:
             frames = sniffer.stop()
             self._node.get_logger().info(f"CAN log closed: {sniffer.path} ({frames} frames)")

@@ -35,6 +35,7 @@ from ssi_bridge.gateway.multicast import derive_channel
 from ssi_bridge.gateway.settings import JOINT_DEFAULTS, JointSettings, StationSettings
 from ssi_bridge.gateway.station import Station
 from ssi_bridge.ros.params import NodeSettings
+from ssi_bridge.ros.realtime import raise_priority
 
 logger = logging.getLogger(__name__)
 
@@ -90,22 +91,6 @@ def _joint_values(joint: JointSettings) -> dict[str, Any]:
 def _die_with_parent() -> None:
     """preexec_fn of the child: SIGTERM when the forking thread (the node's main) ends."""
     _LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-
-
-def raise_priority(pid: int, priority: int) -> bool:
-    """Put every thread of process ``pid`` on SCHED_FIFO ``priority`` (threads it starts later
-    inherit it); False when not permitted."""
-    try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            try:
-                os.sched_setscheduler(int(task), os.SCHED_FIFO, os.sched_param(priority))
-            except ProcessLookupError:
-                pass  # that thread ended meanwhile
-    except PermissionError:
-        return False
-    except OSError:
-        pass  # the process ended meanwhile (start() reports that): nothing to say here
-    return True
 
 
 #: seconds a stop waits for the ended child's last log lines

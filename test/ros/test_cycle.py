@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import logging
+import os
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
 from ssi_bridge.gateway import wire
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits
+from ssi_bridge.ros.realtime import fifo_this_thread, normal_this_thread
 
 
 def test_runs_on_an_absolute_schedule_and_stops():
@@ -82,3 +86,94 @@ def test_a_cycle_waits_for_its_wire_time_only_when_it_does_not_fit_the_period(
     else:  # no SYNC while the cycle's TPDOs are on the wire: the wait outlasts them
         assert first >= on_wire > period
     assert starved >= first and starved <= max(first, 0.05)
+
+
+# -- scheduling (docs/node.md "Scheduling") ----------------------------------------------------
+def _may_use_fifo() -> bool:
+    """Whether this process may put a thread on SCHED_FIFO (root, CAP_SYS_NICE, rtprio)."""
+    seen: list[bool] = []
+    probe = threading.Thread(target=lambda: seen.append(fifo_this_thread(1)))
+    probe.start()
+    probe.join()
+    return seen[0]
+
+
+def _thread_view() -> tuple[int, int, str]:
+    """(policy, priority, kernel name) of the calling thread."""
+    comm = Path(f"/proc/self/task/{threading.get_native_id()}/comm").read_text().strip()
+    return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority, comm
+
+
+def _first_step_view(loop: CycleThread, seen: list) -> tuple[int, int, str]:
+    loop.start()
+    deadline = time.monotonic() + 5.0
+    while not seen and time.monotonic() < deadline:
+        time.sleep(0.01)
+    loop.stop()
+    assert seen, "the cycle never ran"
+    return seen[0]
+
+
+def test_the_cycle_runs_at_its_fifo_priority_under_its_kernel_name(caplog):
+    """cycle_priority: the step runs SCHED_FIFO at the priority and ``top -H`` shows the
+    thread as ssi_cycle; without the right to it, normal scheduling and one INFO line."""
+    seen: list = []
+    loop = CycleThread(0.01, lambda: seen.append(_thread_view()), priority=3)
+    with caplog.at_level(logging.INFO, logger="ssi_bridge.ros.cycle"):
+        policy, priority, comm = _first_step_view(loop, seen)
+    assert comm == "ssi_cycle"
+    if _may_use_fifo():
+        assert (policy, priority) == (os.SCHED_FIFO, 3)
+        assert loop.scheduling == "SCHED_FIFO 3"
+        assert "not permitted" not in caplog.text
+    else:
+        assert (policy, priority) == (os.SCHED_OTHER, 0)
+        assert loop.scheduling == "normal"
+        assert "ssi_cycle thread runs with normal scheduling: SCHED_FIFO 3 not permitted" \
+            in caplog.text
+
+
+def test_priority_zero_is_normal_scheduling(caplog):
+    seen: list = []
+    loop = CycleThread(0.01, lambda: seen.append(_thread_view()), priority=0)
+    with caplog.at_level(logging.INFO, logger="ssi_bridge.ros.cycle"):
+        policy, priority, _ = _first_step_view(loop, seen)
+    assert (policy, priority) == (os.SCHED_OTHER, 0)
+    assert loop.scheduling == "normal" and "not permitted" not in caplog.text
+
+
+def test_a_priority_the_kernel_refuses_runs_the_cycle_normally(caplog):
+    """SCHED_FIFO priorities are 1..99 on Linux: 100 is refused even for root."""
+    seen: list = []
+    loop = CycleThread(0.01, lambda: seen.append(_thread_view()), priority=100)
+    with caplog.at_level(logging.INFO, logger="ssi_bridge.ros.cycle"):
+        policy, _, _ = _first_step_view(loop, seen)
+    assert policy == os.SCHED_OTHER and loop.scheduling == "normal"
+    assert "SCHED_FIFO 100 not permitted" in caplog.text
+
+
+def test_a_thread_the_cycle_starts_for_slow_work_goes_back_to_normal_scheduling():
+    """A thread inherits its creator's policy; the salvage of a failed recording runs
+    normally (normal_this_thread) even when the cycle that started it is SCHED_FIFO."""
+    if not _may_use_fifo():
+        pytest.skip("this process may not use SCHED_FIFO: nothing is inherited")
+    views: dict[str, int] = {}
+
+    def worker() -> None:
+        views["inherited"] = os.sched_getscheduler(0)
+        normal_this_thread()
+        views["after"] = os.sched_getscheduler(0)
+
+    def step() -> None:
+        if not views:
+            t = threading.Thread(target=worker)
+            t.start()
+            t.join()
+
+    loop = CycleThread(0.01, step, priority=2)
+    loop.start()
+    deadline = time.monotonic() + 5.0
+    while "after" not in views and time.monotonic() < deadline:
+        time.sleep(0.01)
+    loop.stop()
+    assert views == {"inherited": os.SCHED_FIFO, "after": os.SCHED_OTHER}

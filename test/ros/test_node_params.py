@@ -149,3 +149,82 @@ def test_sigterm_while_the_node_is_still_starting_exits_zero(start_node, tmp_pat
         node.proc.send_signal(signal.SIGTERM)
         assert node.proc.wait(20) == 0, node.log()[-3000:]
         assert "Traceback" not in node.log()
+
+
+# -- cycle_priority (docs/node.md "The cycle", Scheduling) --------------------------------------
+def _cycle_thread(pid: int) -> tuple[int, int]:
+    """(policy, priority) of the node's thread the kernel calls ssi_cycle."""
+    import os
+
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            if (task / "comm").read_text().strip() == "ssi_cycle":
+                tid = int(task.name)
+                return os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+        except OSError:
+            continue  # that thread ended meanwhile
+    raise AssertionError(f"no thread named ssi_cycle in process {pid}")
+
+
+def _bus_value(probe, node, key: str) -> str:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics", qos=50)
+    probe.wait_for(lambda: any(s.name.endswith(": bus") for _, a in list(diags) for s in a.status),
+                   10.0, "the bus status", node)
+    bus = [s for _, a in list(diags) for s in a.status if s.name.endswith(": bus")][-1]
+    return {kv.key: kv.value for kv in bus.values}[key]
+
+
+def _without_sys_nice() -> None:
+    """preexec: the node may not use SCHED_FIFO (no CAP_SYS_NICE after exec, rtprio limit 0)."""
+    import ctypes
+    import resource
+
+    pr_capbset_drop, cap_sys_nice = 24, 23
+    if ctypes.CDLL(None, use_errno=True).prctl(pr_capbset_drop, cap_sys_nice, 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "PR_CAPBSET_DROP CAP_SYS_NICE")
+    resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
+
+
+def _may_drop_sys_nice() -> bool:
+    import os
+
+    return os.geteuid() == 0
+
+
+def test_the_cycle_runs_at_cycle_priority_or_says_why_not(running, probe):
+    """Default cycle_priority 5: the ssi_cycle thread (and only it) runs SCHED_FIFO 5 and the
+    bus status says so; without the right to it, normal scheduling, one INFO line naming the
+    parameter, and the node still publishes; 0: normal and no such line."""
+    import os
+
+    from sensor_msgs.msg import JointState
+
+    node = running({"diagnostics_period": 0.5})
+    got = _cycle_thread(node.proc.pid)
+    if got == (os.SCHED_FIFO, 5):
+        assert _bus_value(probe, node, "cycle_scheduling") == "SCHED_FIFO 5"
+        others = {os.sched_getscheduler(int(t.name))
+                  for t in Path(f"/proc/{node.proc.pid}/task").iterdir()
+                  if (t / "comm").read_text().strip() != "ssi_cycle"}
+        assert others == {os.SCHED_OTHER}, "only the cycle thread is real-time"
+    else:
+        assert got == (os.SCHED_OTHER, 0)
+        assert "SCHED_FIFO 5 not permitted" in node.log()
+    assert node.stop() == 0
+
+    if _may_drop_sys_nice():
+        node = running({"diagnostics_period": 0.5}, preexec=_without_sys_nice)
+        assert _cycle_thread(node.proc.pid) == (os.SCHED_OTHER, 0)
+        assert ("ssi_cycle thread runs with normal scheduling: SCHED_FIFO 5 not permitted "
+                "(needs CAP_SYS_NICE or an rtprio limit; cycle_priority 0 skips this)") in node.log()
+        assert _bus_value(probe, node, "cycle_scheduling") == "normal"
+        seen = probe.subscribe(JointState, node.topic("joint_states"), qos=100)
+        probe.wait_for(lambda: len(seen) >= 50, 10.0, "joint_states with normal scheduling", node)
+        assert node.stop() == 0
+
+    node = running({"cycle_priority": 0, "diagnostics_period": 0.5})
+    assert _cycle_thread(node.proc.pid) == (os.SCHED_OTHER, 0)
+    assert _bus_value(probe, node, "cycle_scheduling") == "normal"
+    assert "not permitted" not in node.log()

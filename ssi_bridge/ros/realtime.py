@@ -1,0 +1,68 @@
+"""Real-time scheduling for the node's loops and its station child (Linux; ROS-free).
+
+A bus master's cycle is a hard schedule: a SYNC that goes out late is a sample latched late.
+On a busy robot computer a normally scheduled thread waits behind whatever else is runnable,
+so, as a ros2_control hardware loop does, the cycle thread asks for SCHED_FIFO. It is idle but
+for the cycle's work, so it takes little from anything else. Without the right to it (no
+CAP_SYS_NICE, no rtprio limit) everything runs normally and the caller says so once.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+
+#: prctl(2) option: name the calling thread (shown by top -H, ps -L, /proc/<pid>/task/*/comm)
+PR_SET_NAME = 15
+#: the kernel keeps 15 bytes of a thread name
+THREAD_NAME_BYTES = 15
+_LIBC = ctypes.CDLL(None, use_errno=True)
+
+
+def name_this_thread(name: str) -> None:
+    """Give the calling thread its kernel name (Python 3.12 names only its own object)."""
+    _LIBC.prctl(PR_SET_NAME, name.encode()[:THREAD_NAME_BYTES], 0, 0, 0)
+
+
+def fifo_this_thread(priority: int) -> bool:
+    """Put the calling thread on SCHED_FIFO ``priority`` (0: leave it); False when refused."""
+    if priority <= 0:
+        return True
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError:  # EPERM without the right, EINVAL outside the policy's range
+        return False
+    return True
+
+
+def normal_this_thread() -> None:
+    """Put the calling thread back on normal scheduling: a thread started by a SCHED_FIFO one
+    inherits its policy, which a slow clean-up job must not keep."""
+    if os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def raise_priority(pid: int, priority: int) -> bool:
+    """Put every thread of process ``pid`` on SCHED_FIFO ``priority`` (threads it starts later
+    inherit it); False when not permitted."""
+    try:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            try:
+                os.sched_setscheduler(int(task), os.SCHED_FIFO, os.sched_param(priority))
+            except ProcessLookupError:
+                pass  # that thread ended meanwhile
+    except PermissionError:
+        return False
+    except OSError:
+        pass  # the process ended meanwhile (the caller reports that): nothing to say here
+    return True
+
+
+def scheduling_of_this_thread() -> str:
+    """The calling thread's policy and priority as a reader of diagnostics expects them."""
+    policy = os.sched_getscheduler(0)
+    if policy == os.SCHED_FIFO:
+        return f"SCHED_FIFO {os.sched_getparam(0).sched_priority}"
+    if policy == os.SCHED_RR:
+        return f"SCHED_RR {os.sched_getparam(0).sched_priority}"
+    return "normal"
