@@ -36,10 +36,13 @@ class CanMaster:
 
     :param bus: a :class:`BusConfig` (the master opens the bus) or an open bus it takes over
     :param counters: where frames, SYNCs and CAN errors of the bus are counted
+    :param priority: SCHED_FIFO priority of the receive thread (0: normal scheduling)
     """
 
     def __init__(self, bus: BusConfig | can.BusABC,
-                 counters: ClientCounters | None = None) -> None:
+                 counters: ClientCounters | None = None, priority: int = 0) -> None:
+        self.priority = priority
+        self._listener: FrameListener | None = None
         self._source: BusConfig | can.BusABC | None = bus
         self.counters = counters if counters is not None else ClientCounters()
         #: bus load from frame timestamps (one bus, so one figure for every station)
@@ -61,10 +64,16 @@ class CanMaster:
             self._source = None  # a handed-over bus is taken once
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        self.network.listeners[:] = [FrameListener(self.network, self.counters, self.load)]
+        self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
+        self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
+
+    @property
+    def receive_scheduling(self) -> str:
+        """The receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)."""
+        return self._listener.scheduling if self._listener is not None else ""
 
     def attach(self, client: BridgeClient) -> None:
         """Register a station's client: its slot table takes part in every SYNC."""

@@ -27,8 +27,13 @@ from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
 from ssi_bridge.gateway.bus import WireTimeListener
 from ssi_bridge.gateway.dictionary import tpdo_cob_base
+from ssi_bridge.gateway.realtime import (fifo_this_thread, name_this_thread,
+                                         scheduling_of_this_thread)
 
 logger = logging.getLogger(__name__)
+
+#: kernel name of the master's receive thread (``top -H``)
+RX_THREAD_NAME = "ssi_can_rx"
 
 #: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
@@ -42,17 +47,32 @@ class FrameListener(WireTimeListener):
     """canopen's listener feeding the network wire times, counting every frame on the way.
 
     One listener per frame instead of canopen's plus a separate counter: the notifier calls
-    each listener for each frame of the bus.
+    each listener for each frame of the bus. With ``priority`` the notifier's thread, which
+    hands every TPDO to its cycle, puts itself on SCHED_FIFO at its first frame and takes the
+    kernel name ``ssi_can_rx`` (gateway/realtime.py); :attr:`scheduling` says what it got.
     """
 
     def __init__(self, network: canopen.Network, counters: ClientCounters,
-                 load: BusLoad | None = None) -> None:
+                 load: BusLoad | None = None, priority: int = 0) -> None:
         super().__init__(network)
         self._counters = counters
         self._load = load
+        self._priority = priority
+        #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
+        self.scheduling = ""
+
+    def _schedule_this_thread(self) -> None:
+        name_this_thread(RX_THREAD_NAME)
+        if not fifo_this_thread(self._priority):
+            # the cycle thread, refused for the same reason, says it at INFO
+            logger.debug("%s runs with normal scheduling: SCHED_FIFO %d not permitted",
+                         RX_THREAD_NAME, self._priority)
+        self.scheduling = scheduling_of_this_thread()
 
     def on_message_received(self, msg: can.Message) -> None:
         """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
+        if not self.scheduling:
+            self._schedule_this_thread()
         counters = self._counters
         counters.frames += 1
         if msg.is_error_frame:

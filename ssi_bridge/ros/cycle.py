@@ -13,7 +13,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from ssi_bridge.ros.realtime import fifo_this_thread, name_this_thread, scheduling_of_this_thread
+from ssi_bridge.gateway.realtime import (fifo_this_thread, name_this_thread,
+                                         scheduling_of_this_thread)
 
 logger = logging.getLogger(__name__)
 

@@ -181,7 +181,7 @@ class SsiBridgeNode(Node):
             if s.replay_can_log:
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
-            self.master = CanMaster(self.bus_config)
+            self.master = CanMaster(self.bus_config, priority=s.cycle_priority)
             try:
                 for sid in s.station_ids:
                     slots = max(j.slot for j in s.station_joints(sid))
@@ -704,6 +704,8 @@ class SsiBridgeNode(Node):
         counters["late_frames"] = self.client.table.late_frames
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
         counters["cycle_scheduling"] = self.cycle.scheduling
+        if self.master is not None:
+            counters["receive_scheduling"] = self.master.receive_scheduling
         meter = getattr(self.client, "load", None)
         if meter is not None:
             counters.update(meter.figures())
@@ -731,6 +733,8 @@ class SsiBridgeNode(Node):
         counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
         counters["cycle_scheduling"] = self.cycle.scheduling
+        if self.master is not None:
+            counters["receive_scheduling"] = self.master.receive_scheduling
         counters.update(self.master.load.figures())
         counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals

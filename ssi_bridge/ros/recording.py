@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import BusError, RecordingError
-from ssi_bridge.ros.realtime import normal_this_thread
+from ssi_bridge.gateway.realtime import normal_this_thread
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -32,10 +32,10 @@ from ssi_bridge.client.boot import BootWatch
 from ssi_bridge.exceptions import BusError, GatewayUnavailable
 from ssi_bridge.gateway.bus import BusConfig, open_bus
 from ssi_bridge.gateway.multicast import derive_channel
+from ssi_bridge.gateway.realtime import raise_priority
 from ssi_bridge.gateway.settings import JOINT_DEFAULTS, JointSettings, StationSettings
 from ssi_bridge.gateway.station import Station
 from ssi_bridge.ros.params import NodeSettings
-from ssi_bridge.ros.realtime import raise_priority
 
 logger = logging.getLogger(__name__)
 

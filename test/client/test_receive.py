@@ -81,3 +81,50 @@ def test_frame_listener_counts_and_forwards() -> None:
     listener(can.Message(is_error_frame=True))
     assert counters.frames == 2 and counters.can_errors == 1
     assert seen == [(0x185, b"\x01")], "the error frame must not be dispatched"
+
+
+def test_the_receive_thread_takes_the_masters_priority_at_its_first_frame(channel: str) -> None:
+    """CanMaster(priority=N): the notifier thread that hands the TPDOs to the cycle names
+    itself ssi_can_rx and runs SCHED_FIFO N (or, without the right, normally); the master's
+    ``receive_scheduling`` says which (docs/node.md "Scheduling")."""
+    import os
+    import threading
+    import time
+    from pathlib import Path
+
+    from ssi_bridge.client.bus_master import CanMaster
+    from ssi_bridge.gateway.bus import open_bus
+    from ssi_bridge.gateway.realtime import fifo_this_thread
+
+    permitted: list[bool] = []
+    probe = threading.Thread(target=lambda: permitted.append(fifo_this_thread(1)))
+    probe.start()
+    probe.join()
+    config = BusConfig(channel=channel, node_id=NODE)
+    master = CanMaster(config, priority=3)
+    master.connect()
+    other = open_bus(config)
+    try:
+        assert master.receive_scheduling == "", "nothing received yet"
+        other.send(can.Message(arbitration_id=0x705, data=b"\x05", is_extended_id=False))
+        deadline = time.monotonic() + 5.0
+        while not master.receive_scheduling and time.monotonic() < deadline:
+            time.sleep(0.01)
+        names = {}
+        for task in Path("/proc/self/task").iterdir():
+            try:
+                names[(task / "comm").read_text().strip()] = int(task.name)
+            except OSError:
+                continue
+        assert "ssi_can_rx" in names, sorted(names)
+        tid = names["ssi_can_rx"]
+        if permitted[0]:
+            assert master.receive_scheduling == "SCHED_FIFO 3"
+            assert (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority) == \
+                (os.SCHED_FIFO, 3)
+        else:
+            assert master.receive_scheduling == "normal"
+            assert os.sched_getscheduler(tid) == os.SCHED_OTHER
+    finally:
+        other.shutdown()
+        master.close()

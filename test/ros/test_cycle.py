@@ -12,7 +12,7 @@ import pytest
 
 from ssi_bridge.gateway import wire
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits
-from ssi_bridge.ros.realtime import fifo_this_thread, normal_this_thread
+from ssi_bridge.gateway.realtime import fifo_this_thread, normal_this_thread
 
 
 def test_runs_on_an_absolute_schedule_and_stops():

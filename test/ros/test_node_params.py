@@ -152,18 +152,29 @@ def test_sigterm_while_the_node_is_still_starting_exits_zero(start_node, tmp_pat
 
 
 # -- cycle_priority (docs/node.md "The cycle", Scheduling) --------------------------------------
-def _cycle_thread(pid: int) -> tuple[int, int]:
-    """(policy, priority) of the node's thread the kernel calls ssi_cycle."""
+def _threads(pid: int) -> dict[str, set[tuple[int, int]]]:
+    """Kernel thread name -> {(policy, priority)} of the threads of ``pid``."""
     import os
 
+    out: dict[str, set[tuple[int, int]]] = {}
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
-            if (task / "comm").read_text().strip() == "ssi_cycle":
-                tid = int(task.name)
-                return os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+            tid = int(task.name)
+            got = os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority
+            out.setdefault((task / "comm").read_text().strip(), set()).add(got)
         except OSError:
             continue  # that thread ended meanwhile
-    raise AssertionError(f"no thread named ssi_cycle in process {pid}")
+    return out
+
+
+def _cycle_thread(pid: int) -> tuple[int, int]:
+    """(policy, priority) of the node's cycle thread, checking that the master's receive
+    thread (ssi_can_rx) runs the same way: both keep the bus's time."""
+    threads = _threads(pid)
+    assert "ssi_cycle" in threads and "ssi_can_rx" in threads, sorted(threads)
+    assert threads["ssi_can_rx"] == threads["ssi_cycle"], threads
+    (got,) = threads["ssi_cycle"]
+    return got
 
 
 def _bus_value(probe, node, key: str) -> str:
@@ -194,9 +205,10 @@ def _may_drop_sys_nice() -> bool:
 
 
 def test_the_cycle_runs_at_cycle_priority_or_says_why_not(running, probe):
-    """Default cycle_priority 5: the ssi_cycle thread (and only it) runs SCHED_FIFO 5 and the
-    bus status says so; without the right to it, normal scheduling, one INFO line naming the
-    parameter, and the node still publishes; 0: normal and no such line."""
+    """Default cycle_priority 5: the cycle thread and the master's receive thread (and only
+    they) run SCHED_FIFO 5 and the bus status says so; without the right to it, normal
+    scheduling, one INFO line naming the parameter, and the node still publishes; 0: normal
+    and no such line."""
     import os
 
     from sensor_msgs.msg import JointState
@@ -205,10 +217,10 @@ def test_the_cycle_runs_at_cycle_priority_or_says_why_not(running, probe):
     got = _cycle_thread(node.proc.pid)
     if got == (os.SCHED_FIFO, 5):
         assert _bus_value(probe, node, "cycle_scheduling") == "SCHED_FIFO 5"
-        others = {os.sched_getscheduler(int(t.name))
-                  for t in Path(f"/proc/{node.proc.pid}/task").iterdir()
-                  if (t / "comm").read_text().strip() != "ssi_cycle"}
-        assert others == {os.SCHED_OTHER}, "only the cycle thread is real-time"
+        assert _bus_value(probe, node, "receive_scheduling") == "SCHED_FIFO 5"
+        others = {got for name, policies in _threads(node.proc.pid).items()
+                  if name not in ("ssi_cycle", "ssi_can_rx") for got in policies}
+        assert others == {(os.SCHED_OTHER, 0)}, "only the bus's two threads are real-time"
     else:
         assert got == (os.SCHED_OTHER, 0)
         assert "SCHED_FIFO 5 not permitted" in node.log()
@@ -220,6 +232,7 @@ def test_the_cycle_runs_at_cycle_priority_or_says_why_not(running, probe):
         assert ("ssi_cycle thread runs with normal scheduling: SCHED_FIFO 5 not permitted "
                 "(needs CAP_SYS_NICE or an rtprio limit; cycle_priority 0 skips this)") in node.log()
         assert _bus_value(probe, node, "cycle_scheduling") == "normal"
+        assert _bus_value(probe, node, "receive_scheduling") == "normal"
         seen = probe.subscribe(JointState, node.topic("joint_states"), qos=100)
         probe.wait_for(lambda: len(seen) >= 50, 10.0, "joint_states with normal scheduling", node)
         assert node.stop() == 0

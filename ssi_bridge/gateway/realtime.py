@@ -1,9 +1,11 @@
-"""Real-time scheduling for the node's loops and its station child (Linux; ROS-free).
+"""Real-time scheduling for the threads that keep the bus's time (Linux; ROS-free).
 
-A bus master's cycle is a hard schedule: a SYNC that goes out late is a sample latched late.
-On a busy robot computer a normally scheduled thread waits behind whatever else is runnable,
-so, as a ros2_control hardware loop does, the cycle thread asks for SCHED_FIFO. It is idle but
-for the cycle's work, so it takes little from anything else. Without the right to it (no
+A bus master's cycle is a hard schedule: a SYNC that goes out late is a sample latched late,
+and a TPDO handled late misses its cycle. On a busy robot computer a normally scheduled thread
+waits behind whatever else is runnable, so, as a ros2_control hardware loop does, the node's
+cycle thread and the master's receive thread ask for SCHED_FIFO, and the simulated station
+(hardware, which never waits for a CPU) runs at a higher one. They are idle but for the
+cycle's work, so they take little from anything else. Without the right to it (no
 CAP_SYS_NICE, no rtprio limit) everything runs normally and the caller says so once.
 """
 
