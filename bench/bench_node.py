@@ -28,6 +28,12 @@ server on; its CPU s/s in alternating windows with no client, one client
 (``bench/liveview_client.py``, another process) subscribed to joint_states, and one subscribed
 to every node topic; medians of 3 rounds (``node_1enc_liveview_*``).
 
+The subscriber runs SCHED_FIFO ``SUBSCRIBER_PRIORITY`` (3, below the node's default
+``cycle_priority`` 5), as the real-time consumer of a robot (a ros2_control loop) would: a
+normally scheduled subscriber that falls behind for tens of ms (starved by the node's and the
+station's real-time threads waking 2-3 kHz) adds its own backlog to every publisher's
+latency. Where SCHED_FIFO is not permitted it runs normally; the notes say which.
+
 QoS on both sides is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID.
 
@@ -38,6 +44,7 @@ Prints one JSON object per line and appends them to bench/results/latest.jsonl; 
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import random
 import signal
@@ -140,6 +147,34 @@ PR_SET_PDEATHSIG = 1
 _BENCH_PID = os.getpid()
 
 
+#: SCHED_FIFO priority of the subscriber process (0: normal scheduling)
+SUBSCRIBER_PRIORITY = 3
+
+
+@functools.cache
+def subscriber_scheduling() -> str:
+    """How the subscriber is scheduled, for the notes (tried in a short-lived child)."""
+    probe = subprocess.Popen(["sleep", "5"])
+    try:
+        os.sched_setscheduler(probe.pid, os.SCHED_FIFO, os.sched_param(SUBSCRIBER_PRIORITY))
+        return f"subscriber SCHED_FIFO {SUBSCRIBER_PRIORITY}"
+    except OSError:
+        return "subscriber normally scheduled (SCHED_FIFO not permitted)"
+    finally:
+        probe.kill()
+        probe.wait()
+
+
+def _real_time_subscriber() -> None:
+    """preexec_fn of the subscriber: as _die_with_parent, then SCHED_FIFO (every thread
+    rclpy starts inherits it), or normal scheduling where that is not permitted."""
+    _die_with_parent()
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SUBSCRIBER_PRIORITY))
+    except OSError:
+        pass
+
+
 def _die_with_parent() -> None:
     """preexec_fn of every process started here: SIGKILLed when this benchmark dies (a killed
     run leaves no publisher behind); SIGINT back to default (a background job of a
@@ -204,7 +239,7 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
             sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out), str(ready)],
                                    stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
                                    start_new_session=True,
-                                   preexec_fn=_die_with_parent)
+                                   preexec_fn=_real_time_subscriber)
         procs.append(sub)
         with open(pub_log, "wb") as log:
             pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
@@ -296,7 +331,8 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
         pinned = ", node pinned to one CPU (cpu_affinity)" if label else ""
         rec["note"] = (f"{note}; {n_joints} encoder(s) at {case_rate(n_joints):g} Hz, "
                        f"{BITRATE} bit/s{pinned}, baseline = bare "
-                       f"rclpy timer publisher of a {n_joints}-joint JointState, same subscriber")
+                       f"rclpy timer publisher of a {n_joints}-joint JointState, same subscriber "
+                       f"({subscriber_scheduling()})")
         emit(records, rec)
     if label:
         return
@@ -309,7 +345,8 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
                "unit": "us", "baseline": round(base, 1), "ratio": round(value / base, 3),
                "note": f"receive - header.stamp - computed SYNC->last TPDO wire time "
                        f"({wire_us:.0f} us, {n_joints} slot(s) at {BITRATE} bit/s, "
-                       f"{case_rate(n_joints):g} Hz); baseline = bare publisher's latency"}
+                       f"{case_rate(n_joints):g} Hz); baseline = bare publisher's latency; "
+                       f"{subscriber_scheduling()}"}
         if q == 99:
             rec["goal"] = "ratio <= 1.2"
             rec["goal_met"] = rec["ratio"] <= 1.2
@@ -329,7 +366,8 @@ def report_loaded(records: list[dict], n_joints: int, node: dict) -> None:
              "non-increasing header.stamp among received messages")):
         emit(records, {"metric": f"node_{n_joints}enc_loaded_{metric}", "value": value,
                        "unit": unit, "note": f"{note}; {n_joints} encoder(s) at {rate:g} Hz, "
-                       f"{BITRATE} bit/s, beside two CPU-burning processes (one per core)"})
+                       f"{BITRATE} bit/s, beside two CPU-burning processes (one per core); "
+                       f"{subscriber_scheduling()}"})
 
 
 def stations_cmd(n_stations: int, slots: int, domain_id: int, work: Path,

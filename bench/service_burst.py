@@ -1,7 +1,8 @@
 """Benchmark part of bench_node.py: a burst of service calls to the node at 1 kHz.
 
 The installed node runs one simulated encoder at 1000 Hz; ``bench/node_subscriber.py`` records
-every joint_states message in another process. After a warm-up, 4 clients (4 rclpy nodes in
+every joint_states message in another process (SCHED_FIFO 3 where permitted, as in
+bench_node.py: a starved subscriber would count its own backlog). After a warm-up, 4 clients (4 rclpy nodes in
 this process, KEEP_ALL queues so the clients themselves drop nothing) each send 250
 ``~/read_register`` calls at once, 1000 in all, and wait for every answer (success, or the
 node's prompt "busy: N queued" refusal). Reported, same run:
@@ -122,7 +123,7 @@ def run(records: list[dict], extra: dict | None = None) -> None:
                 procs.append(subprocess.Popen(
                     [sys.executable, str(bn.SUBSCRIBER), f"{bn.NODE_NS}/joint_states", str(out),
                      str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                    start_new_session=True))
+                    start_new_session=True, preexec_fn=bn._real_time_subscriber))
             with open(work / "node.log", "wb") as log:
                 node = subprocess.Popen(bn.node_cmd(1, domain_id, work, extra), stdout=log,
                                         stderr=subprocess.STDOUT, env=env, cwd=work,
@@ -154,7 +155,7 @@ def run(records: list[dict], extra: dict | None = None) -> None:
     busy = sum(m.startswith("read_register: busy:") for m in result["messages"])
     other = [m for m in result["messages"] if m not in ("ok", "") and "busy:" not in m]
     note = (f"{CLIENTS} clients x {CALLS_PER_CLIENT} ~/read_register calls at once to the node at "
-            f"{bn.RATE_HZ:g} Hz (1 encoder)"
+            f"{bn.RATE_HZ:g} Hz (1 encoder), {bn.subscriber_scheduling()}"
             + "".join(f", {k} {v}" for k, v in (extra or {}).items()))
     bn.emit(records, {"metric": "service_burst_answered_fraction", "value": len(times) / n,
                       "unit": "", "baseline": 1.0, "ratio": round(len(times) / n, 4),
