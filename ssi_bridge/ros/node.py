@@ -703,7 +703,7 @@ class SsiBridgeNode(Node):
         counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = self.client.table.late_frames
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
-        counters["cycle_scheduling"] = self.cycle.scheduling
+        counters["cycle_scheduling"] = getattr(self.cycle, "scheduling", "")
         if self.master is not None:
             counters["receive_scheduling"] = self.master.receive_scheduling
         meter = getattr(self.client, "load", None)
@@ -732,7 +732,7 @@ class SsiBridgeNode(Node):
         counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
         counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
-        counters["cycle_scheduling"] = self.cycle.scheduling
+        counters["cycle_scheduling"] = getattr(self.cycle, "scheduling", "")
         if self.master is not None:
             counters["receive_scheduling"] = self.master.receive_scheduling
         counters.update(self.master.load.figures())
