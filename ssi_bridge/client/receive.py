@@ -27,8 +27,7 @@ from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
 from ssi_bridge.gateway.bus import WireTimeListener
 from ssi_bridge.gateway.dictionary import tpdo_cob_base
-from ssi_bridge.gateway.realtime import (fifo_this_thread, name_this_thread,
-                                         scheduling_of_this_thread)
+from ssi_bridge.gateway.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
 
@@ -62,12 +61,11 @@ class FrameListener(WireTimeListener):
         self.scheduling = ""
 
     def _schedule_this_thread(self) -> None:
-        name_this_thread(RX_THREAD_NAME)
-        if not fifo_this_thread(self._priority):
+        self.scheduling, granted = run_this_thread_at(RX_THREAD_NAME, self._priority)
+        if not granted:
             # the cycle thread, refused for the same reason, says it at INFO
             logger.debug("%s runs with normal scheduling: SCHED_FIFO %d not permitted",
                          RX_THREAD_NAME, self._priority)
-        self.scheduling = scheduling_of_this_thread()
 
     def on_message_received(self, msg: can.Message) -> None:
         """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""

@@ -37,6 +37,14 @@ def fifo_this_thread(priority: int) -> bool:
     return True
 
 
+def run_this_thread_at(name: str, priority: int) -> tuple[str, bool]:
+    """Name the calling thread and put it on SCHED_FIFO ``priority`` (0: normal scheduling):
+    (its scheduling as :func:`scheduling_of_this_thread` says it, whether the request held)."""
+    name_this_thread(name)
+    granted = fifo_this_thread(priority)
+    return scheduling_of_this_thread(), granted
+
+
 def normal_this_thread() -> None:
     """Put the calling thread back on normal scheduling: a thread started by a SCHED_FIFO one
     inherits its policy, which a slow clean-up job must not keep."""

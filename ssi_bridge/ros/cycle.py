@@ -13,8 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from ssi_bridge.gateway.realtime import (fifo_this_thread, name_this_thread,
-                                         scheduling_of_this_thread)
+from ssi_bridge.gateway.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
 
@@ -73,12 +72,11 @@ class LoopThread:
             self._thread.join(timeout)
 
     def _main(self) -> None:
-        name_this_thread(self._thread.name)
-        if not fifo_this_thread(self.priority):
+        self.scheduling, granted = run_this_thread_at(self._thread.name, self.priority)
+        if not granted:
             logger.info("%s thread runs with normal scheduling: SCHED_FIFO %d not permitted "
                         "(needs CAP_SYS_NICE or an rtprio limit; cycle_priority 0 skips this)",
                         self._thread.name, self.priority)
-        self.scheduling = scheduling_of_this_thread()
         self._run()
 
     def _run(self) -> None:

@@ -699,19 +699,11 @@ class SsiBridgeNode(Node):
             return out + self._station_statuses()
         counters = dataclasses.asdict(self.client.counters)
         counters.update(self.recorder.counters())
-        counters["clock_steps"] = self.clock_steps
-        counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = self.client.table.late_frames
-        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
-        counters["cycle_scheduling"] = getattr(self.cycle, "scheduling", "")
-        if self.master is not None:
-            counters["receive_scheduling"] = self.master.receive_scheduling
+        counters.update(self._cycle_counters())
         meter = getattr(self.client, "load", None)
         if meter is not None:
             counters.update(meter.figures())
-        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
-        counters["service_busy_refusals"] = self.handlers.busy_refusals
-        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         counters.update(self.liveview.counters())
         out.append(bus_status(
             status_name(fqn, "bus"),
@@ -721,6 +713,20 @@ class SsiBridgeNode(Node):
             extra_error=self._bus_problem()))
         return out
 
+    def _cycle_counters(self) -> dict[str, Any]:
+        """The bus status's figures of the cycle, its threads and the services (one station
+        or several)."""
+        counters: dict[str, Any] = {
+            "clock_steps": self.clock_steps, "incomplete_cycles": self.incomplete_cycles,
+            "cycles_missed": getattr(self.cycle, "missed", 0),
+            "cycle_scheduling": getattr(self.cycle, "scheduling", "")}
+        if self.master is not None:
+            counters["receive_scheduling"] = self.master.receive_scheduling
+        counters["diagnostics_period_s"] = f"{self.settings.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self.handlers.busy_refusals
+        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
+        return counters
+
     def _station_statuses(self) -> list:
         """Several stations: one bus status (master, SYNC, rate) and one per station."""
         s = self.settings
@@ -728,17 +734,9 @@ class SsiBridgeNode(Node):
         assert self.master is not None
         counters = dataclasses.asdict(self.master.counters)
         counters.update(self.recorder.counters())
-        counters["clock_steps"] = self.clock_steps
-        counters["incomplete_cycles"] = self.incomplete_cycles
         counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
-        counters["cycles_missed"] = getattr(self.cycle, "missed", 0)
-        counters["cycle_scheduling"] = getattr(self.cycle, "scheduling", "")
-        if self.master is not None:
-            counters["receive_scheduling"] = self.master.receive_scheduling
+        counters.update(self._cycle_counters())
         counters.update(self.master.load.figures())
-        counters["diagnostics_period_s"] = f"{s.diagnostics_period:g}"
-        counters["service_busy_refusals"] = self.handlers.busy_refusals
-        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
         silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
         out = [bus_status(
             status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
