@@ -24,6 +24,7 @@ wakes late, so the receive time is late by as much, the wire time is not.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import ipaddress
 import logging
@@ -47,7 +48,13 @@ LOOPBACK = "127.0.0.1"
 IP_MULTICAST_ALL = 49
 #: derived groups live in the administratively scoped 239.74.0.0/16 (RFC 2365)
 _DERIVED_NET = (239, 74)
-_DERIVED_PORTS = (40000, 60000)
+#: derived ports: above Linux's ephemeral range (net.ipv4.ip_local_port_range, 32768-60999 by
+#: default), where any socket bound to port 0 (DDS's, a client's) may hold a port without
+#: SO_REUSEADDR and the bus's bind then fails; DDS itself uses these ports only for domain IDs
+#: from 215, beyond the 0-101 ROS recommends on Linux
+_DERIVED_PORTS = (61000, 65536)
+#: where Linux keeps its ephemeral port range
+_EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
 #: a sender's timestamp is taken as the frame's wire time only this close to its receive time
 #: (s): a python-can tool may send a frame with no stamp (0) or replay a logged one
 WIRE_TIME_PLAUSIBLE = 1.0
@@ -134,11 +141,30 @@ def parse_channel(channel: str) -> Endpoint:
     return Endpoint(group, port_number, interface or LOOPBACK)
 
 
+def ephemeral_ports() -> range | None:
+    """This machine's ephemeral UDP/TCP port range (Linux), or None where it cannot be read."""
+    try:
+        with open(_EPHEMERAL_RANGE_FILE, encoding="ascii") as f:
+            low, high = (int(v) for v in f.read().split())
+    except (OSError, ValueError):
+        return None
+    return range(low, high + 1)
+
+
+def _port_taken(port: int) -> str:
+    """Why binding ``port`` said EADDRINUSE, and what to do, for the error message."""
+    ephemeral = ephemeral_ports()
+    if ephemeral is not None and port in ephemeral:
+        return (f"port {port} lies in this machine's ephemeral range {ephemeral.start}-"
+                f"{ephemeral.stop - 1}, where any socket may hold it; choose a port outside it")
+    return f"another socket holds port {port} without SO_REUSEADDR"
+
+
 def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     """A group and port of their own for a bus named ``name`` (e.g. the node's bus.channel).
 
-    A hash of the name picks 239.74.x.y and a port in 40000-59999, so nodes (and test runs)
-    with different channel names never share a group and port.
+    A hash of the name picks 239.74.x.y and a port in 61000-65535 (above Linux's ephemeral
+    ports), so nodes (and test runs) with different channel names never share a group and port.
     """
     digest = hashlib.sha256(str(name).encode()).digest()
     x, y = digest[0], max(1, digest[1])
@@ -152,7 +178,16 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
 
     def __init__(self, endpoint: Endpoint, hop_limit: int) -> None:
         self._endpoint = endpoint
-        super().__init__(endpoint.group, endpoint.port, hop_limit)
+        try:
+            super().__init__(endpoint.group, endpoint.port, hop_limit)
+        except can.CanInitializationError as err:  # python-can's text hides the OS error
+            cause = err.__cause__
+            if not isinstance(cause, OSError):
+                raise
+            hint = f" ({_port_taken(endpoint.port)})" if cause.errno == errno.EADDRINUSE else ""
+            raise can.CanInitializationError(
+                f"cannot bind its receive socket: {cause.strerror or cause}{hint}") \
+                from cause
         iface = socket.inet_aton(endpoint.interface)
         send = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:

@@ -7,6 +7,7 @@ string names group, port and interface (gateway/multicast.py). Real sockets on l
 from __future__ import annotations
 
 import os
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -14,9 +15,10 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.exceptions import BusError, ConfigError
 from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.multicast import DEFAULT_PORT, Endpoint, derive_channel, parse_channel
+from ssi_bridge.gateway.multicast import (
+    DEFAULT_PORT, Endpoint, derive_channel, ephemeral_ports, parse_channel)
 from ssi_bridge.gateway.settings import load_params_file, station_settings
 
 
@@ -75,6 +77,35 @@ def test_derived_channels_are_stable_and_distinct() -> None:
     assert derive_channel("test_7_0") == derive_channel("test_7_0")
     channels = {derive_channel(f"test_{d}_{n}") for d in range(1, 233) for n in range(4)}
     assert len(channels) == 232 * 4  # every test domain and node index: its own group:port
+
+
+def test_derived_ports_lie_above_the_ephemeral_ports() -> None:
+    """A socket bound to port 0 (DDS opens dozens) takes a port in Linux's ephemeral range
+    and, without SO_REUSEADDR, keeps a bus from binding it: derived ports stay above it."""
+    ports = {parse_channel(derive_channel(f"test_{d}_{n}")).port
+             for d in range(1, 233) for n in range(4)}
+    assert min(ports) >= 61000 and max(ports) <= 65535
+    ephemeral = ephemeral_ports()
+    if ephemeral is not None:
+        assert not ports & set(ephemeral), (ephemeral, sorted(ports & set(ephemeral))[:5])
+
+
+def test_a_taken_port_is_named_with_the_reason() -> None:
+    """A port held by a socket without SO_REUSEADDR: the error says so (python-can's own
+    message is only "could not create or configure socket") and names the ephemeral range."""
+    holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    holder.bind(("127.0.0.1", 0))  # as DDS's and every client's sockets do
+    port = holder.getsockname()[1]
+    try:
+        with pytest.raises(BusError) as err:
+            open_bus(BusConfig(interface="udp_multicast", channel=f"239.74.250.9:{port}"))
+    finally:
+        holder.close()
+    text = str(err.value)
+    assert "Address already in use" in text, text
+    ephemeral = ephemeral_ports()
+    if ephemeral is not None and port in ephemeral:
+        assert f"ephemeral range {ephemeral.start}-{ephemeral.stop - 1}" in text, text
 
 
 #: ports of this test run only (parallel runs have other pids)

@@ -94,7 +94,7 @@ def _env(domain_id: int) -> dict[str, str]:
 
 
 def test_station_and_node_on_two_hosts_subscriber_on_a_third(namespaces, domain_id, tmp_path):
-    group = f"239.74.201.1:{40000 + domain_id}"
+    group = f"239.74.201.1:{61000 + domain_id}"
     params = {"joints": ["joint1"], "publish_rate": RATE, "bus.interface": "udp_multicast",
               "storage_path": str(tmp_path / "bank" / "retentive.json")}
     station_file = tmp_path / "station.yaml"
