@@ -109,11 +109,24 @@ def _watch_parent(parent: int, stop: threading.Event) -> None:
             stop.set()
 
 
+#: how often (s) the main thread looks whether a stop signal came
+STOP_POLL_S = 0.1
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the station until SIGINT/SIGTERM (0); 2 for bad parameters, 1 for bus errors."""
-    stop = threading.Event()
+    stop = threading.Event()  # set by the parent watch (a thread)
+    signalled: list[int] = []
+
+    def _on_signal(signum: int, _frame: object) -> None:
+        # only a note, no lock: the handler runs in the main thread between two bytecodes,
+        # maybe inside stop.wait()/stop.set() holding the Event's lock, and a second signal
+        # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) may land inside the first
+        # handler; threading.Event.set here deadlocked the station for good
+        signalled.append(signum)
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, _on_signal)
     args = _parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="[%(levelname)s] %(name)s: %(message)s")
@@ -140,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.parent_pid:
         threading.Thread(target=_watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     try:
-        while not stop.wait(0.5):
+        while not signalled and not stop.wait(STOP_POLL_S):
             pass
     finally:
         station.stop()
