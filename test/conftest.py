@@ -8,6 +8,7 @@ import os
 import random
 import signal
 import subprocess
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -140,3 +141,69 @@ def fill_up(directory: Path) -> Path:
     finally:
         os.close(fd)
     return filler
+
+
+# -- no orphans: a process of this repository that outlived its parent is a defect ----------
+#: how long (s) the end of the session waits for orphans that are still stopping
+ORPHAN_GRACE_S = 5.0
+_REPO = str(Path(__file__).resolve().parent.parent)
+_SESSION_START_TICKS: list[int] = []
+
+
+def _start_ticks(pid: int) -> int:
+    """A process's start time in clock ticks since boot (/proc/<pid>/stat field 22)."""
+    with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as f:
+        return int(f.read().rpartition(")")[2].split()[19])
+
+
+def _orphans() -> list[tuple[int, str]]:
+    """Processes of this checkout (their command line names it) started during this session
+    whose parent is gone (re-parented to init)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        pid = int(entry)
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace").strip()
+            if _REPO not in cmd or pid == os.getpid():
+                continue
+            with open(f"/proc/{pid}/status", encoding="ascii", errors="replace") as f:
+                ppid = next(int(ln.split()[1]) for ln in f if ln.startswith("PPid:"))
+            if ppid == 1 and _start_ticks(pid) >= _SESSION_START_TICKS[0]:
+                found.append((pid, cmd))
+        except (OSError, StopIteration, ValueError, IndexError):
+            continue  # ended meanwhile
+    return found
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    _SESSION_START_TICKS.append(_start_ticks(os.getpid()))
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Fail the run if a node, station or tool a test started outlived its parent (a child
+    must die with its node; a test must stop what it starts); kill them after reporting."""
+    if not _SESSION_START_TICKS or not os.path.isdir("/proc"):
+        return
+    deadline = time.monotonic() + ORPHAN_GRACE_S
+    orphans = _orphans()
+    while orphans and time.monotonic() < deadline:
+        time.sleep(0.2)
+        orphans = _orphans()
+    if not orphans:
+        return
+    reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+    if reporter is not None:
+        reporter.write_line("")
+        reporter.write_sep("=", "processes that outlived their parent: the run fails", red=True)
+    for pid, cmd in orphans:
+        line = f"orphan process {pid} (parent gone) outlived the session: {cmd[:300]}"
+        if reporter is not None:
+            reporter.write_line(line, red=True)
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    session.exitstatus = pytest.ExitCode.TESTS_FAILED
