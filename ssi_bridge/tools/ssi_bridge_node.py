@@ -19,16 +19,12 @@ not answer) exits 1 with the reason on one line instead of a traceback.
 from __future__ import annotations
 
 import signal
-import socket
 import sys
-import threading
 import time
-from collections.abc import Callable
 
 from ssi_bridge.record.heap import fix_mmap_threshold, limit_malloc_arenas
+from ssi_bridge.tools.stop_signals import STOP_SIGNALS, StopRequests
 
-#: the stop signals a launch system or a terminal sends
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 #: longest reason printed for a start-up error (an echoed 1 MB value stays readable)
 MAX_REASON = 400
 #: seconds a stop waits for callbacks still running (a register handshake takes < 1 s)
@@ -58,66 +54,6 @@ from ssi_bridge.exceptions import SsiBridgeError  # noqa: E402
 
 #: errors that mean "this configuration cannot run", reported in one line
 START_ERRORS = (SsiBridgeError, ParameterException, NameValidationException, ValueError, OSError)
-
-
-class StopRequests:
-    """Stop signals, seen by a watcher thread through ``signal.set_wakeup_fd``.
-
-    The Python-level handler does nothing (it only has to exist so that CPython's C handler
-    writes the signal number to the wake-up socket); the watcher thread sets :attr:`event`
-    and calls the ``on_stop`` callbacks once, at the first signal.
-    """
-
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.signum = 0
-        self._callbacks: list[Callable[[], None]] = []
-        self._lock = threading.Lock()
-        self._reader, self._writer = socket.socketpair()
-        self._writer.setblocking(False)
-
-    @property
-    def requested(self) -> bool:
-        """True once a stop signal (or :meth:`request`) arrived."""
-        return self.event.is_set()
-
-    def install(self) -> None:
-        """Route SIGINT and SIGTERM to the watcher (main thread only)."""
-        for sig in STOP_SIGNALS:
-            signal.signal(sig, _ignore)
-        signal.set_wakeup_fd(self._writer.fileno(), warn_on_full_buffer=False)
-        threading.Thread(target=self._watch, name="stop-signals", daemon=True).start()
-
-    def on_stop(self, callback: Callable[[], None]) -> None:
-        """Call ``callback`` at the first stop (at once if it already happened)."""
-        with self._lock:
-            if not self.event.is_set():
-                self._callbacks.append(callback)
-                return
-        callback()
-
-    def request(self) -> None:
-        """Stop as if a signal had arrived (e.g. the end of a replayed log)."""
-        with self._lock:
-            if self.event.is_set():
-                return
-            self.event.set()
-            callbacks, self._callbacks = self._callbacks, []
-        for callback in callbacks:
-            callback()
-
-    def _watch(self) -> None:
-        while True:
-            data = self._reader.recv(64)
-            if not data:
-                return
-            if not self.event.is_set():
-                self.signum = data[0]
-                self.request()
-
-
-def _ignore(_signum: int, _frame: object) -> None:
-    """The Python side of a stop signal: nothing (the watcher thread acts on it)."""
 
 
 def one_line(err: object, limit: int = MAX_REASON) -> str:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import sys
 import threading
 from typing import Any
@@ -20,6 +19,7 @@ import yaml
 
 from ssi_bridge.exceptions import SsiBridgeError
 from ssi_bridge.gateway.settings import load_params_file, station_settings
+from ssi_bridge.tools.stop_signals import StopRequests
 
 logger = logging.getLogger(__name__)
 
@@ -101,32 +101,20 @@ def _values(args: argparse.Namespace) -> dict[str, Any]:
     return values
 
 
-def _watch_parent(parent: int, stop: threading.Event) -> None:
+def _watch_parent(parent: int, stop: StopRequests) -> None:
     """Stop when the parent is gone (PR_SET_PDEATHSIG is the fast path; this is the sure one)."""
-    while not stop.wait(0.2):
+    while not stop.event.wait(0.2):
         if os.getppid() != parent:
             logger.warning("parent process %d is gone: stopping", parent)
-            stop.set()
-
-
-#: how often (s) the main thread looks whether a stop signal came
-STOP_POLL_S = 0.1
+            stop.request()
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the station until SIGINT/SIGTERM (0); 2 for bad parameters, 1 for bus errors."""
-    stop = threading.Event()  # set by the parent watch (a thread)
-    signalled: list[int] = []
-
-    def _on_signal(signum: int, _frame: object) -> None:
-        # only a note, no lock: the handler runs in the main thread between two bytecodes,
-        # maybe inside stop.wait()/stop.set() holding the Event's lock, and a second signal
-        # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) may land inside the first
-        # handler; threading.Event.set here deadlocked the station for good
-        signalled.append(signum)
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _on_signal)
+    # a handler that set an Event itself deadlocked the station for good when a second signal
+    # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) landed inside the first one
+    stop = StopRequests()
+    stop.install()
     args = _parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="[%(levelname)s] %(name)s: %(message)s")
@@ -153,8 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.parent_pid:
         threading.Thread(target=_watch_parent, args=(args.parent_pid, stop), daemon=True).start()
     try:
-        while not signalled and not stop.wait(STOP_POLL_S):
-            pass
+        stop.event.wait()
     finally:
         station.stop()
     return 0
