@@ -44,6 +44,21 @@ def test_fast_frame_length_equals_the_bit_by_bit_reference():
         assert wire.frame_bits(cid, data) <= wire.worst_frame_bits(len(data))
 
 
+def test_a_remembered_frame_length_follows_the_frame_content():
+    # frame_bits remembers lengths by content: the same bytearray changed in place (as a
+    # received payload buffer may be) is a new frame
+    data = bytearray(8)
+    zeros = wire.frame_bits(0x181, data)
+    data[:] = bytes([0x55] * 8)
+    assert wire.frame_bits(0x181, data) == wire.reference_frame_bits(0x181, bytes(data)) != zeros
+    data[:] = bytes(8)
+    assert wire.frame_bits(0x181, data) == zeros == wire.reference_frame_bits(0x181, bytes(8))
+    with pytest.raises(ValueError, match="11-bit"):
+        wire.frame_bits(0x800, data)
+    with pytest.raises(ValueError, match="11-bit"):  # a refusal is not remembered as a length
+        wire.frame_bits(0x800, data)
+
+
 def test_frame_length_counts_stuff_bits():
     # 34 + 8n stuffable bits + 13 tail bits, plus stuffing: all-zero data stuffs every 5 bits
     assert wire.frame_bits(0x080) >= 47
