@@ -153,16 +153,12 @@ SUBSCRIBER_PRIORITY = 3
 
 @functools.cache
 def subscriber_scheduling() -> str:
-    """How the subscriber is scheduled, for the notes (tried in a short-lived child)."""
-    probe = subprocess.Popen(["sleep", "5"])
-    try:
-        os.sched_setscheduler(probe.pid, os.SCHED_FIFO, os.sched_param(SUBSCRIBER_PRIORITY))
+    """How the subscriber is scheduled, for the notes."""
+    from ssi_bridge.gateway.realtime import fifo_permitted
+
+    if fifo_permitted(SUBSCRIBER_PRIORITY):
         return f"subscriber SCHED_FIFO {SUBSCRIBER_PRIORITY}"
-    except OSError:
-        return "subscriber normally scheduled (SCHED_FIFO not permitted)"
-    finally:
-        probe.kill()
-        probe.wait()
+    return "subscriber normally scheduled (SCHED_FIFO not permitted)"
 
 
 def _real_time_subscriber() -> None:

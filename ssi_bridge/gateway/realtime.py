@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
 import time
 
 #: prctl(2) option: name the calling thread (shown by top -H, ps -L, /proc/<pid>/task/*/comm)
@@ -42,6 +43,35 @@ def fifo_this_thread(priority: int) -> bool:
     except OSError:  # EPERM without the right, EINVAL outside the policy's range
         return False
     return True
+
+
+def fifo_permitted(priority: int = 1) -> bool:
+    """Whether this process may use SCHED_FIFO ``priority`` (CAP_SYS_NICE, or an rtprio limit
+    that high), for itself or a child: tried in a short-lived thread, so no thread that goes
+    on running changes its scheduling."""
+    granted: list[bool] = []
+    probe = threading.Thread(target=lambda: granted.append(fifo_this_thread(priority)),
+                             name="fifo_probe")
+    probe.start()
+    probe.join()
+    return bool(granted) and granted[0]
+
+
+def thread_policies(pid: int) -> set[tuple[int, int]]:
+    """(scheduling policy, priority) of every thread of process ``pid``; a thread that ends
+    while they are read is left out."""
+    found = set()
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return found
+    for task in tasks:
+        tid = int(task)
+        try:
+            found.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority))
+        except OSError:
+            pass  # that thread ended meanwhile
+    return found
 
 
 def run_this_thread_at(name: str, priority: int) -> tuple[str, bool]:

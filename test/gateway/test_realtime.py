@@ -6,11 +6,10 @@ import os
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from ssi_bridge.gateway.realtime import raise_priority
+from ssi_bridge.gateway.realtime import fifo_permitted, raise_priority, thread_policies
 
 #: a process whose threads keep starting threads (as a booting station starts its timers and
 #: listeners): each thread starts one successor and ends, so a thread that was normal when it
@@ -27,27 +26,8 @@ time.sleep(60)
 """
 
 
-def _may_use_fifo() -> bool:
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
-    except OSError:
-        return False
-    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    return True
-
-
-def _policies(pid: int) -> set[tuple[int, int]]:
-    out = set()
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            tid = int(task.name)
-            out.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority))
-        except OSError:
-            pass  # that thread ended meanwhile
-    return out
-
-
-@pytest.mark.skipif(not _may_use_fifo(), reason="SCHED_FIFO not permitted here (no CAP_SYS_NICE)")
+@pytest.mark.skipif(not fifo_permitted(7),
+                    reason="SCHED_FIFO not permitted here (no CAP_SYS_NICE)")
 def test_raise_priority_reaches_threads_started_while_it_runs():
     for _ in range(20):
         proc = subprocess.Popen([sys.executable, "-c", SPAWNER], stdout=subprocess.PIPE)
@@ -55,7 +35,7 @@ def test_raise_priority_reaches_threads_started_while_it_runs():
             assert proc.stdout is not None and proc.stdout.readline() == b"up\n"
             assert raise_priority(proc.pid, 7)
             for _ in range(20):  # the chains go on: every thread they start stays FIFO 7
-                assert _policies(proc.pid) == {(os.SCHED_FIFO, 7)}
+                assert thread_policies(proc.pid) == {(os.SCHED_FIFO, 7)}
                 time.sleep(0.002)
         finally:
             proc.kill()
@@ -73,13 +53,22 @@ def _without_fifo_rights() -> None:
 
 
 def test_raise_priority_says_when_not_permitted():
-    """Without the right, False (the node then logs its INFO line) and the process is untouched."""
+    """Without the right, False (the node then logs its INFO line) and the process is untouched;
+    fifo_permitted says so beforehand, and its probe leaves no thread of the caller raised."""
     script = ("import subprocess, os\n"
-              "from ssi_bridge.gateway.realtime import raise_priority\n"
+              "from ssi_bridge.gateway.realtime import fifo_permitted, raise_priority, "
+              "thread_policies\n"
               "p = subprocess.Popen(['sleep', '30'])\n"
-              "print(raise_priority(p.pid, 7), os.sched_getscheduler(p.pid) == os.SCHED_OTHER)\n"
+              "print(raise_priority(p.pid, 7), os.sched_getscheduler(p.pid) == os.SCHED_OTHER,\n"
+              "      fifo_permitted(7), thread_policies(os.getpid()) == {(os.SCHED_OTHER, 0)})\n"
               "p.kill()\n")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          preexec_fn=_without_fifo_rights, timeout=30)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "True"]
+    assert out.stdout.split() == ["False", "True", "False", "True"]
+
+
+def test_fifo_permitted_leaves_every_thread_as_it_was():
+    before = thread_policies(os.getpid())
+    fifo_permitted(7)
+    assert thread_policies(os.getpid()) == before  # the probe thread has ended, nothing raised

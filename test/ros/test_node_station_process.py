@@ -22,6 +22,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
 
 from ssi_bridge.gateway.multicast import derive_channel
+from ssi_bridge.gateway.realtime import fifo_permitted, thread_policies
 
 from .conftest import dds_env, installed_executable
 
@@ -277,42 +278,17 @@ def test_station_bad_parameters_exit_2_in_one_line(tmp_path):
     assert len(err) == 1 and "a.motion.kind" in err[0], err
 
 
-def _policies(pid: int) -> set[tuple[int, int]]:
-    """(scheduling policy, priority) of every thread of ``pid``."""
-    out = set()
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        tid = int(task.name)
-        try:
-            out.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority))
-        except OSError:
-            pass  # the thread ended meanwhile
-    return out
-
-
-def _may_use_fifo() -> bool:
-    """Whether this test process may raise a process to SCHED_FIFO (root, CAP_SYS_NICE)."""
-    probe = subprocess.Popen(["sleep", "5"])
-    try:
-        os.sched_setscheduler(probe.pid, os.SCHED_FIFO, os.sched_param(1))
-        return True
-    except OSError:
-        return False
-    finally:
-        probe.kill()
-        probe.wait()
-
-
 def test_the_station_child_runs_at_its_priority_or_says_why_not(running):
     """simulation.station_priority (docs/node.md): SCHED_FIFO 10 for every thread of the child,
     or, without the right to it, normal scheduling and one INFO line saying so; 0: normal."""
     node = running(CHILD)
     station = _station_of(node)
-    if _may_use_fifo():
-        assert _policies(station) == {(os.SCHED_FIFO, 10)}, _policies(station)
+    if fifo_permitted(10):
+        assert thread_policies(station) == {(os.SCHED_FIFO, 10)}, thread_policies(station)
     else:
-        assert _policies(station) == {(os.SCHED_OTHER, 0)}
+        assert thread_policies(station) == {(os.SCHED_OTHER, 0)}
         assert "SCHED_FIFO 10 not permitted" in node.log()
     assert node.stop() == 0
     node = running({**CHILD, "simulation.station_priority": 0})
-    assert _policies(_station_of(node)) == {(os.SCHED_OTHER, 0)}
+    assert thread_policies(_station_of(node)) == {(os.SCHED_OTHER, 0)}
     assert "simulated station runs with normal scheduling" not in node.log()
