@@ -19,6 +19,14 @@ same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per p
 * ``latency_beyond_wire_p50_us`` / ``_p99_us``: receive - header.stamp minus the
   computed SYNC -> last TPDO wire time (the TPDOs of one cycle, worst-case stuffed) against
   the bare publisher's latency (goal p99 <= 1.2x)
+* ``latency_floor_p50_us`` / ``_p99_us``: the floor publisher (this file with ``--floor``)
+  against the bare one. Another process sends a datagram stamped with its send time at the
+  case rate; a thread of an rclpy node, woken by it at the node's receive-thread priority,
+  publishes the same JointState stamped with that send time at once. That is the least any
+  rclpy node adds that publishes data it receives from a device (its receive thread's
+  wake-up, nothing else): the bridge's latency beyond the wire cannot be below it.
+  ``latency_beyond_wire_vs_floor_p50_us`` / ``_p99_us``: the node's latency beyond the wire
+  against the floor: what the bridge adds on top of that
 * loaded run (1 encoder, 1 kHz, two CPU-burning processes beside it, killed by PID at the
   end): ``cycles_missed_fraction``, ``spurious_faults`` (EMCY / "silent" in the node log),
   ``stamp_inversions``
@@ -121,6 +129,86 @@ def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
 
     node.create_timer(1.0 / rate, tick)
     spin_until_shutdown(node)
+    return 0
+
+
+# -- the floor publisher (a subprocess of this file) ------------------------------------------
+#: the floor's receive thread runs at the node's default cycle_priority, which the node's CAN
+#: receive thread takes too
+FLOOR_PRIORITY = 5
+FLOOR_TOPIC = "/bench_floor/joint_states"
+
+
+def floor_sender(port: int, rate: float, parent: int) -> int:
+    """Send a datagram holding ``time.time_ns()`` to 127.0.0.1:``port`` ``rate`` times a
+    second until the process ``parent`` (the floor publisher) ends."""
+    import socket
+    import struct
+
+    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:
+        return 1  # the publisher died before prctl took effect
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    period, due = 1.0 / rate, time.monotonic()
+    while True:
+        due += period
+        wait = due - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        sock.sendto(struct.pack("<q", time.time_ns()), ("127.0.0.1", port))
+
+
+def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
+    """The least any rclpy node that publishes what it receives adds to the bare publisher.
+
+    Another process sends a datagram stamped with its send time ``rate`` times a second (as a
+    station's last TPDO reaches the node); a thread of this node, blocked on the socket at
+    ``FLOOR_PRIORITY`` as the node's CAN receive thread is, wakes and publishes an N-joint
+    JointState stamped with that send time at once: no simulation, no CAN decoding, no
+    hand-off to another thread, nothing computed. Runs until SIGINT.
+    """
+    import socket
+    import struct
+    import threading
+
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from ssi_bridge.gateway.realtime import run_this_thread_at
+    from ssi_bridge.tools.spin import spin_until_shutdown
+
+    rclpy.init(args=None)
+    node = rclpy.create_node(f"bench_floor_{os.getpid()}")
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    pub = node.create_publisher(JointState, topic, qos)
+    names = [f"j{i + 1}" for i in range(n_joints)]
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sender = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--floor-sender",
+                               str(sock.getsockname()[1]), str(rate), str(os.getpid())])
+
+    def receive() -> None:
+        run_this_thread_at("floor_rx", FLOOR_PRIORITY)
+        count = 0
+        while True:
+            sent_ns = struct.unpack("<q", sock.recv(64))[0]
+            count += 1
+            js = JointState()
+            js.header.stamp.sec, js.header.stamp.nanosec = divmod(sent_ns, 1_000_000_000)
+            js.name = names
+            js.position = [count * 1e-3] * n_joints
+            js.velocity = [1.0] * n_joints
+            pub.publish(js)
+
+    threading.Thread(target=receive, name="floor_rx", daemon=True).start()
+    try:
+        spin_until_shutdown(node)
+    finally:
+        sender.kill()
+        sender.wait(5)
     return 0
 
 
@@ -313,6 +401,11 @@ def bare_cmd(n_joints: int) -> list[str]:
             str(case_rate(n_joints)), BARE_TOPIC]
 
 
+def floor_cmd(n_joints: int) -> list[str]:
+    return [sys.executable, str(Path(__file__).resolve()), "--floor", str(n_joints),
+            str(case_rate(n_joints)), FLOOR_TOPIC]
+
+
 def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: str = "") -> None:
     for key, note in NOTES.items():
         value, base = node[key], bare[key]
@@ -347,6 +440,33 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
             rec["goal"] = "ratio <= 1.2"
             rec["goal_met"] = rec["ratio"] <= 1.2
         emit(records, rec)
+
+
+def report_floor(records: list[dict], n_joints: int, node: dict, bare: dict,
+                 floor: dict) -> None:
+    """The floor publisher against the bare one, and the node's latency beyond the wire
+    against the floor: what the bridge adds beyond what any receiving rclpy node adds."""
+    import numpy as np
+    wire_us = after_sync_wire_s(n_joints) * 1e6
+    beyond = node["latency"] - wire_us
+    where = (f"{n_joints} joint(s) at {case_rate(n_joints):g} Hz; {subscriber_scheduling()}; "
+             f"floor received {floor['rate_hz']:.0f} msg/s")
+    for q in (50, 99):
+        f, b, nb = (float(np.percentile(x, q)) for x in (floor["latency"], bare["latency"],
+                                                        beyond))
+        emit(records, {
+            "metric": f"node_{n_joints}enc_latency_floor_p{q}_us", "value": round(f, 1),
+            "unit": "us", "baseline": round(b, 1), "ratio": round(f / b, 3),
+            "note": "receive - send time of a datagram another process sent, published at "
+                    "once by the rclpy thread it woke (SCHED_FIFO "
+                    f"{FLOOR_PRIORITY}): the least a node publishing what it receives adds; "
+                    f"baseline = bare publisher's latency; {where}"})
+        emit(records, {
+            "metric": f"node_{n_joints}enc_latency_beyond_wire_vs_floor_p{q}_us",
+            "value": round(nb, 1), "unit": "us", "baseline": round(f, 1),
+            "ratio": round(nb / f, 3),
+            "note": f"the node's latency beyond the wire ({wire_us:.0f} us subtracted) against "
+                    f"the floor publisher's latency; {where}"})
 
 
 def report_loaded(records: list[dict], n_joints: int, node: dict) -> None:
@@ -561,6 +681,9 @@ def run(records: list[dict]) -> None:
                 bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work,
                                case_rate(n))
                 report(records, n, node, bare)
+                floor = measure(f"floor{n}", floor_cmd(n), FLOOR_TOPIC, env, work,
+                                case_rate(n))
+                report_floor(records, n, node, bare, floor)
                 plain[n] = node
                 if n == max(CASES):
                     pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
@@ -615,4 +738,8 @@ def main() -> int:
 if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--bare":
         sys.exit(bare_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
+    if len(sys.argv) == 5 and sys.argv[1] == "--floor":
+        sys.exit(floor_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
+    if len(sys.argv) == 5 and sys.argv[1] == "--floor-sender":
+        sys.exit(floor_sender(int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])))
     sys.exit(main())
