@@ -62,6 +62,7 @@ import tempfile
 import time
 import traceback
 from pathlib import Path
+from typing import Any
 
 from benchlib import cpu_seconds, save
 from benchlib import emit_record as emit
@@ -100,32 +101,46 @@ NOTES = {
 
 
 # -- the bare publisher (a subprocess of this file) -------------------------------------------
-def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
-    """A bare rclpy timer publishing an N-joint JointState at ``rate``; runs until SIGINT."""
+def _joint_state_publisher(kind: str, topic: str) -> tuple[Any, Any]:
+    """rclpy started, a node ``bench_<kind>_<pid>`` and its JointState publisher on ``topic``
+    with the bridge's QoS."""
     import rclpy
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    from ssi_bridge.tools.spin import spin_until_shutdown
-
     rclpy.init(args=None)
-    node = rclpy.create_node(f"bench_bare_{os.getpid()}")
+    node = rclpy.create_node(f"bench_{kind}_{os.getpid()}")
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                      reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.VOLATILE)
-    pub = node.create_publisher(JointState, topic, qos)
+    return node, node.create_publisher(JointState, topic, qos)
+
+
+def _joint_state(names: list[str], count: int, sec: int, nanosec: int) -> Any:
+    """The benchmark's JointState: ``names``, a position that moves with ``count``, a speed."""
+    from sensor_msgs.msg import JointState
+
+    js = JointState()
+    js.header.stamp.sec, js.header.stamp.nanosec = sec, nanosec
+    js.name = names
+    js.position = [count * 1e-3] * len(names)
+    js.velocity = [1.0] * len(names)
+    return js
+
+
+def bare_publisher(n_joints: int, rate: float, topic: str) -> int:
+    """A bare rclpy timer publishing an N-joint JointState at ``rate``; runs until SIGINT."""
+    from ssi_bridge.tools.spin import spin_until_shutdown
+
+    node, pub = _joint_state_publisher("bare", topic)
     names = [f"j{i + 1}" for i in range(n_joints)]
     clock = node.get_clock()
     count = [0]
 
     def tick() -> None:
         count[0] += 1
-        js = JointState()
-        js.header.stamp = clock.now().to_msg()
-        js.name = names
-        js.position = [count[0] * 1e-3] * n_joints
-        js.velocity = [1.0] * n_joints
-        pub.publish(js)
+        sec, nanosec = clock.now().seconds_nanoseconds()
+        pub.publish(_joint_state(names, count[0], sec, nanosec))
 
     node.create_timer(1.0 / rate, tick)
     spin_until_shutdown(node)
@@ -171,19 +186,10 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
     import struct
     import threading
 
-    import rclpy
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
-
     from ssi_bridge.gateway.realtime import run_this_thread_at
     from ssi_bridge.tools.spin import spin_until_shutdown
 
-    rclpy.init(args=None)
-    node = rclpy.create_node(f"bench_floor_{os.getpid()}")
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.VOLATILE)
-    pub = node.create_publisher(JointState, topic, qos)
+    node, pub = _joint_state_publisher("floor", topic)
     names = [f"j{i + 1}" for i in range(n_joints)]
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
@@ -196,12 +202,7 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
         while True:
             sent_ns = struct.unpack("<q", sock.recv(64))[0]
             count += 1
-            js = JointState()
-            js.header.stamp.sec, js.header.stamp.nanosec = divmod(sent_ns, 1_000_000_000)
-            js.name = names
-            js.position = [count * 1e-3] * n_joints
-            js.velocity = [1.0] * n_joints
-            pub.publish(js)
+            pub.publish(_joint_state(names, count, *divmod(sent_ns, 1_000_000_000)))
 
     threading.Thread(target=receive, name="floor_rx", daemon=True).start()
     try:
