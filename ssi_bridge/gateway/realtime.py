@@ -57,21 +57,27 @@ def fifo_permitted(priority: int = 1) -> bool:
     return bool(granted) and granted[0]
 
 
-def thread_policies(pid: int) -> set[tuple[int, int]]:
-    """(scheduling policy, priority) of every thread of process ``pid``; a thread that ends
-    while they are read is left out."""
-    found = set()
+def _schedules(pid: int) -> dict[int, tuple[int, int]] | None:
+    """Thread id -> (scheduling policy, priority) of every thread of process ``pid`` (None: no
+    such process); a thread that ends while they are read is left out."""
     try:
         tasks = os.listdir(f"/proc/{pid}/task")
     except OSError:
-        return found
+        return None
+    found = {}
     for task in tasks:
         tid = int(task)
         try:
-            found.add((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority))
+            found[tid] = (os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority)
         except OSError:
             pass  # that thread ended meanwhile
     return found
+
+
+def thread_policies(pid: int) -> set[tuple[int, int]]:
+    """(scheduling policy, priority) of every thread of process ``pid`` (empty: no such
+    process)."""
+    return set((_schedules(pid) or {}).values())
 
 
 def run_this_thread_at(name: str, priority: int) -> tuple[str, bool]:
@@ -99,18 +105,15 @@ def raise_priority(pid: int, priority: int) -> bool:
     """
     clean = 0
     for _ in range(RAISE_ROUNDS):
-        try:
-            tasks = os.listdir(f"/proc/{pid}/task")
-        except OSError:
+        threads = _schedules(pid)
+        if threads is None:
             return True  # the process ended meanwhile (the caller reports that)
         missed = False
-        for task in tasks:
-            tid = int(task)
+        for tid, schedule in threads.items():
+            if schedule == (os.SCHED_FIFO, priority):
+                continue
+            missed = True
             try:
-                if (os.sched_getscheduler(tid) == os.SCHED_FIFO
-                        and os.sched_getparam(tid).sched_priority == priority):
-                    continue
-                missed = True
                 os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
             except ProcessLookupError:
                 pass  # that thread ended meanwhile
