@@ -154,15 +154,12 @@ FLOOR_PRIORITY = 5
 FLOOR_TOPIC = "/bench_floor/joint_states"
 
 
-def floor_sender(port: int, rate: float, parent: int) -> int:
+def floor_sender(port: int, rate: float) -> int:
     """Send a datagram holding ``time.time_ns()`` to 127.0.0.1:``port`` ``rate`` times a
-    second until the process ``parent`` (the floor publisher) ends."""
+    second (started with :func:`_die_with_parent`: it ends with the floor publisher)."""
     import socket
     import struct
 
-    _prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    if os.getppid() != parent:
-        return 1  # the publisher died before prctl took effect
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     period, due = 1.0 / rate, time.monotonic()
     while True:
@@ -193,8 +190,10 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
     names = [f"j{i + 1}" for i in range(n_joints)]
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
+    # _die_with_parent: in this process _BENCH_PID is the floor publisher's own PID
     sender = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--floor-sender",
-                               str(sock.getsockname()[1]), str(rate), str(os.getpid())])
+                               str(sock.getsockname()[1]), str(rate)],
+                              preexec_fn=_die_with_parent)
 
     def receive() -> None:
         run_this_thread_at("floor_rx", FLOOR_PRIORITY)
@@ -301,6 +300,12 @@ def after_sync_wire_s(n_joints: int) -> float:
     """Computed SYNC -> last TPDO wire time (s): the TPDOs of one cycle, worst-case stuffed."""
     from ssi_bridge.gateway import wire
     return sum(wire.worst_frame_bits(b) for b in wire.cycle_payloads(n_joints)[1:]) / BITRATE
+
+
+def beyond_wire_us(n_joints: int, node: dict) -> tuple[float, Any]:
+    """The computed SYNC -> last TPDO wire time (us) and the node's latencies minus it."""
+    wire_us = after_sync_wire_s(n_joints) * 1e6
+    return wire_us, node["latency"] - wire_us
 
 
 def burners(n: int) -> list[subprocess.Popen]:
@@ -427,8 +432,7 @@ def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: st
     if label:
         return
     import numpy as np
-    wire_us = after_sync_wire_s(n_joints) * 1e6
-    beyond = node["latency"] - wire_us
+    wire_us, beyond = beyond_wire_us(n_joints, node)
     for q in (50, 99):
         value, base = float(np.percentile(beyond, q)), float(np.percentile(bare["latency"], q))
         rec = {"metric": f"node_{n_joints}enc_latency_beyond_wire_p{q}_us", "value": round(value, 1),
@@ -448,8 +452,7 @@ def report_floor(records: list[dict], n_joints: int, node: dict, bare: dict,
     """The floor publisher against the bare one, and the node's latency beyond the wire
     against the floor: what the bridge adds beyond what any receiving rclpy node adds."""
     import numpy as np
-    wire_us = after_sync_wire_s(n_joints) * 1e6
-    beyond = node["latency"] - wire_us
+    wire_us, beyond = beyond_wire_us(n_joints, node)
     where = (f"{n_joints} joint(s) at {case_rate(n_joints):g} Hz; {subscriber_scheduling()}; "
              f"floor received {floor['rate_hz']:.0f} msg/s")
     for q in (50, 99):
@@ -741,6 +744,6 @@ if __name__ == "__main__":
         sys.exit(bare_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
     if len(sys.argv) == 5 and sys.argv[1] == "--floor":
         sys.exit(floor_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
-    if len(sys.argv) == 5 and sys.argv[1] == "--floor-sender":
-        sys.exit(floor_sender(int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])))
+    if len(sys.argv) == 4 and sys.argv[1] == "--floor-sender":
+        sys.exit(floor_sender(int(sys.argv[2]), float(sys.argv[3])))
     sys.exit(main())
