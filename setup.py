@@ -31,7 +31,7 @@ setup(
             f"replay = {PACKAGE}.tools.replay:main",
             f"plot = {PACKAGE}.tools.plot:main",
             f"monitor = {PACKAGE}.tools.monitor:main",
-            f"station = {PACKAGE}.tools.station:main",
+            f"station = {PACKAGE}.sim.program:main",
         ],
     },
 )

@@ -51,7 +51,7 @@ def bare_sdo_us() -> float:
     """A bare canopen LocalNode/RemoteNode SDO upload of a UNSIGNED32 on the virtual bus."""
     import canopen
 
-    from ssi_bridge.gateway.dictionary import build_dictionary
+    from ssi_bridge.base.od import build_dictionary
 
     server, master = canopen.Network(), canopen.Network()
     server.NOTIFIER_CYCLE = master.NOTIFIER_CYCLE = 0.05
@@ -69,14 +69,15 @@ def bare_sdo_us() -> float:
 
 def bridge_us(records: list[dict], baseline: float) -> None:
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.gateway import XnGateway
-    from ssi_bridge.module.registers import Reg
-    from ssi_bridge.module.xn1ssi import Xn1Ssi
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.sim.gateway.gateway import XnGateway
+    from ssi_bridge.protocol.registers import Reg
+    from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
     config = BusConfig(channel="bench-bridge", node_id=NODE_ID)
     with XnGateway(config, NODE_ID, [Xn1Ssi(None, slot=1)]):
-        with BridgeClient(config, NODE_ID, 1, assist_after=0.0005) as client:
+        from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+        with BridgeClient(config, NODE_ID, 1, assist_after=0.0005, opener=wire_bus) as client:
             _emit(records, "bus_sdo_upload_us", _per_call_us(
                 lambda: client.read_object(0x6820, 1), ROUNDS), "us", baseline)
             _emit(records, "bus_register_read_handshake_us", _per_call_us(
@@ -87,21 +88,22 @@ def bridge_us(records: list[dict], baseline: float) -> None:
 
 def pdo_cycle(records: list[dict]) -> None:
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.gateway import XnGateway
-    from ssi_bridge.line.readout import LineReadout
-    from ssi_bridge.module.xn1ssi import Xn1Ssi
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.sim.gateway.gateway import XnGateway
+    from ssi_bridge.protocol.readout import LineReadout
+    from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
     class Reader:
         def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
             return LineReadout(latch_time=t, n_bits=n_bits, data=int(t * 1e4) & 0xFFFFFF)
 
-    from ssi_bridge.gateway.wire import max_cycle_rate
+    from ssi_bridge.protocol.wire import max_cycle_rate
     cycle_hz = max_cycle_rate(8, CYCLE_BITRATE)
     config = BusConfig(channel="bench-cycle", node_id=NODE_ID, bitrate=CYCLE_BITRATE)
     modules = [Xn1Ssi(Reader(), slot=s) for s in range(1, 9)]
     with XnGateway(config, NODE_ID, modules):
-        with BridgeClient(config, NODE_ID, 8) as client:
+        from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+        with BridgeClient(config, NODE_ID, 8, opener=wire_bus) as client:
             period = 1.0 / cycle_hz
             n = int(CYCLE_SECONDS * cycle_hz)
             missed = 0
@@ -138,19 +140,20 @@ def cycle_cpu(records: list[dict], slots: int, runs: int = 1) -> None:
 def _cycle_cpu_run(slots: int, channel: str) -> tuple[float, float, float, int]:
     """One measurement: (mean, p50, p99 in us, incomplete cycles)."""
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.encoder.families import make_encoder
-    from ssi_bridge.encoder.motion import Sine
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.gateway import XnGateway
-    from ssi_bridge.line.line import LineConfig, SsiLine
-    from ssi_bridge.module.xn1ssi import Xn1Ssi
+    from ssi_bridge.sim.encoder.encoder import make_encoder
+    from ssi_bridge.sim.encoder.motion import Sine
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.sim.gateway.gateway import XnGateway
+    from ssi_bridge.sim.line.line import LineConfig, SsiLine
+    from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
     config = BusConfig(channel=channel, node_id=NODE_ID)
     modules = [Xn1Ssi(SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0 + s)),
                               LineConfig(check_cable_table=False)), slot=s)
                for s in range(1, slots + 1)]
     with XnGateway(config, NODE_ID, modules):
-        with BridgeClient(config, NODE_ID, slots) as client:
+        from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+        with BridgeClient(config, NODE_ID, slots, opener=wire_bus) as client:
             for _ in range(50):  # warm-up: first samples, caches
                 client.sync()
                 client.wait_cycle(0.05)

@@ -70,17 +70,18 @@ def _spread_us(client: object, counts_per_rev: float) -> list[float]:
 
 
 def _counts_per_rev() -> float:
-    from ssi_bridge.gateway.settings import station_settings
-    from ssi_bridge.gateway.station import count_factor, joint_encoder
+    from ssi_bridge.protocol.settings import station_settings
+    from ssi_bridge.protocol.joint_encoder import count_factor
+    from ssi_bridge.sim.gateway.station import joint_encoder
 
     joint = station_settings(_values("x", "virtual")).joints[0]
     encoder = joint_encoder(joint)
-    return count_factor(encoder, joint.para1) * encoder.steps_per_rev
+    return count_factor(encoder.config, joint.para1) * encoder.steps_per_rev
 
 
 def _lags(channel: str, stop: threading.Event, out: list[float]) -> None:
     """Receive time minus wire time of every SYNC on ``channel`` (s), until ``stop``."""
-    from ssi_bridge.gateway.multicast import open_udp_bus
+    from ssi_bridge.base.udp_bus import open_udp_bus
 
     bus = open_udp_bus(channel)
     try:
@@ -94,8 +95,8 @@ def _lags(channel: str, stop: threading.Event, out: list[float]) -> None:
 
 def child_run(counts_per_rev: float) -> tuple[list[float], list[float]]:
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.multicast import derive_channel
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.base.udp_bus import derive_channel
 
     channel = derive_channel(f"bench_latch_{os.getpid()}")
     args = [str(STATION_EXE), "--interface", "udp_multicast", "--channel", channel]
@@ -109,7 +110,8 @@ def child_run(counts_per_rev: float) -> tuple[list[float], list[float]]:
         if "ready" not in (proc.stdout.readline() if proc.stdout else ""):
             raise RuntimeError("station child did not come up")
         watcher.start()
-        client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1)
+        from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+        client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1, opener=wire_bus)
         client.connect()
         try:
             spread = _spread_us(client, counts_per_rev)
@@ -125,14 +127,15 @@ def child_run(counts_per_rev: float) -> tuple[list[float], list[float]]:
 
 def inprocess_run(counts_per_rev: float) -> list[float]:
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.settings import station_settings
-    from ssi_bridge.gateway.station import Station
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.protocol.settings import station_settings
+    from ssi_bridge.sim.gateway.station import Station
 
     channel = f"bench_latch_virtual_{os.getpid()}"
     station = Station(station_settings(_values(channel, "virtual")))
     station.start()
-    client = BridgeClient(BusConfig(channel=channel), 1, 1)
+    from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+    client = BridgeClient(BusConfig(channel=channel), 1, 1, opener=wire_bus)
     try:
         client.connect()
         return _spread_us(client, counts_per_rev)

@@ -31,9 +31,9 @@ PASSES = 5
 
 
 def bench_scalar(records: list[dict], n: int = 30000) -> None:
-    from ssi_bridge.encoder.families import make_encoder
-    from ssi_bridge.encoder.motion import Sine
-    from ssi_bridge.line.line import LineConfig, SsiLine, decode_frame
+    from ssi_bridge.sim.encoder.encoder import make_encoder
+    from ssi_bridge.sim.encoder.motion import Sine
+    from ssi_bridge.sim.line.line import LineConfig, SsiLine, decode_frame
 
     line = SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0)),
                    LineConfig(check_cable_table=False))
@@ -60,10 +60,10 @@ def bench_scalar(records: list[dict], n: int = 30000) -> None:
 def bench_batch(records: list[dict], n: int = 1_000_000) -> None:
     import numpy as np
 
-    from ssi_bridge.encoder.families import make_encoder
-    from ssi_bridge.encoder.motion import Sine
-    from ssi_bridge.line.batch import read_batch
-    from ssi_bridge.line.line import LineConfig, SsiLine
+    from ssi_bridge.sim.encoder.encoder import make_encoder
+    from ssi_bridge.sim.encoder.motion import Sine
+    from ssi_bridge.sim.line.batch import read_batch
+    from ssi_bridge.sim.line.line import LineConfig, SsiLine
 
     line = SsiLine(make_encoder("GENERIC", Sine(2.0, 1.0, offset=10.0)),
                    LineConfig(check_cable_table=False))

@@ -183,7 +183,7 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
     import struct
     import threading
 
-    from ssi_bridge.gateway.realtime import run_this_thread_at
+    from ssi_bridge.base.realtime import run_this_thread_at
     from ssi_bridge.tools.spin import spin_until_shutdown
 
     node, pub = _joint_state_publisher("floor", topic)
@@ -242,7 +242,7 @@ SUBSCRIBER_PRIORITY = 3
 @functools.cache
 def subscriber_scheduling() -> str:
     """How the subscriber is scheduled, for the notes."""
-    from ssi_bridge.gateway.realtime import fifo_permitted
+    from ssi_bridge.base.realtime import fifo_permitted
 
     if fifo_permitted(SUBSCRIBER_PRIORITY):
         return f"subscriber SCHED_FIFO {SUBSCRIBER_PRIORITY}"
@@ -292,13 +292,13 @@ def _tail(path: Path, n: int = 1500) -> str:
 
 def case_rate(n_joints: int) -> float:
     """1 kHz, or the highest rate the wire allows for ``n_joints`` slots at BITRATE."""
-    from ssi_bridge.gateway import wire
+    from ssi_bridge.protocol import wire
     return min(RATE_HZ, wire.max_cycle_rate(n_joints, BITRATE))
 
 
 def after_sync_wire_s(n_joints: int) -> float:
     """Computed SYNC -> last TPDO wire time (s): the TPDOs of one cycle, worst-case stuffed."""
-    from ssi_bridge.gateway import wire
+    from ssi_bridge.protocol import wire
     return sum(wire.worst_frame_bits(b) for b in wire.cycle_payloads(n_joints)[1:]) / BITRATE
 
 

@@ -43,11 +43,12 @@ ROUNDS = 1000
 
 
 def startup(records: list[dict]) -> None:
-    from ssi_bridge.client.boot import BootWatch
-    from ssi_bridge.gateway.bus import BusConfig, open_bus
-    from ssi_bridge.gateway.multicast import derive_channel
-    from ssi_bridge.gateway.settings import station_settings
-    from ssi_bridge.gateway.station import Station
+    from ssi_bridge.sim.supervisor.boot import BootWatch
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.sim.gateway.bus import open_bus
+    from ssi_bridge.base.udp_bus import derive_channel
+    from ssi_bridge.protocol.settings import station_settings
+    from ssi_bridge.sim.gateway.station import Station
 
     child, inproc = [], []
     for k in range(3):
@@ -81,10 +82,10 @@ def startup(records: list[dict]) -> None:
 
 def round_trip(records: list[dict]) -> None:
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.bus import BusConfig
-    from ssi_bridge.gateway.multicast import derive_channel
-    from ssi_bridge.gateway.settings import station_settings
-    from ssi_bridge.gateway.station import Station
+    from ssi_bridge.protocol.settings import BusConfig
+    from ssi_bridge.base.udp_bus import derive_channel
+    from ssi_bridge.protocol.settings import station_settings
+    from ssi_bridge.sim.gateway.station import Station
 
     def measure(client: BridgeClient) -> list[float]:
         out = []
@@ -101,7 +102,8 @@ def round_trip(records: list[dict]) -> None:
                              channel], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
     try:
         proc.stdout.readline()
-        client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1)
+        from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+        client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1, opener=wire_bus)
         client.connect()
         udp = measure(client)
         client.close()
@@ -111,7 +113,8 @@ def round_trip(records: list[dict]) -> None:
     vchan = f"bench_rt_virtual_{os.getpid()}"
     station = Station(station_settings({"bus.channel": vchan}))
     station.start()
-    client = BridgeClient(BusConfig(channel=vchan), 1, 1)
+    from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+    client = BridgeClient(BusConfig(channel=vchan), 1, 1, opener=wire_bus)
     client.connect()
     virt = measure(client)
     client.close()

@@ -12,23 +12,30 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import can
 import canopen
 
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import FrameListener
-from ssi_bridge.client.samples import ClientCounters, CycleGate
+from ssi_bridge.client.samples import ClientCounters, CycleGate, SlotTable
 from ssi_bridge.exceptions import BusError
-from ssi_bridge.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, BusConfig, LossyBus, take_bus
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.client.bus import (
+    NOTIFIER_CYCLE, BusOpener, MasterNetwork, ReceiveWatch, open_bus, take_bus,
+)
+from ssi_bridge.protocol.dictionary import SYNC_COB_ID
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.timebase import wire_now
 
-if TYPE_CHECKING:
-    from ssi_bridge.client.master import BridgeClient
 
-#: CiA 301 default COB-ID of SYNC (no node id: one producer per bus)
-SYNC_COB_ID = 0x80
+
+class Attached(Protocol):
+    """A station's client on the master (``BridgeClient``): its node id, counters, slot table."""
+
+    node_id: int
+    counters: ClientCounters
+    table: SlotTable
 
 
 class CanMaster:
@@ -37,21 +44,25 @@ class CanMaster:
     :param bus: a :class:`BusConfig` (the master opens the bus) or an open bus it takes over
     :param counters: where frames, SYNCs and CAN errors of the bus are counted
     :param priority: SCHED_FIFO priority of the receive thread (0: normal scheduling)
+    :param opener: opens the bus of a :class:`BusConfig` (default :func:`open_bus`; the node's
+        simulation supervisor gives the simulated wire's)
     """
 
     def __init__(self, bus: BusConfig | can.BusABC,
-                 counters: ClientCounters | None = None, priority: int = 0) -> None:
+                 counters: ClientCounters | None = None, priority: int = 0,
+                 opener: BusOpener | None = None) -> None:
         self.priority = priority
+        self._opener = opener or open_bus
         self._listener: FrameListener | None = None
         self._source: BusConfig | can.BusABC | None = bus
         self.counters = counters if counters is not None else ClientCounters()
         #: bus load from frame timestamps (one bus, so one figure for every station)
         self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
-        self.bus: LossyBus | None = None
+        self.bus: ReceiveWatch | None = None
         self.network: canopen.Network | None = None
         #: one sender at a time on the network (SYNC, RPDOs of every station)
         self.send_lock = threading.Lock()
-        self.clients: list[BridgeClient] = []
+        self.clients: list[Attached] = []
         #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
         self.gate = CycleGate()
 
@@ -59,11 +70,11 @@ class CanMaster:
         """Open the bus and start canopen's network (idempotent)."""
         if self.network is not None:
             return
-        inner = take_bus(self._source, "this master")
+        inner = take_bus(self._source, "this master", self._opener)
         if not isinstance(self._source, BusConfig):
             self._source = None  # a handed-over bus is taken once
-        self.bus = LossyBus(inner)
-        self.network = BridgeNetwork(self.bus)
+        self.bus = ReceiveWatch(inner)
+        self.network = MasterNetwork(self.bus)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
@@ -75,14 +86,14 @@ class CanMaster:
         """The receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)."""
         return self._listener.scheduling if self._listener is not None else ""
 
-    def attach(self, client: BridgeClient) -> None:
+    def attach(self, client: Attached) -> None:
         """Register a station's client: its slot table takes part in every SYNC."""
         if any(c.node_id == client.node_id for c in self.clients if c is not client):
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
             self.clients.append(client)
 
-    def detach(self, client: BridgeClient) -> None:
+    def detach(self, client: Attached) -> None:
         """Take a station's client off the master (its RemoteNode off the network)."""
         if client in self.clients:
             self.clients.remove(client)

@@ -23,9 +23,9 @@ from typing import Protocol
 from ssi_bridge.exceptions import (
     GatewayUnavailable, HandshakeTimeout, ParameterError, RegisterReadError, RegisterWriteError,
 )
-from ssi_bridge.module.images import ADDRESS_MASK, ProcessInput, WriteRequest
-from ssi_bridge.module.registers import REGISTER_COUNT, VALUE_MAX, Reg, describe_refusal
-from ssi_bridge.module.registers import validate_para1
+from ssi_bridge.protocol.images import ADDRESS_MASK, ProcessInput, WriteRequest
+from ssi_bridge.protocol.registers import REGISTER_COUNT, VALUE_MAX, Reg, describe_refusal
+from ssi_bridge.protocol.registers import validate_para1
 
 logger = logging.getLogger(__name__)
 

@@ -32,9 +32,10 @@ from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.exceptions import BusError
-from ssi_bridge.gateway.bus import BusConfig, take_bus
-from ssi_bridge.gateway.dictionary import MAX_SLOTS
-from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
+from ssi_bridge.client.bus import take_bus
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.protocol.dictionary import MAX_SLOTS
+from ssi_bridge.base.timebase import frame_wire_time, wire_now
 
 logger = logging.getLogger(__name__)
 

@@ -16,13 +16,11 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
+from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.exceptions import SsiBridgeError
-from ssi_bridge.gateway.timebase import wire_now
-
-if TYPE_CHECKING:
-    from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.base.timebase import wire_now
 
 logger = logging.getLogger(__name__)
 
@@ -30,10 +28,30 @@ HEARTBEAT_OBJECT = 0x1017
 NMT_BOOTUP, NMT_OPERATIONAL = 0, 5
 
 
-class Liveness:
-    """Heartbeat state of one :class:`BridgeClient` and its supervisor thread."""
+class Supervised(Protocol):
+    """What the supervisor reads of and does to its station's client (``BridgeClient``)."""
 
-    def __init__(self, client: BridgeClient) -> None:
+    node_id: int
+    heartbeat_ms: int
+    heartbeat_timeout: float
+    counters: ClientCounters
+    bus: Any  # ReceiveWatch | None: ``seen_until()``
+
+    @property
+    def gateway_alive(self) -> bool:
+        """True while the station's heartbeat is current."""
+
+    def read_object(self, index: int, subindex: int = 0) -> Any:
+        """One SDO upload (raises SsiBridgeError)."""
+
+    def configure(self) -> None:
+        """Configure the station again (raises SsiBridgeError)."""
+
+
+class Liveness:
+    """Heartbeat state of one station's client and its supervisor thread."""
+
+    def __init__(self, client: Supervised) -> None:
         self._client = client
         #: wire time of the last heartbeat frame (its receive timestamp) or configuration
         self.last_heartbeat = 0.0
@@ -53,7 +71,7 @@ class Liveness:
 
         Measured on the bus, not on the scheduler: the heartbeat's time is its frame
         timestamp (when it arrived), and silence counts only up to the wire time this side
-        has handled (``LossyBus.seen_until``). A stalled process whose receive queue still
+        has handled (``ReceiveWatch.seen_until``). A stalled process whose receive queue still
         holds heartbeats is not "gateway silent"; a real silence shows once the receive
         thread finds the queue empty (within its 0.05 s wake-up) past the timeout.
         """

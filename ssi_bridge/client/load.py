@@ -13,8 +13,8 @@ from collections import deque
 
 import can
 
-from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
-from ssi_bridge.gateway.wire import frame_bits
+from ssi_bridge.base.timebase import frame_wire_time, wire_now
+from ssi_bridge.protocol.wire import frame_bits
 
 SYNC_COB_ID = 0x080
 

@@ -37,12 +37,14 @@ from ssi_bridge.client.sdo import SdoAccess
 from ssi_bridge.exceptions import (
     BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
 )
-from ssi_bridge.gateway.bus import BusConfig, LossyBus
-from ssi_bridge.gateway.timebase import wire_now
-from ssi_bridge.gateway.dictionary import (
-    MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, build_dictionary, rpdo_cob_base,
+from ssi_bridge.client.bus import BusOpener, ReceiveWatch
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.protocol.dictionary import (
+    MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base,
 )
-from ssi_bridge.module.images import CmpControl, CmpStatus, Control, ProcessInput
+from ssi_bridge.base.od import build_dictionary
+from ssi_bridge.protocol.images import CmpControl, CmpStatus, Control, ProcessInput
 
 logger = logging.getLogger(__name__)
 #: how often a clear pulse is sent again when the next image shows it never arrived
@@ -70,12 +72,14 @@ class BridgeClient:
         counts as silent after 4 periods without one
     :param transport: "pdo" (process images over PDOs) or "sdo" (SDO polling of 0x2000/0x2100)
     :param assist_after: a handshake sends its own SYNC when none was sent for this long (s)
+    :param opener: opens the bus of a :class:`BusConfig` (default: a plain python-can bus;
+        a simulated wire's opener puts the master's frames on that wire's time line)
     """
 
     def __init__(self, bus: BusConfig | can.BusABC | CanMaster, node_id: int, slots: int, *,
                  sdo_timeout: float = 0.5, handshake_timeout: float = 1.0,
                  heartbeat_ms: int = 50, transport: str = "pdo",
-                 assist_after: float = 0.005) -> None:
+                 assist_after: float = 0.005, opener: BusOpener | None = None) -> None:
         if not 1 <= slots <= MAX_SLOTS:
             raise ValueError(f"slots {slots} outside 1-{MAX_SLOTS}")
         if transport not in ("pdo", "sdo"):
@@ -92,11 +96,12 @@ class BridgeClient:
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         #: the bus' master; a private one (counting into this client) unless one was given
         self._owns_master = not isinstance(bus, CanMaster)
-        self.master = CanMaster(bus, self.counters) if not isinstance(bus, CanMaster) else bus
+        self.master = (CanMaster(bus, self.counters, opener=opener) if not isinstance(bus, CanMaster)
+                       else bus)
         self.table = SlotTable(slots, self.master.gate)
         #: bus load from frame timestamps (for the bus diagnostics): the master's, one bus
         self.load: BusLoad = self.master.load
-        self.bus: LossyBus | None = None
+        self.bus: ReceiveWatch | None = None
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
         self.sdo: SdoAccess | None = None

@@ -25,9 +25,9 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.gateway.bus import WireTimeListener
-from ssi_bridge.gateway.dictionary import tpdo_cob_base
-from ssi_bridge.gateway.realtime import run_this_thread_at
+from ssi_bridge.base.timebase import WireTimeListener
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
+from ssi_bridge.base.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ class FrameListener(WireTimeListener):
     One listener per frame instead of canopen's plus a separate counter: the notifier calls
     each listener for each frame of the bus. With ``priority`` the notifier's thread, which
     hands every TPDO to its cycle, puts itself on SCHED_FIFO at its first frame and takes the
-    kernel name ``ssi_can_rx`` (gateway/realtime.py); :attr:`scheduling` says what it got.
+    kernel name ``ssi_can_rx`` (base/realtime.py); :attr:`scheduling` says what it got.
     """
 
     def __init__(self, network: canopen.Network, counters: ClientCounters,

@@ -11,8 +11,8 @@ import struct
 import threading
 from dataclasses import dataclass, field
 
-from ssi_bridge.gateway.timebase import wire_now
-from ssi_bridge.module.images import ProcessInput
+from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.protocol.images import ProcessInput
 
 #: two Integer32 positions in one encoder default PDO (000 Table 15, object 0x6820)
 POSITION_PAIR = struct.Struct("<ii")

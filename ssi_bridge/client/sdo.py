@@ -15,8 +15,8 @@ import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
 
 from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
-from ssi_bridge.gateway.aborts import describe_abort
-from ssi_bridge.gateway.dictionary import (
+from ssi_bridge.protocol.aborts import describe_abort
+from ssi_bridge.protocol.dictionary import (
     PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base, tpdo_cob_base,
 )
 

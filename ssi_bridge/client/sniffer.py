@@ -27,8 +27,9 @@ from pathlib import Path
 import can
 
 from ssi_bridge.exceptions import BusError
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.timebase import frame_wire_time
+from ssi_bridge.client.bus import open_bus
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.timebase import frame_wire_time
 
 logger = logging.getLogger(__name__)
 

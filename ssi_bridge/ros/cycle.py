@@ -13,7 +13,7 @@ import threading
 import time
 from collections.abc import Callable
 
-from ssi_bridge.gateway.realtime import run_this_thread_at
+from ssi_bridge.base.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
 

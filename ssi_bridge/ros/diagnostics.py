@@ -31,7 +31,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from ssi_bridge.module.images import ModuleStatus, ProcessInput
+from ssi_bridge.protocol.images import ModuleStatus, ProcessInput
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)

@@ -18,10 +18,10 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ssi_bridge.encoder.config import EncoderConfig
-from ssi_bridge.line.frame_check import FrameCheck, FrameVerdict
-from ssi_bridge.module.diagnostics import cam_state
-from ssi_bridge.module.registers import Para1, Reg
+from ssi_bridge.protocol.encoder_config import EncoderConfig
+from ssi_bridge.protocol.frame_check import FrameCheck, FrameVerdict
+from ssi_bridge.protocol.diagnostics import cam_state
+from ssi_bridge.protocol.registers import Para1, Reg
 
 logger = logging.getLogger(__name__)
 

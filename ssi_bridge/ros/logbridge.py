@@ -3,7 +3,7 @@
 The stages left of the node log with the standard library (STYLE.md), and so do canopen and
 python-can; inside the node those records appear like every other ROS log line (console
 format, /rosout, log file) under a child of the node's logger named after the module:
-``ssi_bridge.ros.station`` logs as ``[ssi_bridge.ros.station]``, ``canopen.emcy`` as
+``ssi_bridge.sim.supervisor.station`` logs as ``[ssi_bridge.sim.supervisor.station]``, ``canopen.emcy`` as
 ``[ssi_bridge.canopen.emcy]`` (with a namespace: ``[ns.ssi_bridge.…]``), never as a name in
 brackets inside the message. canopen and python-can report protocol chatter at INFO (every
 EMCY, NMT change); they are passed from WARNING up unless the node's logger is set to DEBUG.

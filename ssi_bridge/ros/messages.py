@@ -10,8 +10,8 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from ssi_bridge_msgs.msg import ChannelStatus
 
-from ssi_bridge.module.images import ProcessInput
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.images import ProcessInput
+from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.ros.diagnostics import ChannelCounters
 from ssi_bridge.ros.frame_watch import FrameWatch
 

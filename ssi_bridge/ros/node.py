@@ -32,24 +32,21 @@ from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.samples import ChannelSample
 from ssi_bridge.client.can_log_player import CanLogPlayer
-from ssi_bridge.encoder.config import EncoderConfig
-from ssi_bridge.encoder.families import family_config
+from ssi_bridge.protocol.encoder_config import EncoderConfig
 from ssi_bridge.exceptions import ConfigError, RecordingError, SsiBridgeError
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.station import (
-    count_factor, encoder_overrides, joint_encoder, para1_mismatch,
-)
-from ssi_bridge.gateway.timebase import ModelClock, to_ros_ns, wire_now
-from ssi_bridge.gateway import wire
-from ssi_bridge.module.images import ModuleStatus, ProcessInput
-from ssi_bridge.module.registers import Reg, validate_para1
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.protocol.families import family_config
+from ssi_bridge.protocol.joint_encoder import count_factor, joint_config, para1_mismatch
+from ssi_bridge.base.timebase import ModelClock, to_ros_ns, wire_now
+from ssi_bridge.protocol import wire
+from ssi_bridge.protocol.images import ModuleStatus, ProcessInput
+from ssi_bridge.protocol.registers import Reg, validate_para1
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits
 from ssi_bridge.ros.diagnostics import (
     OK, WARN, ChannelCounters, ChannelHealth, bus_status, channel_status, station_status,
     status_name,
 )
-from ssi_bridge.ros.faults import FaultInjector, StationFaults
 from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.joint_scale import JointScale
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
@@ -58,9 +55,6 @@ from ssi_bridge.ros.params import JointSettings, NodeSettings, declare_parameter
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.frame_watch import FrameWatch, edges, read_cam
-from ssi_bridge.ros.station import (
-    ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
-)
 from ssi_bridge.ros.velocity import VelocityEstimator
 
 #: status bits under which the module does not acquire (000 "Error detection / messages")
@@ -118,9 +112,18 @@ class SsiBridgeNode(Node):
             self.settings = dataclasses.replace(
                 self.settings, bus_interface="virtual",
                 bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
+        #: the simulated station(s) the node owns while its bus side is open (simulation:
+        #: true), else None; the supervisor's class (None on real hardware)
+        self.station: Any = None
+        self._simulation: Any = None
         if self.settings.simulation:
-            # the node and its simulated station meet on this bus (ros/station.py)
-            self.settings = with_station_bus(self.settings)
+            # the node's one import of the simulator (docs/architecture.md): a node on
+            # real hardware loads nothing of ssi_bridge.sim
+            from ssi_bridge.sim.supervisor import Simulation
+
+            # the node and its simulated station meet on this bus (sim/supervisor/station.py)
+            self.settings = Simulation.bus_settings(self.settings)
+            self._simulation = Simulation
         s = self.settings
         #: the simulated station's clock: wire time since the node started (gateway/timebase)
         self.model_clock = ModelClock()
@@ -163,12 +166,14 @@ class SsiBridgeNode(Node):
         virtual bus as the fallback): the node starts it, waits for its boot-up, and from
         then on reaches it only over CAN, fault injection included (SDO 0x4000-0x4002).
         """
-        self.station: ChildStation | InProcessStation | StationGroup | None = None
-        self.faults: FaultInjector | StationFaults | None = None
-        #: the simulated encoders' models (frame layout and resolution), built from the params
-        self.encoders = {j.name: joint_encoder(j) for j in s.joints} if s.simulation else {}
-        if s.simulation:
-            self.station = start_stations(s)
+        #: fault injection into the simulated station (None on real hardware)
+        self.faults: Any = None
+        #: each joint's encoder layout from its parameters (family preset + overrides): the
+        #: frame checks and the counts -> units scale, simulated station or real
+        self.configs = {j.name: self._encoder_config(j) for j in s.joints}
+        if self._simulation is not None:
+            self.station = self._simulation(s)
+            self.station.start()
         n_slots = max(j.slot for j in s.joints)
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient
@@ -181,7 +186,8 @@ class SsiBridgeNode(Node):
             if s.replay_can_log:
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
-            self.master = CanMaster(self.bus_config, priority=s.cycle_priority)
+            self.master = CanMaster(self.bus_config, priority=s.cycle_priority,
+                                    opener=self.station.open_bus if self.station else None)
             try:
                 for sid in s.station_ids:
                     slots = max(j.slot for j in s.station_joints(sid))
@@ -196,11 +202,8 @@ class SsiBridgeNode(Node):
                 raise
             self.client = self.station_clients[s.station_ids[0]]
             if self.station is not None:
-                injectors = {sid: FaultInjector(
-                    client, {j.name: j for j in s.station_joints(sid)}, self.encoders,
-                    self.sim_time) for sid, client in self.station_clients.items()}
-                self.faults = (injectors[s.node_id] if len(injectors) == 1
-                               else StationFaults(injectors, self.joints))
+                self.faults = self.station.fault_injector(self.station_clients, self.configs,
+                                                          self.sim_time)
             for joint in s.joints:
                 self._configure_para1(joint)
                 if joint.ssi_mask >= 0:  # 000 Table 3 via object 0x5840 (Table 35)
@@ -225,7 +228,7 @@ class SsiBridgeNode(Node):
                          for j in s.joints}
         self.counters = {j.name: ChannelCounters() for j in s.joints}
         self.health = {j.name: ChannelHealth() for j in s.joints}
-        self.frames = {j.name: FrameWatch(self._encoder_config(j), j.para1) for j in s.joints}
+        self.frames = {j.name: FrameWatch(self.configs[j.name], j.para1) for j in s.joints}
         if not s.listen_only:
             self.refresh_cams()
         self.positions = {j.name: 0.0 for j in s.joints}
@@ -315,11 +318,9 @@ class SsiBridgeNode(Node):
         return self.station_clients.get(station, self.client)
 
     def _encoder_config(self, joint: JointSettings) -> EncoderConfig | None:
-        """The joint's encoder layout (family + overrides) for the frame checks, if known."""
-        if joint.name in self.encoders:
-            return self.encoders[joint.name].config
+        """The joint's encoder layout (family + overrides) from its parameters, if known."""
         try:
-            return family_config(joint.family, **encoder_overrides(joint))
+            return joint_config(joint)
         except ConfigError as err:
             self.get_logger().warning(f"{joint.name}: no frame checks: {err}")
             return None
@@ -395,21 +396,25 @@ class SsiBridgeNode(Node):
         return stamp
 
     def _scale(self, joint: JointSettings, para1: int | None = None) -> JointScale:
-        """Counts -> units for the joint's current REG_PARA1.
+        """Counts -> units for the joint's REG_PARA1 (its parameter unless given).
 
-        Simulated: from the encoder's resolution and frame layout (:func:`count_factor`).
-        Real hardware: ``steps_per_rev``/``revolutions`` or ``measuring_step`` are the
-        resolution of REG_SSI_POS itself, as the user configured the module.
+        One path for simulated and real stations: the encoder layout the joint's parameters
+        describe (family preset, ``steps_per_rev``/``revolutions``/``measuring_step``) and
+        the REG_PARA1 in force (frame length, invalid LSB bits: :func:`count_factor`).
+        Without a usable layout, ``steps_per_rev``/``revolutions`` or ``measuring_step``
+        are taken as the resolution of REG_SSI_POS itself.
         """
         para1 = joint.para1 if para1 is None else para1
-        if joint.name in self.encoders:
-            enc = self.encoders[joint.name]
-            factor = count_factor(enc, para1)
-            if enc.linear:
-                return JointScale(linear=True, measuring_step_m=enc.measuring_step_m / factor,
+        cfg = self.configs.get(joint.name)
+        if cfg is not None:
+            factor = count_factor(cfg, para1)
+            if cfg.linear:
+                return JointScale(linear=True, measuring_step_m=cfg.measuring_step_m / factor,
                                   direction=joint.direction)
-            return JointScale(counts_per_rev=enc.steps_per_rev * factor,
-                              revolutions=enc.revolutions, direction=joint.direction)
+            return JointScale(
+                counts_per_rev=cfg.steps_per_unit * factor,
+                revolutions=cfg.revolutions_numerator / cfg.revolutions_divisor,
+                direction=joint.direction)
         if joint.measuring_step > 0:
             return JointScale(linear=True, measuring_step_m=joint.measuring_step,
                               direction=joint.direction)
@@ -417,10 +422,9 @@ class SsiBridgeNode(Node):
                           revolutions=joint.revolutions or 4096, direction=joint.direction)
 
     def _para1_note(self, joint: str, para1: int) -> str:
-        """Simulation: why ``para1`` does not fit the joint's encoder (or "")."""
-        if joint not in self.encoders:
-            return ""
-        mismatch = para1_mismatch(self.encoders[joint], para1)
+        """Why ``para1`` does not fit the joint's encoder (or "")."""
+        cfg = self.configs.get(joint)
+        mismatch = para1_mismatch(cfg, para1) if cfg is not None else None
         return f"REG_PARA1 0x{para1:08X} does not fit the encoder: {mismatch}" if mismatch else ""
 
     @staticmethod

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from ssi_bridge.exceptions import ConfigError
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
-from ssi_bridge.gateway.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
+from ssi_bridge.protocol.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
     DEFAULT_PARA1, JointSettings, joint_from_values,
 )
 

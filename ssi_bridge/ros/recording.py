@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import BusError, RecordingError
-from ssi_bridge.gateway.realtime import normal_this_thread
+from ssi_bridge.base.realtime import normal_this_thread
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -173,7 +173,7 @@ class SessionRecorder:
     def _start_sniffer(self, bag_dir: Path) -> None:
         """Log the raw CAN traffic beside the bag (``can_0.log``, candump format)."""
         from ssi_bridge.client.sniffer import CanSniffer
-        from ssi_bridge.gateway.bus import BusConfig
+        from ssi_bridge.protocol.settings import BusConfig
 
         s = self._settings
         config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,

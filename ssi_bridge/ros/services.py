@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any
 
 from builtin_interfaces.msg import Time
 
-from ssi_bridge.encoder.config import ERROR_BITS, ErrorOutput, FrameFormat
+from ssi_bridge.protocol.encoder_config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.exceptions import BusError, ConfigError, RegisterError, SsiBridgeError
-from ssi_bridge.gateway.timebase import wire_now
-from ssi_bridge.module.registers import Para1, Reg
+from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.protocol.registers import Para1, Reg
 from ssi_bridge.ros.joint_scale import to_int32
 from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
 from ssi_bridge_msgs.msg import Event
@@ -274,10 +274,9 @@ class BridgeServices:
         them only as SSI_DIAG, and only for a frame bit REG_SSI_MASK selects with EN_Dx_RMSx
         and EN_Dx_DS (000 Table 3; bit 0 = the last bit clocked).
         """
-        encoder = self.node.encoders.get(joint)
-        if encoder is None:
+        cfg = self.node.configs.get(joint)
+        if cfg is None:
             return ""
-        cfg = encoder.config
         if cfg.error_output is not ErrorOutput.FLAGS or cfg.frame_format is not FrameFormat.PLAIN:
             return ""  # the position itself changes (error value / all ones): it shows
         para = Para1.decode(self.node.para1[joint])

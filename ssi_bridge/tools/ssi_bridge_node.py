@@ -23,7 +23,7 @@ import sys
 import time
 
 from ssi_bridge.record.heap import fix_mmap_threshold, limit_malloc_arenas
-from ssi_bridge.tools.stop_signals import STOP_SIGNALS, StopRequests
+from ssi_bridge.base.stop_signals import STOP_SIGNALS, StopRequests
 
 #: longest reason printed for a start-up error (an echoed 1 MB value stays readable)
 MAX_REASON = 400

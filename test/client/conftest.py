@@ -13,10 +13,12 @@ import can.interfaces.virtual as virtual
 import pytest
 
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import LossyBus
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 _channels = itertools.count()
 
@@ -43,13 +45,18 @@ def channel(request: pytest.FixtureRequest) -> Iterator[str]:
     assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
 
 
+def lossy_wire(config: BusConfig) -> LossyBus:
+    """The master's end of the simulated wire behind a loss wrapper the tests can turn up."""
+    return LossyBus(wire_bus(config))
+
+
 @pytest.fixture
 def station(channel: str) -> Iterator[tuple[XnGateway, BridgeClient, list[ScriptedReader]]]:
     """Gateway (node 5, one XN-1SSI on a scripted reader) and a connected client."""
     readers = [ScriptedReader(1234)]
     config = BusConfig(channel=channel, node_id=5)
     gateway = XnGateway(config, 5, [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
-    client = BridgeClient(config, 5, len(readers), sdo_timeout=0.3, handshake_timeout=0.5)
+    client = BridgeClient(config, 5, len(readers), sdo_timeout=0.3, handshake_timeout=0.5, opener=lossy_wire)
     gateway.start()
     try:
         client.connect()

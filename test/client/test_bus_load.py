@@ -8,15 +8,17 @@ import time
 import pytest
 
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.gateway.wire import frame_bits
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.protocol.wire import frame_bits
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 @pytest.mark.parametrize("bitrate", [125_000, 1_000_000])
 def test_bus_load_matches_the_formula_within_5_percent(channel, bitrate) -> None:
-    from ssi_bridge.line.readout import LineReadout
+    from ssi_bridge.protocol.readout import LineReadout
 
     class Reader:
         def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
@@ -25,7 +27,7 @@ def test_bus_load_matches_the_formula_within_5_percent(channel, bitrate) -> None
 
     config = BusConfig(channel=channel, node_id=5, bitrate=bitrate)
     gateway = XnGateway(config, 5, [Xn1Ssi(Reader(), slot=s) for s in (1, 2)])
-    client = BridgeClient(config, 5, 2, sdo_timeout=1.0)
+    client = BridgeClient(config, 5, 2, sdo_timeout=1.0, opener=wire_bus)
     sniffer = open_bus(config)
     gateway.start()
     try:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.ros.frame_watch import FrameWatch, read_cam
 
 

@@ -8,8 +8,9 @@ import pytest
 
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import GatewayUnavailable, HandshakeTimeout
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.module.registers import MAGIC_NO, Reg
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.protocol.registers import MAGIC_NO, Reg
 
 
 def wait_for(condition, message: str, timeout: float = 3.0) -> None:
@@ -23,8 +24,8 @@ def wait_for(condition, message: str, timeout: float = 3.0) -> None:
 @pytest.mark.parametrize("loss", [0.1, 0.4])
 def test_lossy_bus_handshake_completes_or_times_out(station, loss) -> None:
     _, client, _ = station
-    client.bus.loss_rate = loss
-    client.bus.drop_received = True
+    client.bus.inner.loss_rate = loss
+    client.bus.inner.drop_received = True
     bound = client._handshake.total_timeout + 0.5
     outcomes = []
     for _ in range(8):
@@ -93,11 +94,11 @@ def test_clear_pulse_lasts_one_cycle_and_keeps_enables(station) -> None:
 
 
 def test_sdo_transport_runs_the_same_handshake(channel) -> None:
-    from ssi_bridge.gateway.gateway import XnGateway
-    from ssi_bridge.module.xn1ssi import Xn1Ssi
+    from ssi_bridge.sim.gateway.gateway import XnGateway
+    from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
     config = BusConfig(channel=channel, node_id=4)
     with XnGateway(config, 4, [Xn1Ssi(None, slot=1)]):
-        with BridgeClient(config, 4, 1, transport="sdo", sdo_timeout=0.3) as client:
+        with BridgeClient(config, 4, 1, transport="sdo", sdo_timeout=0.3, opener=wire_bus) as client:
             assert client.read_register(1, Reg.REG_MAGIC_NO) == MAGIC_NO
             client.write_register(1, Reg.REG_CMP2, 77)
             assert client.read_register(1, Reg.REG_CMP2) == 77
@@ -118,9 +119,9 @@ def test_lost_clear_pulse_is_sent_again(station) -> None:
     readers[0].value += 10                      # no match any more: a clear would work
     client.sync()
     assert client.wait_cycle(1.0)
-    client.bus.loss_rate = 1.0                  # the pulse RPDO is lost on the wire
+    client.bus.inner.loss_rate = 1.0                  # the pulse RPDO is lost on the wire
     client.set_control(1, enable_cmp1=True, clear_cmp1=True)
-    client.bus.loss_rate = 0.0
+    client.bus.inner.loss_rate = 0.0
     assert gateway.objects.outputs[0][6] == 0x01, "the module never saw CLR_CMP1"
     for _ in range(4):
         client.sync()

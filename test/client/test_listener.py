@@ -17,9 +17,10 @@ from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.sniffer import CanSniffer
 from ssi_bridge.exceptions import BusError, ConfigError
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 from .conftest import ScriptedReader
 
@@ -31,7 +32,7 @@ def pair(channel: str) -> Iterator[tuple[BridgeClient, ListenOnlyClient, list[Sc
     config = BusConfig(channel=channel, node_id=5)
     gateway = XnGateway(config, 5, [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
     listener = ListenOnlyClient(config, 5, 2)
-    driver = BridgeClient(config, 5, 2, sdo_timeout=0.3, handshake_timeout=0.5)
+    driver = BridgeClient(config, 5, 2, sdo_timeout=0.3, handshake_timeout=0.5, opener=wire_bus)
     gateway.start()
     listener.connect()
     try:

@@ -9,8 +9,9 @@ import time
 
 import can
 
-from ssi_bridge.gateway.bus import OWED_MAX_S, BusConfig, open_bus
-from ssi_bridge.gateway.timebase import wire_now
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import OWED_MAX_S, open_bus
+from ssi_bridge.base.timebase import wire_now
 
 STALL_COB = 0x123
 

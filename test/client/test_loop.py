@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from ssi_bridge.exceptions import RegisterReadError, RegisterWriteError
-from ssi_bridge.module.registers import MAGIC_NO, Reg
+from ssi_bridge.protocol.registers import MAGIC_NO, Reg
 
 
 def test_magic_number_through_the_handshake(station) -> None:

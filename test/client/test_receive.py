@@ -13,10 +13,11 @@ from canopen.network import MessageListener
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.receive import FrameListener, TpdoRoutes
 from ssi_bridge.client.samples import ClientCounters
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.module.registers import Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 from .conftest import ScriptedReader
 
@@ -44,7 +45,7 @@ def test_one_handler_per_tpdo_after_connect_and_reconfigure(channel: str) -> Non
     readers = [ScriptedReader(1000), ScriptedReader(2000), ScriptedReader(3000)]
     config = BusConfig(channel=channel, node_id=NODE)
     gateway = XnGateway(config, NODE, [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
-    client = BridgeClient(config, NODE, 3, sdo_timeout=0.3, handshake_timeout=0.5)
+    client = BridgeClient(config, NODE, 3, sdo_timeout=0.3, handshake_timeout=0.5, opener=wire_bus)
     gateway.start()
     try:
         client.connect()
@@ -93,15 +94,15 @@ def test_the_receive_thread_takes_the_masters_priority_at_its_first_frame(channe
     from pathlib import Path
 
     from ssi_bridge.client.bus_master import CanMaster
-    from ssi_bridge.gateway.bus import open_bus
-    from ssi_bridge.gateway.realtime import fifo_this_thread
+    from ssi_bridge.sim.gateway.bus import open_bus
+    from ssi_bridge.base.realtime import fifo_this_thread
 
     permitted: list[bool] = []
     probe = threading.Thread(target=lambda: permitted.append(fifo_this_thread(1)))
     probe.start()
     probe.join()
     config = BusConfig(channel=channel, node_id=NODE)
-    master = CanMaster(config, priority=3)
+    master = CanMaster(config, priority=3, opener=wire_bus)
     master.connect()
     other = open_bus(config)
     try:

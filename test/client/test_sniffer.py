@@ -9,7 +9,7 @@ import can
 import pytest
 
 from ssi_bridge.client.sniffer import CanSniffer
-from ssi_bridge.gateway.bus import BusConfig
+from ssi_bridge.protocol.settings import BusConfig
 
 
 def test_sniffer_logs_every_frame_and_the_log_reads_back(tmp_path: Path):
@@ -89,8 +89,8 @@ def test_a_udp_multicast_frame_is_logged_at_its_senders_wire_time(tmp_path: Path
     # frame's end; the log keeps the wire time, so a replay stamps cycles as recorded
     import os
 
-    from ssi_bridge.gateway.multicast import derive_channel, open_udp_bus
-    from ssi_bridge.gateway.timebase import wire_now
+    from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus
+    from ssi_bridge.base.timebase import wire_now
 
     channel = derive_channel(f"sniffer-udp-{os.getpid()}")
     sniffer = CanSniffer(BusConfig(interface="udp_multicast", channel=channel),

@@ -22,11 +22,12 @@ from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.client.receive import FrameListener
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.dictionary import tpdo_cob_base
-from ssi_bridge.gateway.multicast import UdpFrame, derive_channel, open_udp_bus
-from ssi_bridge.gateway.settings import station_settings
-from ssi_bridge.gateway.station import Station
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
+from ssi_bridge.base.udp_bus import UdpFrame, derive_channel, open_udp_bus
+from ssi_bridge.protocol.settings import station_settings
+from ssi_bridge.sim.gateway.station import Station
 
 NODE = 1
 
@@ -52,7 +53,7 @@ def test_a_tpdo_arriving_after_the_next_sync_counts_for_its_own(
                                         "bus.interface": "udp_multicast",
                                         "bus.channel": channel}))
     station.start()
-    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), NODE, 1)
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), NODE, 1, opener=wire_bus)
     late_sender = open_udp_bus(channel)  # a plain bus: frames go out as stamped
     try:
         client.connect()

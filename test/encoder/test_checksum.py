@@ -3,7 +3,7 @@
 zu 5 Fehler je Codewort"; German text of 001 §5.2.4.2, the English copy lost its heading).
 
 The checksum polynomial is not in the manual: the simulation uses CAN's CRC-15 with a final
-XOR (ssi_bridge/encoder/checksum.py); the tests check that this choice has the properties the
+XOR (ssi_bridge/protocol/checksum.py); the tests check that this choice has the properties the
 manual states, not TR's bits.
 """
 
@@ -14,15 +14,16 @@ from itertools import combinations
 
 import pytest
 
-from ssi_bridge.encoder.checksum import (DATA_BITS, WIDTH, code_word, crc15, min_weight,
+from ssi_bridge.protocol.checksum import (DATA_BITS, WIDTH, code_word, crc15, min_weight,
                                          syndrome)
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.config import FrameFormat, SpecialBit
-from ssi_bridge.encoder.families import family_config, make_encoder
-from ssi_bridge.encoder.layout import decode_area, encode_area
-from ssi_bridge.encoder.motion import Still
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.encoder_config import FrameFormat, SpecialBit
+from ssi_bridge.protocol.families import family_config
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.protocol.layout import decode_area, encode_area
+from ssi_bridge.sim.encoder.motion import Still
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.line.frame_check import FrameCheck
+from ssi_bridge.protocol.frame_check import FrameCheck
 
 
 def _manual_example(value: int) -> tuple[int, object]:

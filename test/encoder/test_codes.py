@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, strategies as st
 
-from ssi_bridge.encoder.codes import (Code, bcd_decode, bcd_encode, bin_to_gray, decode, encode,
+from ssi_bridge.protocol.codes import (Code, bcd_decode, bcd_encode, bin_to_gray, decode, encode,
                                       gray_excess_decode, gray_excess_encode, gray_excess_offset,
                                       gray_to_bin)
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.config import Alignment, SpecialBit, SsiMode
-from ssi_bridge.encoder.families import FAMILIES, family_config, make_encoder
-from ssi_bridge.encoder.layout import decode_area, split
-from ssi_bridge.encoder.motion import Still
+from ssi_bridge.protocol.encoder_config import Alignment, SpecialBit, SsiMode
+from ssi_bridge.protocol.families import FAMILIES, family_config
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.protocol.layout import decode_area, split
+from ssi_bridge.sim.encoder.motion import Still
 from ssi_bridge.exceptions import ConfigError
 
 

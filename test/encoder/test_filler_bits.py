@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import pytest
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import Still
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import Still
 
 
 # -- reference codes, from 004 §2.4 ---------------------------------------------------------

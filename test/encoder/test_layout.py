@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.config import (Alignment, EncoderConfig, FrameFormat, Negative,
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.encoder_config import (Alignment, EncoderConfig, FrameFormat, Negative,
                                        SpecialBit)
-from ssi_bridge.encoder.layout import decode_area, encode_area, split
+from ssi_bridge.protocol.layout import decode_area, encode_area, split
 from ssi_bridge.exceptions import ConfigError
 
 # 001 §5.2.5 table (16 bits): value, binary+complement, binary+sign, BCD+complement, BCD+sign
@@ -56,7 +56,7 @@ def test_26bit_repeat_left_justified_example() -> None:
     """001 §5.2.4.3: data bits 22 -> clocks 1-22 position, 23-26 S1..S4."""
     specials = (SpecialBit.CAM1, SpecialBit.CAM2, SpecialBit.CAM3, SpecialBit.CAM4)
     cfg = _repeat_cfg(22, specials)
-    from ssi_bridge.encoder.layout import assemble
+    from ssi_bridge.protocol.layout import assemble
     frame = assemble(cfg, encode_area(cfg, 0x2AAAAA), [1, 0, 1, 1])
     assert frame == (0x2AAAAA << 4) | 0b1011
     area, levels = split(cfg, frame)
@@ -67,7 +67,7 @@ def test_26bit_repeat_left_justified_example() -> None:
 def test_26bit_repeat_pads_with_trailing_zeros() -> None:
     """001 §5.2.4.3: always 26 bits; unused special-bit clocks send trailing zeros."""
     cfg = _repeat_cfg(22, (SpecialBit.CAM1,))
-    from ssi_bridge.encoder.layout import assemble
+    from ssi_bridge.protocol.layout import assemble
     assert assemble(cfg, 5, [1]) == ((5 << 1 | 1) << 3)
 
 

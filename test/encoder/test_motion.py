@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from ssi_bridge.encoder.motion import ConstantVelocity, Sine, Still, Trapezoid, Waypoints
+from ssi_bridge.sim.encoder.motion import ConstantVelocity, Sine, Still, Trapezoid, Waypoints
 from ssi_bridge.exceptions import ConfigError
 
 H = 1e-6

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.config import Direction, SpecialBit
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity, Still, Waypoints
+from ssi_bridge.protocol.encoder_config import Direction, SpecialBit
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity, Still, Waypoints
 from ssi_bridge.exceptions import ConfigError
 
 SPR = 4096

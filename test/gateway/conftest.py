@@ -15,11 +15,11 @@ import can.interfaces.virtual as virtual
 import canopen
 import pytest
 
-from ssi_bridge.gateway.bus import BusConfig
-from ssi_bridge.gateway.dictionary import build_dictionary
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.od import build_dictionary
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 _channels = itertools.count()
 NODE_ID = 7

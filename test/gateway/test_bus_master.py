@@ -12,12 +12,14 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from ssi_bridge.client.boot import BootWatch
+from ssi_bridge.sim.supervisor.boot import BootWatch
 from ssi_bridge.client.master import BridgeClient, CanMaster
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.settings import station_settings
-from ssi_bridge.gateway.station import Station
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.protocol.settings import station_settings
+from ssi_bridge.sim.gateway.station import Station
+from ssi_bridge.protocol.registers import Reg
 
 from .conftest import wait_for
 
@@ -36,7 +38,7 @@ def rig(channel: str) -> Iterator[tuple[CanMaster, dict[int, BridgeClient], can.
             BootWatch(watch, sid).wait(5.0)
     finally:
         watch.shutdown()
-    master = CanMaster(BusConfig(channel=channel))
+    master = CanMaster(BusConfig(channel=channel), opener=wire_bus)
     clients = {1: BridgeClient(master, 1, 2), 3: BridgeClient(master, 3, 1)}
     sniffer = open_bus(BusConfig(channel=channel))
     for client in clients.values():

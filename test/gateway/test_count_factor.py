@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import Still
-from ssi_bridge.gateway.station import count_factor
-from ssi_bridge.line.line import LineConfig, SsiLine
-from ssi_bridge.module.registers import Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import Still
+from ssi_bridge.protocol.joint_encoder import count_factor
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 @pytest.mark.parametrize("family, overrides, para1", [
@@ -30,4 +30,4 @@ def test_count_factor_matches_reg_ssi_pos(family: str, overrides: dict, para1: i
     module = Xn1Ssi(SsiLine(enc, LineConfig(check_cable_table=False)))
     module.write_para1(para1)
     module.cycle(0.0)
-    assert module.read_register(Reg.REG_SSI_POS) == value * count_factor(enc, para1)
+    assert module.read_register(Reg.REG_SSI_POS) == value * count_factor(enc.config, para1)

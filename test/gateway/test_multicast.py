@@ -1,7 +1,7 @@
 """CAN over UDP multicast (python-can's udp_multicast): what a CAN wire between processes needs.
 
 A CAN controller does not receive its own frames; a bus hears only its own group; a channel
-string names group, port and interface (gateway/multicast.py). Real sockets on loopback.
+string names group, port and interface (base/udp_bus.py). Real sockets on loopback.
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ import can
 import pytest
 
 from ssi_bridge.exceptions import BusError, ConfigError
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.multicast import (
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.base.udp_bus import (
     DEFAULT_PORT, Endpoint, derive_channel, ephemeral_ports, parse_channel)
-from ssi_bridge.gateway.settings import load_params_file, station_settings
+from ssi_bridge.protocol.settings import load_params_file, station_settings
 
 
 @pytest.fixture
@@ -155,7 +156,7 @@ def test_another_process_on_the_channel_is_heard(name: str) -> None:
     """Two processes: the point of the interface (the station runs as a child process)."""
     channel = derive_channel(name)
     bus = open_bus(BusConfig(interface="udp_multicast", channel=channel))
-    code = ("import sys, can; from ssi_bridge.gateway.bus import BusConfig, open_bus;"
+    code = ("import sys, can; from ssi_bridge.sim.gateway.bus import BusConfig, open_bus;"
             f"b = open_bus(BusConfig(interface='udp_multicast', channel='{channel}'));"
             "m = b.recv(10.0); b.send(can.Message(arbitration_id=m.arbitration_id + 1,"
             " data=m.data, is_extended_id=False)); b.shutdown()")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from ssi_bridge.gateway.aborts import SdoAbort
-from ssi_bridge.gateway.dictionary import ENCODER_OBJECTS
-from ssi_bridge.module.registers import PARA1_DEFAULT, Reg
+from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.protocol.dictionary import ENCODER_OBJECTS
+from ssi_bridge.protocol.registers import PARA1_DEFAULT, Reg
 
 ARRAY_OBJECTS = [o for o in ENCODER_OBJECTS if o.array]
 

@@ -12,9 +12,9 @@ import copy
 import can
 import canopen
 
-from ssi_bridge.gateway.bus import BridgeNetwork, WireMessage
-from ssi_bridge.gateway.dictionary import tpdo_cob_base
-from ssi_bridge.module.registers import PARA1_DEFAULT
+from ssi_bridge.sim.gateway.bus import BridgeNetwork, WireMessage
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
+from ssi_bridge.protocol.registers import PARA1_DEFAULT
 
 from .conftest import NODE_ID
 

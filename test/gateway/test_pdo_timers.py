@@ -14,8 +14,8 @@ import threading
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from ssi_bridge.gateway.aborts import SdoAbort
-from ssi_bridge.gateway.dictionary import tpdo_cob_base
+from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
 
 from .conftest import NODE_ID
 

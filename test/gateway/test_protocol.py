@@ -9,9 +9,10 @@ import canopen
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from ssi_bridge.gateway.aborts import SdoAbort
-from ssi_bridge.gateway.dictionary import build_dictionary, tpdo_cob_base
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.base.od import build_dictionary
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
+from ssi_bridge.protocol.registers import Reg
 
 NODE_ID = 7  # conftest's station node id
 

@@ -1,4 +1,4 @@
-"""gateway/realtime.py: the station child is raised from outside while its threads start others."""
+"""base/realtime.py: the station child is raised from outside while its threads start others."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from ssi_bridge.gateway.realtime import fifo_permitted, raise_priority, thread_policies
+from ssi_bridge.base.realtime import fifo_permitted, raise_priority, thread_policies
 
 #: a process whose threads keep starting threads (as a booting station starts its timers and
 #: listeners): each thread starts one successor and ends, so a thread that was normal when it
@@ -56,7 +56,7 @@ def test_raise_priority_says_when_not_permitted():
     """Without the right, False (the node then logs its INFO line) and the process is untouched;
     fifo_permitted says so beforehand, and its probe leaves no thread of the caller raised."""
     script = ("import subprocess, os\n"
-              "from ssi_bridge.gateway.realtime import fifo_permitted, raise_priority, "
+              "from ssi_bridge.base.realtime import fifo_permitted, raise_priority, "
               "thread_policies\n"
               "p = subprocess.Popen(['sleep', '30'])\n"
               "print(raise_priority(p.pid, 7), os.sched_getscheduler(p.pid) == os.SCHED_OTHER,\n"

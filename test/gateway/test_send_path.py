@@ -13,10 +13,10 @@ import copy
 import can
 import pytest
 
-from ssi_bridge.gateway.bus import BridgeNetwork, LossyBus, WireMessage
-from ssi_bridge.gateway.objects import EncoderObjects
-from ssi_bridge.module.registers import Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.gateway.bus import BridgeNetwork, LossyBus, WireMessage
+from ssi_bridge.sim.gateway.objects import EncoderObjects
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 from .conftest import ScriptedReader
 

@@ -13,15 +13,17 @@ from collections.abc import Iterator
 
 import pytest
 
-from ssi_bridge.client.boot import BootWatch
+from ssi_bridge.sim.supervisor.boot import BootWatch
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.dictionary import SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE
-from ssi_bridge.gateway.settings import station_settings
-from ssi_bridge.gateway.simulation import FaultKind, command_word
-from ssi_bridge.gateway.station import Station
-from ssi_bridge.module.images import ModuleStatus
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.protocol.dictionary import SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE
+from ssi_bridge.protocol.settings import station_settings
+from ssi_bridge.sim.gateway.simulation import FaultKind, command_word
+from ssi_bridge.sim.gateway.station import Station
+from ssi_bridge.protocol.images import ModuleStatus
 
 from .conftest import wait_for
 
@@ -37,7 +39,7 @@ def rig(channel: str) -> Iterator[tuple[Station, BridgeClient]]:
         BootWatch(watch, settings.bus.node_id).wait(5.0)
     finally:
         watch.shutdown()
-    client = BridgeClient(BusConfig(channel=channel), settings.bus.node_id, 2)
+    client = BridgeClient(BusConfig(channel=channel), settings.bus.node_id, 2, opener=wire_bus)
     client.connect()
     yield station, client
     client.close()

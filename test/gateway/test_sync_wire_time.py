@@ -3,7 +3,7 @@
 On udp_multicast a frame reaches the other process when its sender's thread gets to send it:
 the sender stamps the frame's end on the simulated wire, sleeps until then and sends, and
 under CPU load it wakes milliseconds late. The datagram carries that stamp
-(``gateway/multicast.py``); ``frame_wire_time`` gives it back, and the station latches its
+(``base/udp_bus.py``); ``frame_wire_time`` gives it back, and the station latches its
 modules on it. 000 §"Process data": the XN-1SSI acquires the encoder value on the SYNC, so
 REG_SSI_POS is the shaft position at the SYNC's instant on the wire, wherever the station runs.
 Real sockets on loopback, a real station; the ground truth is the same module model cycled at
@@ -19,13 +19,15 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.multicast import (
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.base.udp_bus import (
     WIRE_TIME_PLAUSIBLE, UdpFrame, derive_channel, open_udp_bus,
 )
-from ssi_bridge.gateway.settings import station_settings
-from ssi_bridge.gateway.station import SimStation, Station
-from ssi_bridge.gateway.timebase import frame_wire_time, wire_now
+from ssi_bridge.protocol.settings import station_settings
+from ssi_bridge.sim.gateway.station import SimStation, Station
+from ssi_bridge.base.timebase import frame_wire_time, wire_now
 
 #: how late the simulated sender put its SYNC out after the SYNC's end on the wire (s)
 LATE = 0.030
@@ -135,13 +137,13 @@ def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) 
     # SYNC late (a starved process) still puts them right after that SYNC on the wire, so a
     # master counts them for it, not for a newer SYNC sent meanwhile (client/samples.py)
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.gateway.wire import frame_bits
+    from ssi_bridge.protocol.wire import frame_bits
 
     settings = station_settings({"joints": ["j"], "j.slot": 1,
                                  "bus.interface": "udp_multicast", "bus.channel": channel})
     station = Station(settings)
     station.start()
-    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1)
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1, opener=wire_bus)
     master = open_udp_bus(channel)
     try:
         client.connect()  # OPERATIONAL, TPDO1 (image) and TPDO9 (positions) on SYNC
@@ -168,8 +170,8 @@ def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) 
 def test_an_answer_goes_in_the_first_gap_after_its_sync() -> None:
     # a heartbeat this process put on the wire 5 ms after the SYNC, before the station got
     # to the SYNC: the answer fits in before it; where it does not fit, it goes after it
-    from ssi_bridge.gateway.bus import Wire
-    from ssi_bridge.gateway.wire import frame_bits
+    from ssi_bridge.sim.gateway.bus import Wire
+    from ssi_bridge.protocol.wire import frame_bits
 
     wire = Wire(500_000)
     sync_end = 100.0

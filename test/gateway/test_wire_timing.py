@@ -12,13 +12,15 @@ from pathlib import Path
 import can
 import pytest
 
-from ssi_bridge.gateway import wire
-from ssi_bridge.gateway.bus import BusConfig, open_bus
-from ssi_bridge.gateway.gateway import XnGateway
-from ssi_bridge.gateway.timebase import ModelClock
+from ssi_bridge.protocol import wire
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.bus import open_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.base.timebase import ModelClock
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 class ScriptedReader:
@@ -78,7 +80,7 @@ def test_sync_to_last_tpdo_takes_the_wire_time_of_the_formula(bitrate):
     config = BusConfig(channel=channel, node_id=3, bitrate=bitrate)
     gateway = XnGateway(config, 3, [Xn1Ssi(ScriptedReader(0x1234 + i), slot=i + 1)
                                     for i in range(2)])
-    client = BridgeClient(config, 3, 2, sdo_timeout=1.0)
+    client = BridgeClient(config, 3, 2, sdo_timeout=1.0, opener=wire_bus)
     sniffer = open_bus(config)
     gateway.start()
     try:
@@ -142,7 +144,7 @@ def test_udp_multicast_frames_arrive_after_their_wire_time_in_the_same_time_base
         b = can.Bus(interface="udp_multicast", channel=channel, port=port)
     except (OSError, can.CanError, ImportError) as err:
         pytest.skip(f"no multicast on this host: {err}")
-    from ssi_bridge.gateway.bus import Wire, WireBus
+    from ssi_bridge.sim.gateway.bus import Wire, WireBus
 
     sender, receiver = WireBus(a, Wire(config.bitrate)), WireBus(b, Wire(config.bitrate))
     try:

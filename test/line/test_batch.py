@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity, Sine
-from ssi_bridge.line.batch import read_batch
-from ssi_bridge.line.line import LineConfig, SsiLine
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity, Sine
+from ssi_bridge.sim.line.batch import read_batch
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
 
 
 @pytest.mark.parametrize("family, kw, n_extra", [

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.config import SpecialBit
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import Still
-from ssi_bridge.line.frame_check import FrameCheck
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.encoder_config import SpecialBit
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import Still
+from ssi_bridge.protocol.frame_check import FrameCheck
 
 
 def _frame(family: str, step: float, **kw) -> tuple[int, object]:

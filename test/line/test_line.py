@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.config import SpecialBit, SsiMode
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity, Still
-from ssi_bridge.line.decode import MasterStatus, check_readout, decode_frame
-from ssi_bridge.line.line import LineConfig, SsiLine
-from ssi_bridge.line.multi import MultipleTransmission
+from ssi_bridge.protocol.encoder_config import SpecialBit, SsiMode
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity, Still
+from ssi_bridge.protocol.decode import MasterStatus, check_readout, decode_frame
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
+from ssi_bridge.sim.line.multi import MultipleTransmission
 
 RATE = 250e3          # below the 004 §2.7 recommendation for a 10 m cable
 POS = 5 + 1234.5 / 8192
@@ -142,7 +142,7 @@ def test_repeat_bursts_send_the_latched_word() -> None:
 
 def test_26bit_repeat_repeats_only_once() -> None:
     """001 §5.2.4.3: the second sequence repeats the word, a further one sends a new word."""
-    from ssi_bridge.encoder.config import FrameFormat
+    from ssi_bridge.protocol.encoder_config import FrameFormat
     enc = make_encoder("TR_PROGRAMMABLE", ConstantVelocity(100.0),
                        frame_format=FrameFormat.REPEAT_26)
     line = SsiLine(enc)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from hypothesis import given, settings, strategies as st
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.config import ERROR_BITS, Negative, SpecialBit
-from ssi_bridge.encoder.families import FAMILIES, make_encoder
-from ssi_bridge.encoder.layout import decode_area, split
-from ssi_bridge.encoder.motion import Still
-from ssi_bridge.line.decode import MasterStatus, check_readout, decode_frame
-from ssi_bridge.line.line import LineConfig, SsiLine
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.encoder_config import ERROR_BITS, Negative, SpecialBit
+from ssi_bridge.protocol.families import FAMILIES
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.protocol.layout import decode_area, split
+from ssi_bridge.sim.encoder.motion import Still
+from ssi_bridge.protocol.decode import MasterStatus, check_readout, decode_frame
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
 
 FAMILY_NAMES = sorted(n for n in FAMILIES if n not in ("KH53",))
 ERROR_CAPABLE = {SpecialBit.ERROR, SpecialBit.ERRDIG, SpecialBit.ERRSI, SpecialBit.ERRSYNC,

@@ -7,9 +7,9 @@ from dataclasses import replace
 
 import pytest
 
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.images import CmpControl, ProcessInput, ProcessOutput
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.protocol.images import CmpControl, ProcessInput, ProcessOutput
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 class ScriptedReader:

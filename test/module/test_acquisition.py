@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.acquisition import bin_to_gray, gray_to_bin
-from ssi_bridge.module.diagnostics import Diag
-from ssi_bridge.module.images import ModuleStatus
-from ssi_bridge.module.registers import Para1, Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.module.acquisition import bin_to_gray, gray_to_bin
+from ssi_bridge.protocol.diagnostics import Diag
+from ssi_bridge.protocol.images import ModuleStatus
+from ssi_bridge.protocol.registers import Para1, Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 def para(**fields: object) -> int:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.images import CmpControl, CmpStatus, ProcessInput
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.images import CmpControl, CmpStatus, ProcessInput
+from ssi_bridge.protocol.registers import Reg
 
 C = CmpStatus
 UNITS = [  # (register, EN, CLR, STS, FLAG, REL)

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.diagnostics import Diag, cam_state, to_int32
-from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus
-from ssi_bridge.module.registers import BIT_RATES_HZ, DEVICENET_BIT_RATES_HZ, Para1, Reg
+from ssi_bridge.protocol.diagnostics import Diag, cam_state, to_int32
+from ssi_bridge.protocol.images import CmpControl, CmpStatus, ModuleStatus
+from ssi_bridge.protocol.registers import BIT_RATES_HZ, DEVICENET_BIT_RATES_HZ, Para1, Reg
 
 
 def test_bit_rate_codes_3_and_4_follow_profibus_and_canopen(reader, module) -> None:

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from ssi_bridge.exceptions import ParameterError
-from ssi_bridge.module.diagnostics import Diag, DiagTracker, diag_edges
-from ssi_bridge.module.images import ModuleStatus
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.diagnostics import Diag, DiagTracker, diag_edges
+from ssi_bridge.protocol.images import ModuleStatus
+from ssi_bridge.protocol.registers import Reg
 
 
 @pytest.mark.parametrize("bit, position, emcy", [

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.registers import SF_LD20, Reg
+from ssi_bridge.protocol.registers import SF_LD20, Reg
 
 
 def test_write_step_by_step(master, module) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.images import (
+from ssi_bridge.protocol.images import (
     CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput,
 )
 

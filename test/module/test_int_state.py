@@ -10,13 +10,13 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.diagnostics import Diag
-from ssi_bridge.module.images import (
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.protocol.diagnostics import Diag
+from ssi_bridge.protocol.images import (
     CmpStatus, ModuleStatus, ProcessInput, ProcessOutput, encode_input,
 )
-from ssi_bridge.module.registers import Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 class ListReader:

@@ -21,15 +21,15 @@ from pathlib import Path
 
 import yaml
 
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity
-from ssi_bridge.line.decode import MasterStatus, check_readout
-from ssi_bridge.line.frame_check import FrameCheck
-from ssi_bridge.line.line import LineConfig, SsiLine
-from ssi_bridge.line.multi import MultipleTransmission
-from ssi_bridge.module.images import ModuleStatus as M
-from ssi_bridge.module.registers import Para1, Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity
+from ssi_bridge.protocol.decode import MasterStatus, check_readout
+from ssi_bridge.protocol.frame_check import FrameCheck
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
+from ssi_bridge.sim.line.multi import MultipleTransmission
+from ssi_bridge.protocol.images import ModuleStatus as M
+from ssi_bridge.protocol.registers import Para1, Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "noise_guard.yaml"
 N = 4000

@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.encoder.codes import Code
-from ssi_bridge.encoder.families import make_encoder
-from ssi_bridge.encoder.motion import ConstantVelocity, Still
-from ssi_bridge.line.line import LineConfig, SsiLine
-from ssi_bridge.module.diagnostics import Diag
-from ssi_bridge.module.images import CmpStatus
-from ssi_bridge.module.registers import Para1, Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity, Still
+from ssi_bridge.sim.line.line import LineConfig, SsiLine
+from ssi_bridge.protocol.diagnostics import Diag
+from ssi_bridge.protocol.images import CmpStatus
+from ssi_bridge.protocol.registers import Para1, Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 
 def on_line(motion=None, **encoder) -> tuple[Xn1Ssi, SsiLine]:

@@ -7,10 +7,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ssi_bridge.exceptions import RegisterError
-from ssi_bridge.line.readout import LineReadout
-from ssi_bridge.module.images import CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput
-from ssi_bridge.module.registers import REGISTERS, describe_refusal
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.protocol.readout import LineReadout
+from ssi_bridge.protocol.images import CmpControl, CmpStatus, ModuleStatus, ProcessInput, ProcessOutput
+from ssi_bridge.protocol.registers import REGISTERS, describe_refusal
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 WRITABLE = [r for r, i in REGISTERS.items() if i.writable]
 CMP1_BITS = CmpStatus.STS_CMP1 | CmpStatus.FLAG_CMP1 | CmpStatus.REL_CMP1

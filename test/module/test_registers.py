@@ -6,11 +6,11 @@ from __future__ import annotations
 import pytest
 
 from ssi_bridge.exceptions import ParameterError, RegisterReadError, RegisterWriteError
-from ssi_bridge.module.registers import (
+from ssi_bridge.protocol.registers import (
     BIT_RATES_HZ, MAGIC_NO, PARA1_DEFAULT, REGISTERS, RETENTIVE, Para1, Reg, describe_refusal,
     validate_para1,
 )
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 NAMED = {int(r) for r in Reg}
 RESERVED = [a for a in range(64) if a not in NAMED]
@@ -163,7 +163,7 @@ def test_para1_valid_sets(value: int) -> None:
 def test_injected_parameter_error_until_a_valid_set(module, reader) -> None:
     # 000 "Error detection": ERR_PARA is a "non-retentive error message, and rejected
     # parameter set with it"; STS_STOP = 1 while it stands; a valid set clears it
-    from ssi_bridge.module.images import ModuleStatus
+    from ssi_bridge.protocol.images import ModuleStatus
     reason = module.inject_parameter_error()
     assert "reserved" in reason
     module.cycle(0.0)

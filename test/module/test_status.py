@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from ssi_bridge.module.acquisition import direction
-from ssi_bridge.module.diagnostics import Diag
-from ssi_bridge.module.images import CmpStatus, ModuleStatus
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.sim.module.acquisition import direction
+from ssi_bridge.protocol.diagnostics import Diag
+from ssi_bridge.protocol.images import CmpStatus, ModuleStatus
+from ssi_bridge.protocol.registers import Reg
 
 M = ModuleStatus
 

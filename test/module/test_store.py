@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 from ssi_bridge.exceptions import ParameterError, RegisterWriteError, StorageError
-from ssi_bridge.module.bank import ENDURANCE_LIMIT, ENDURANCE_WARNING
-from ssi_bridge.module.registers import RETENTIVE, SF_LD20, SF_LD48, Reg
-from ssi_bridge.module.store import BankSnapshot, MemoryStore, RetentiveStore
-from ssi_bridge.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.module.bank import ENDURANCE_LIMIT, ENDURANCE_WARNING
+from ssi_bridge.protocol.registers import RETENTIVE, SF_LD20, SF_LD48, Reg
+from ssi_bridge.sim.module.store import BankSnapshot, MemoryStore, RetentiveStore
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 WRITES = {  # a non-default value for every writable register
     Reg.REG_PARA1: 0x99020000, Reg.REG_LOWER_LIMIT: 11, Reg.REG_UPPER_LIMIT: 22,
@@ -144,7 +144,7 @@ def test_write_counter_per_register() -> None:
 def test_warning_before_the_limit(caplog) -> None:
     m = _worn(ENDURANCE_WARNING - 1)
     assert not m.endurance[Reg.REG_OFFSET].warning
-    with caplog.at_level(logging.WARNING, logger="ssi_bridge.module.bank"):
+    with caplog.at_level(logging.WARNING, logger="ssi_bridge.sim.module.bank"):
         m.write_register(Reg.REG_OFFSET, 1)
     assert m.endurance[Reg.REG_OFFSET].warning, "warning from 90,000 writes on"
     assert "REG_OFFSET written 90000 of 100000" in caplog.text

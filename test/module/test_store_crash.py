@@ -16,15 +16,15 @@ from pathlib import Path
 
 import pytest
 
-from ssi_bridge.module.registers import Reg
-from ssi_bridge.module.xn1ssi import Xn1Ssi
-from ssi_bridge.module.store import RetentiveStore
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
+from ssi_bridge.sim.module.store import RetentiveStore
 
 REPO = Path(__file__).resolve().parents[2]
 WRITER = """
 import sys
-from ssi_bridge.module.registers import RETENTIVE, REGISTERS, Reg
-from ssi_bridge.module.store import BankSnapshot, RetentiveStore
+from ssi_bridge.protocol.registers import RETENTIVE, REGISTERS, Reg
+from ssi_bridge.sim.module.store import BankSnapshot, RetentiveStore
 store = RetentiveStore(sys.argv[1], fsync=sys.argv[2] == "1")
 i = int(sys.argv[3])
 while True:

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from ssi_bridge.gateway import wire
+from ssi_bridge.protocol import wire
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits
-from ssi_bridge.gateway.realtime import fifo_this_thread, normal_this_thread
+from ssi_bridge.base.realtime import fifo_this_thread, normal_this_thread
 
 
 def test_runs_on_an_absolute_schedule_and_stops():

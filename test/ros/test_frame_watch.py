@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from ssi_bridge.encoder.families import family_config, make_encoder
-from ssi_bridge.encoder.motion import Still
-from ssi_bridge.module.images import encode_input
-from ssi_bridge.module.registers import Reg
+from ssi_bridge.protocol.families import family_config
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import Still
+from ssi_bridge.protocol.images import encode_input
+from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.ros.frame_watch import CamSettings, FrameWatch
 
 

@@ -99,7 +99,7 @@ def test_module_errors_pass_through_debounced():
 
 
 def _status_with(sts, verdict):
-    from ssi_bridge.line.frame_check import FrameVerdict
+    from ssi_bridge.protocol.frame_check import FrameVerdict
     from ssi_bridge.ros.diagnostics import ChannelCounters, channel_status
 
     h = ChannelHealth(raise_after_s=0.0)
@@ -112,7 +112,7 @@ def _status_with(sts, verdict):
 def test_frame_findings_and_module_status_are_both_named():
     # the frame check sees the encoder's error bit (004 2.3) at once; the module's SSI_DIAG
     # (000 Table 3) follows after the debounce: neither message hides the other
-    from ssi_bridge.module.images import ModuleStatus
+    from ssi_bridge.protocol.images import ModuleStatus
 
     only_frame = _status_with(0, (False, False, False, True))
     assert only_frame.level == WARN and only_frame.message == "encoder error bit set in the frame"

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from ssi_bridge.line.timing import recommended_bit_rate
-from ssi_bridge.module.para1 import Para1
+from ssi_bridge.sim.line.timing import recommended_bit_rate
+from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.ros.observe import SILENT_WARNING_S
 from ssi_bridge.ros.params import DEFAULT_PARA1, JointSettings
 
@@ -115,7 +115,7 @@ def test_emcy_floods_are_one_line_per_second_per_slot_and_code(start_node):
         times = [t for t, m in emcy if key in m]
         assert all(b - a >= 0.99 for a, b in zip(times, times[1:])), (key, times)
     assert all("[ssi_bridge.client.master]" in m and m.startswith("[INFO]") for _, m in emcy)
-    assert "ssi_bridge.gateway.emergency" not in log, "the gateway side logs at DEBUG"
+    assert "ssi_bridge.sim.gateway.emergency" not in log, "the gateway side logs at DEBUG"
 
 
 def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):

@@ -21,8 +21,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
 
-from ssi_bridge.gateway.multicast import derive_channel
-from ssi_bridge.gateway.realtime import fifo_permitted, thread_policies
+from ssi_bridge.base.udp_bus import derive_channel
+from ssi_bridge.base.realtime import fifo_permitted, thread_policies
 
 from .conftest import dds_env, installed_executable
 
@@ -45,7 +45,7 @@ def _children(pid: int) -> list[int]:
 
 def _station_of(node) -> int:
     kids = [k for k in _children(node.proc.pid)
-            if b"ssi_bridge.tools.station" in Path(f"/proc/{k}/cmdline").read_bytes()]
+            if b"ssi_bridge.sim.program" in Path(f"/proc/{k}/cmdline").read_bytes()]
     assert len(kids) == 1, f"expected one station child of the node, got {kids}"
     return kids[0]
 
@@ -153,7 +153,7 @@ def test_a_station_that_cannot_start_is_one_line_and_exit_1(start_node, tmp_path
 def test_virtual_fallback_runs_in_process_and_faults_still_go_over_the_bus(running, probe):
     node = running({"simulation.transport": "virtual", "diagnostics_period": PERIOD})
     assert not [k for k in _children(node.proc.pid)
-                if b"ssi_bridge.tools.station" in Path(f"/proc/{k}/cmdline").read_bytes()]
+                if b"ssi_bridge.sim.program" in Path(f"/proc/{k}/cmdline").read_bytes()]
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.DATA_WIRE_BREAK))

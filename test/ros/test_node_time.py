@@ -54,7 +54,7 @@ def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_n
 
 @pytest.mark.integration
 def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running, probe):
-    from ssi_bridge.gateway import wire
+    from ssi_bridge.protocol import wire
 
     joints = [f"axis{i}" for i in range(1, 5)]
     node = running({"joints": joints, "publish_rate": 1000.0, "bus.bitrate": 500_000})
@@ -76,7 +76,7 @@ def test_a_rate_the_wire_cannot_carry_runs_complete_cycles_at_the_rate_that_does
     """
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from ssi_bridge.gateway import wire
+    from ssi_bridge.protocol import wire
 
     node = running({"joints": [f"j{i}" for i in range(1, 9)], "publish_rate": 1000.0,
                     "bus.bitrate": 500_000, "simulation.transport": transport,

@@ -1,0 +1,268 @@
+"""CAN over UDP multicast between processes and hosts: python-can's ``udp_multicast`` interface.
+
+The simulated station runs in its own process (or on another host) and meets the master on
+python-can's ``udp_multicast`` bus: every CAN frame is one msgpack datagram to a multicast
+group, the wire format of python-can, so any python-can tool on the same group sees the
+traffic. :class:`UdpCanBus` is that interface with three things a CAN wire needs:
+
+* a sender does not receive its own frames (a CAN controller does not either; python-can's
+  bus would, through multicast loop-back): frames go out through a second socket and
+  datagrams from that socket's address are dropped on receipt;
+* the group is joined on one chosen interface (``127.0.0.1`` by default) and sent from it,
+  so a station on the same host never puts a frame on the LAN;
+* ``IP_MULTICAST_ALL`` is off, so a bus hears only its own group even when another bus on
+  the machine uses the same port.
+
+The channel string is ``GROUP[:PORT][@INTERFACE_ADDRESS]``, e.g. ``239.74.163.2:43113@127.0.0.1``.
+Receive timestamps are the kernel's (``SO_TIMESTAMPNS``, ``time.time()`` base), as python-can
+sets them. The datagram also carries the sender's ``can.Message.timestamp`` (python-can packs
+it): on a :class:`~ssi_bridge.sim.gateway.bus.WireBus` that is the frame's end on the simulated
+wire, stamped before the sender's thread slept until then and sent. A received frame is a
+:class:`UdpFrame` that keeps it as :attr:`UdpFrame.wire_time`: under CPU load the sender
+wakes late, so the receive time is late by as much, the wire time is not.
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import ipaddress
+import logging
+import socket
+import struct
+from dataclasses import dataclass
+
+import can
+from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
+from can.interfaces.udp_multicast.utils import unpack_message
+
+from ssi_bridge.exceptions import ConfigError
+
+logger = logging.getLogger(__name__)
+
+#: python-can's default udp_multicast port
+DEFAULT_PORT = 43113
+#: the interface a station on the same host is reached through
+LOOPBACK = "127.0.0.1"
+#: Linux socket option: deliver only the groups this socket joined (in.h)
+IP_MULTICAST_ALL = 49
+#: derived groups live in the administratively scoped 239.74.0.0/16 (RFC 2365)
+_DERIVED_NET = (239, 74)
+#: derived ports: above Linux's ephemeral range (net.ipv4.ip_local_port_range, 32768-60999 by
+#: default), where any socket bound to port 0 (DDS's, a client's) may hold a port without
+#: SO_REUSEADDR and the bus's bind then fails; DDS itself uses these ports only for domain IDs
+#: from 215, beyond the 0-101 ROS recommends on Linux
+_DERIVED_PORTS = (61000, 65536)
+#: where Linux keeps its ephemeral port range
+_EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
+#: a sender's timestamp is taken as the frame's wire time only this close to its receive time
+#: (s): a python-can tool may send a frame with no stamp (0) or replay a logged one
+WIRE_TIME_PLAUSIBLE = 1.0
+
+_new_message = can.Message.__new__
+#: the fields of a can.Message (its __slots__ minus the weak-reference slot)
+_FIELDS = tuple(n for n in can.Message.__slots__ if n != "__weakref__")
+
+
+class UdpFrame(can.Message):
+    """A frame received on udp_multicast: the kernel's receive ``timestamp`` and the sender's
+    :attr:`wire_time` (its end on the wire, the instant every receiver shares)."""
+
+    __slots__ = ("wire_time",)
+
+    @classmethod
+    def of(cls, msg: can.Message, timestamp: float, wire_time: float) -> UdpFrame:
+        """A copy of ``msg`` (fields and a new payload) with these two times."""
+        frame = _new_message(cls)
+        for name in _FIELDS:
+            setattr(frame, name, getattr(msg, name))
+        frame.data = bytearray(msg.data)
+        frame.timestamp = timestamp
+        frame.wire_time = wire_time
+        return frame
+
+    def __copy__(self) -> UdpFrame:
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
+
+    def __deepcopy__(self, memo: dict[int, object] | None) -> UdpFrame:
+        return UdpFrame.of(self, self.timestamp, self.wire_time)
+
+
+def wire_time_of(sent: float, received: float) -> float:
+    """The wire time of a frame the sender stamped ``sent`` and the kernel received at
+    ``received``: ``sent`` when it is a plausible stamp (within :data:`WIRE_TIME_PLAUSIBLE`),
+    else ``received``."""
+    if sent > 0 and abs(received - sent) <= WIRE_TIME_PLAUSIBLE:
+        return sent
+    return received
+
+
+def unpack_frame(data: bytes, received: float) -> UdpFrame:
+    """A python-can udp_multicast datagram as a :class:`UdpFrame` received at ``received``."""
+    sent = unpack_message(data, check=True)  # its timestamp: the sender's
+    return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """Where a udp_multicast CAN bus meets: group, UDP port, and the local interface address."""
+
+    group: str
+    port: int = DEFAULT_PORT
+    interface: str = LOOPBACK
+
+    def __post_init__(self) -> None:
+        try:
+            group = ipaddress.IPv4Address(self.group)
+            ipaddress.IPv4Address(self.interface)
+        except ValueError as err:
+            raise ConfigError(f"udp_multicast channel: {err} (IPv4 addresses only)") from None
+        if not group.is_multicast:
+            raise ConfigError(f"udp_multicast channel: {self.group} is not a multicast group "
+                              "(224.0.0.0/4)")
+        if not 1 <= self.port <= 65535:
+            raise ConfigError(f"udp_multicast channel: port {self.port} outside 1-65535")
+
+    @property
+    def channel(self) -> str:
+        """The channel string that parses back to this endpoint."""
+        return f"{self.group}:{self.port}@{self.interface}"
+
+
+def parse_channel(channel: str) -> Endpoint:
+    """``GROUP[:PORT][@INTERFACE_ADDRESS]`` -> :class:`Endpoint` (ConfigError when malformed)."""
+    text, _, interface = str(channel).partition("@")
+    group, _, port = text.partition(":")
+    try:
+        port_number = int(port) if port else DEFAULT_PORT
+    except ValueError:
+        raise ConfigError(f"udp_multicast channel {channel!r}: port {port!r} is not a number; "
+                          "use GROUP[:PORT][@INTERFACE_ADDRESS]") from None
+    return Endpoint(group, port_number, interface or LOOPBACK)
+
+
+def ephemeral_ports() -> range | None:
+    """This machine's ephemeral UDP/TCP port range (Linux), or None where it cannot be read."""
+    try:
+        with open(_EPHEMERAL_RANGE_FILE, encoding="ascii") as f:
+            low, high = (int(v) for v in f.read().split())
+    except (OSError, ValueError):
+        return None
+    return range(low, high + 1)
+
+
+def _port_taken(port: int) -> str:
+    """Why binding ``port`` said EADDRINUSE, and what to do, for the error message."""
+    ephemeral = ephemeral_ports()
+    if ephemeral is not None and port in ephemeral:
+        return (f"port {port} lies in this machine's ephemeral range {ephemeral.start}-"
+                f"{ephemeral.stop - 1}, where any socket may hold it; choose a port outside it")
+    return f"another socket holds port {port} without SO_REUSEADDR"
+
+
+def derive_channel(name: str, interface: str = LOOPBACK) -> str:
+    """A group and port of their own for a bus named ``name`` (e.g. the node's bus.channel).
+
+    A hash of the name picks 239.74.x.y and a port in 61000-65535 (above Linux's ephemeral
+    ports), so nodes (and test runs) with different channel names never share a group and port.
+    """
+    digest = hashlib.sha256(str(name).encode()).digest()
+    x, y = digest[0], max(1, digest[1])
+    port = _DERIVED_PORTS[0] + int.from_bytes(digest[2:4], "big") % (
+        _DERIVED_PORTS[1] - _DERIVED_PORTS[0])
+    return Endpoint(f"{_DERIVED_NET[0]}.{_DERIVED_NET[1]}.{x}.{y}", port, interface).channel
+
+
+class _GroupSockets(GeneralPurposeUdpMulticastBus):
+    """python-can's multicast socket pair logic, joined and sent on one interface address."""
+
+    def __init__(self, endpoint: Endpoint, hop_limit: int) -> None:
+        self._endpoint = endpoint
+        try:
+            super().__init__(endpoint.group, endpoint.port, hop_limit)
+        except can.CanInitializationError as err:  # python-can's text hides the OS error
+            cause = err.__cause__
+            if not isinstance(cause, OSError):
+                raise
+            hint = f" ({_port_taken(endpoint.port)})" if cause.errno == errno.EADDRINUSE else ""
+            raise can.CanInitializationError(
+                f"cannot bind its receive socket: {cause.strerror or cause}{hint}") \
+                from cause
+        iface = socket.inet_aton(endpoint.interface)
+        send = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL,
+                            struct.pack("@I", hop_limit))
+            send.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, iface)
+            send.bind((endpoint.interface, 0))
+        except OSError as err:
+            send.close()
+            self._socket.close()
+            raise can.CanInitializationError(
+                f"cannot send to {endpoint.channel}: {err}") from err
+        self._send_socket = send
+        #: datagrams from this address are this bus's own frames
+        self.own_address = send.getsockname()
+
+    def _create_socket(self, address_family: socket.AddressFamily) -> socket.socket:
+        sock = super()._create_socket(address_family)  # bound to the port, group on any iface
+        group = socket.inet_aton(self.group)
+        iface = socket.inet_aton(self._endpoint.interface)
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_DROP_MEMBERSHIP,
+                            group + struct.pack("@I", socket.INADDR_ANY))
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group + iface)
+        except OSError as err:
+            sock.close()
+            raise can.CanInitializationError(
+                f"cannot join {self.group} on {self._endpoint.interface}: {err}") from err
+        return sock
+
+    def send(self, data: bytes, timeout: float | None = None) -> None:
+        try:
+            self._send_socket.sendto(data, (self.group, self.port))
+        except OSError as err:
+            raise can.CanOperationError(f"failed to send to {self._endpoint.channel}: {err}") \
+                from err
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._send_socket.close()
+
+
+class UdpCanBus(UdpMulticastBus):
+    """python-can's ``udp_multicast`` bus on one :class:`Endpoint`, without its own frames."""
+
+    def __init__(self, channel: str, hop_limit: int = 1, **kwargs: object) -> None:
+        endpoint = parse_channel(channel)
+        # python-can's constructor opens sockets on every interface: replaced right away
+        can.BusABC.__init__(self, endpoint.channel, **kwargs)  # type: ignore[arg-type]
+        try:
+            self._multicast = _GroupSockets(endpoint, hop_limit)
+        except BaseException:
+            self._is_shutdown = True  # nothing opened: no "not properly shut down" warning
+            raise
+        self._can_protocol = can.CanProtocol.CAN_20
+        self.endpoint = endpoint
+        self.channel_info = f"udp_multicast {endpoint.channel}"
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        result = self._multicast.recv(timeout)
+        if not result:
+            return None, False
+        data, sender, timestamp = result
+        if sender[:2] == self._multicast.own_address:
+            return None, False  # our own frame looped back
+        try:
+            msg = unpack_frame(data, timestamp)
+        except Exception as err:  # noqa: BLE001 - a foreign datagram on the group
+            raise can.CanOperationError("could not unpack received message") from err
+        if msg.is_fd:
+            return None, False
+        return msg, False
+
+
+def open_udp_bus(channel: str) -> can.BusABC:
+    """Open a :class:`UdpCanBus` on ``channel`` (``GROUP[:PORT][@INTERFACE_ADDRESS]``)."""
+    return UdpCanBus(channel)

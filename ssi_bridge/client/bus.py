@@ -1,0 +1,159 @@
+"""The master's CAN bus: a plain python-can bus, canopen's network on it, what it has seen.
+
+The master runs on whatever python-can bus it is given (socketcan, pcan, the CAN-over-UDP
+interface of :mod:`ssi_bridge.base.udp_bus`, virtual): :func:`open_bus` opens one from a
+:class:`~ssi_bridge.protocol.settings.BusConfig`, or the caller hands an open bus over
+(:func:`take_bus`; the node's simulation supervisor hands over the simulated wire). Nothing
+here simulates anything: frame loss, a muted gateway and the timed wire are faults and
+models of the simulated station (``sim/``).
+
+:class:`ReceiveWatch` wraps the master's bus to keep what the liveness check needs, the wire
+time up to which the receive path has handled every frame (:meth:`ReceiveWatch.seen_until`),
+through python-can's public ``recv``/``send`` only. :class:`MasterNetwork` is canopen's
+``Network`` that reports every frame it sends (the bus load).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+import can
+import canopen
+
+from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.base.udp_bus import open_udp_bus
+from ssi_bridge.exceptions import BusError
+from ssi_bridge.protocol.settings import BusConfig
+
+logger = logging.getLogger(__name__)
+
+#: receive-thread wake-up period (s): bounds how long stopping a canopen Network takes
+NOTIFIER_CYCLE = 0.05
+
+#: opens a bus for a config: :func:`open_bus`, or the simulation supervisor's
+BusOpener = Callable[[BusConfig], can.BusABC]
+
+
+def open_bus(config: BusConfig) -> can.BusABC:
+    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
+
+    ``udp_multicast`` is this package's CAN-over-UDP interface (:mod:`ssi_bridge.base.udp_bus`:
+    no echo of its own frames, one group on one interface), every other name python-can's
+    own. Raises BusError with the interface, channel, bit rate and the reason.
+    """
+    if config.interface == "udp_multicast":
+        try:
+            return open_udp_bus(str(config.channel))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
+    kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
+    if config.interface != "virtual":
+        kwargs["bitrate"] = config.bitrate
+    try:
+        bus = can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as err:
+        raise BusError(
+            f"cannot open CAN bus {config.interface}:{config.channel} "
+            f"at {config.bitrate} bit/s: {err}") from err
+    logger.debug("opened %s:%s", config.interface, config.channel)
+    return bus
+
+
+def take_bus(source: BusConfig | can.BusABC | None, owner: str,
+             opener: BusOpener = open_bus) -> can.BusABC:
+    """The bus a master or listener runs on: a new one for a config, or the one handed over.
+
+    A handed-over bus belongs to its taker, which shuts it down when it stops; so it can be
+    taken once. ``owner`` ("this master", ...) names the taker in the error.
+    """
+    if isinstance(source, BusConfig):
+        return opener(source)
+    if source is None:
+        raise BusError(f"{owner}'s bus was handed over and already shut down")
+    return source
+
+
+class ReceiveWatch(can.BusABC):
+    """The master's bus, keeping the wire time up to which its receive path has seen the wire.
+
+    ``recv`` and ``send`` pass straight through (python-can's public API of the wrapped bus).
+    Where the wrapped bus is a simulated wire shared with a station in this process (it has a
+    ``wire`` with ``undelivered_since()``), a frame of this process still on its way to the
+    receivers holds the view back: its sender's thread may be the one stalled.
+    """
+
+    def __init__(self, inner: can.BusABC) -> None:
+        self._inner = inner
+        self._wire = getattr(inner, "wire", None)
+        #: newest timestamp of a frame received, and the wire time at which a receive last
+        #: found nothing waiting
+        self.rx_latest = 0.0
+        self.rx_idle_at = 0.0
+        super().__init__(channel=getattr(inner, "channel_info", "bus"))
+        self.channel_info = str(getattr(inner, "channel_info", "bus"))
+
+    @property
+    def inner(self) -> can.BusABC:
+        """The wrapped bus."""
+        return self._inner
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` on the wrapped bus."""
+        self._inner.send(msg, timeout)
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """Receive one frame from the wrapped bus (None after ``timeout``) and note its time."""
+        msg = self._inner.recv(timeout)
+        wire = self._wire
+        if msg is None:
+            now = wire_now()
+            self.rx_idle_at = now if wire is None else min(now, wire.undelivered_since())
+        elif msg.timestamp > self.rx_latest:
+            ts = msg.timestamp
+            self.rx_latest = ts if wire is None else min(ts, wire.undelivered_since())
+        return msg
+
+    def seen_until(self) -> float:
+        """Wire time up to which every frame on the wire has been handled by this side."""
+        seen = max(self.rx_latest, self.rx_idle_at)
+        if self._wire is not None:
+            seen = min(seen, self._wire.undelivered_since())
+        return seen
+
+    def shutdown(self) -> None:
+        """Shut the wrapped bus down too."""
+        super().shutdown()
+        self._inner.shutdown()
+
+
+class MasterNetwork(canopen.Network):
+    """canopen's ``Network`` that hands every frame it sends to :attr:`on_sent`.
+
+    ``Network.send_message`` is canopen's documented hook for a custom back end; everything
+    canopen sends through it (NMT, SYNC, SDO, PDOs) goes out unchanged, under the same lock.
+    The frame is returned, so a caller can read its timestamp (on a simulated wire its end
+    on the wire).
+    """
+
+    #: called with every frame :meth:`send_message` sent (the master's bus load)
+    on_sent: Callable[[can.Message], None] | None = None
+
+    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> can.Message:
+        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
+        connected)."""
+        if not self.bus:
+            raise RuntimeError("Not connected to CAN bus")
+        frame = can.Message(arbitration_id=can_id, is_extended_id=can_id > 0x7FF,
+                            data=data, is_remote_frame=remote)
+        with self.send_lock:
+            self.bus.send(frame)
+        self.check()
+        if self.on_sent is not None:
+            self.on_sent(frame)
+        return frame
+
+
+__all__ = ["BusOpener", "MasterNetwork", "NOTIFIER_CYCLE", "ReceiveWatch", "open_bus",
+           "take_bus"]

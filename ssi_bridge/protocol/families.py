@@ -1,0 +1,192 @@
+"""Named encoder presets with the frame layouts of 004 §3 (SICK) and 001 §5 (TR).
+
+``family_config("AFM60_MULTI", steps_per_rev=32768)`` is the layout of the encoder a user has
+on the machine; overrides are :class:`EncoderConfig` fields (the simulated encoder of a family:
+:func:`ssi_bridge.sim.encoder.encoder.make_encoder`). Where a family sends its
+position bits "directly added" (the error bits follow the last position bit, 004 §3.2
+"13 bits -> 16 bits output"), ``data_bits`` follows the resolution unless overridden.
+Selecting ``ssi_mode=SsiMode.SYNC`` fills in the family's synchronous timing.
+
+Assumptions the manual leaves open (docs/encoder_line.md): ARS60 values are MSB-justified
+like the other non-programmable SICK encoders; the measuring steps of TTK70 (1 µm) and KH53
+(0.1 mm) are not in 004 and are only defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+from collections.abc import Callable
+from typing import Any
+
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.encoder_config import (Alignment, EncoderConfig, ErrorOutput, FrameFormat,
+                                       SpecialBit, SsiMode, SyncReference)
+from ssi_bridge.exceptions import ConfigError
+
+SICK3 = (SpecialBit.ERRDIG, SpecialBit.ERRSI, SpecialBit.ERRSYNC)   # 004 §3.2
+#: AHS/AHM36 asynchronous / synchronous timing (004 §3.1)
+AHM36_TIMING: dict[str, Any] = dict(formation_period_s=125e-6, async_pause_tolerance=0.2,
+                                    async_max_pause_s=0.6)
+AHM36_SYNC: dict[str, Any] = dict(sync_reference=SyncReference.BURST_END, sync_delay_s=20e-6,
+                                  min_pause_s=150e-6)
+
+
+def _is_binary(steps: float) -> bool:
+    s = int(steps)
+    return s == steps and s > 0 and not s & (s - 1)
+
+
+def _st_bits(steps: float, code: Code = Code.BINARY) -> int:
+    """Bits a singleturn value of ``steps`` steps needs (BCD: four per decimal digit)."""
+    top = max(int(steps) - 1, 1)
+    return 4 * len(str(top)) if code is Code.BCD else top.bit_length()
+
+
+def _directly_added(cfg: Any, given: dict[str, Any], turn_bits: int = 0) -> dict[str, Any]:
+    """data_bits = position bits of the resolution (004 §3.2 example, §3.3 note)."""
+    if "data_bits" in given:
+        return {}
+    return {"data_bits": turn_bits + _st_bits(cfg.steps_per_rev, cfg.code)}
+
+
+def _multiturn_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
+    """Tannenbaum for binary resolutions; else MSB-justified / right-aligned (004 §3.1, §3.4)."""
+    if "alignment" in given or _is_binary(cfg.steps_per_rev):
+        return {}
+    return {"alignment": Alignment.LEFT}
+
+
+def _atm60_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
+    """ATM60 non-binary / round axis: right aligned on the 24th bit, 200 µs (004 §3.4)."""
+    out: dict[str, Any] = {}
+    if "alignment" not in given and not _is_binary(cfg.steps_per_rev):
+        out.update(alignment=Alignment.RIGHT, data_bits=24, trailing_zero_bits=1)
+        out["formation_period_s"] = 200e-6
+        if cfg.ssi_mode is SsiMode.SYNC:
+            out.update(monoflop_s=200e-6, min_pause_s=200e-6)
+    return out
+
+
+def _ars60_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
+    """ARS60: 13 bits up to 8192 steps, else 15 bits + 2 error bits (004 §3.5)."""
+    if cfg.steps_per_rev > 8192 and "data_bits" not in given:
+        out: dict[str, Any] = {"data_bits": 15}
+        if "special_bits" not in given:
+            out["special_bits"] = (SpecialBit.ERR_POSITION, SpecialBit.ERR_SENDER)
+        return out
+    return {}
+
+
+Fix = Callable[[Any, dict[str, Any]], dict[str, Any]]
+
+
+@dataclasses.dataclass(frozen=True)
+class Family:
+    """A preset: base fields, extra fields for synchronous mode, and resolution fix-ups."""
+
+    base: dict[str, Any]
+    sync: dict[str, Any] = dataclasses.field(default_factory=dict)
+    fixes: tuple[Fix, ...] = ()
+    doc: str = ""
+
+
+_ROTARY_ST = dict(revolutions_numerator=1, revolutions_divisor=1)
+
+FAMILIES: dict[str, Family] = {
+    "GENERIC": Family(
+        dict(steps_per_rev=8192, revolutions_numerator=4096, data_bits=25),
+        doc="25-bit multiturn, 12 + 13 bits, binary, no special bits (XN-1SSI default frame)"),
+    "AHS36": Family(
+        dict(steps_per_rev=16384, data_bits=14, alignment=Alignment.LEFT,
+             special_bits=(SpecialBit.ERROR,), **_ROTARY_ST, **AHM36_TIMING),
+        AHM36_SYNC, doc="004 §3.1: 14 position bits MSB-justified + error bit (clock 15)"),
+    "AHM36_MULTI": Family(
+        dict(steps_per_rev=16384, revolutions_numerator=4096, data_bits=26, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, special_bits=(SpecialBit.ERROR,), **AHM36_TIMING),
+        AHM36_SYNC, (_multiturn_layout,),
+        doc="004 §3.1: 12 multiturn + 14 singleturn bits + error bit (clock 27)"),
+    "AFS60": Family(
+        dict(steps_per_rev=262144, data_bits=18, special_bits=SICK3, **_ROTARY_ST),
+        fixes=(lambda c, g: _directly_added(c, g),),
+        doc="004 §3.2: 18 position bits + ERRDIG, ERRSI, ERRSYNC"),
+    "AFM60_MULTI": Family(
+        dict(steps_per_rev=262144, revolutions_numerator=4096, data_bits=30, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, special_bits=SICK3),
+        fixes=(lambda c, g: _directly_added(c, g, 12), _multiturn_layout),
+        doc="004 §3.2: 12 + 18 (30 bits) or 12 + 15 (27 bits) + 3 error bits"),
+    "AFS60S_PRO": Family(
+        dict(steps_per_rev=262144, data_bits=18, special_bits=SICK3,
+             error_output=ErrorOutput.ALL_ONES, **_ROTARY_ST),
+        fixes=(lambda c, g: _directly_added(c, g),),
+        doc="004 §3.3: as AFS60; on an internal error every bit is 1"),
+    "AFM60S_PRO": Family(
+        dict(steps_per_rev=262144, revolutions_numerator=4096, data_bits=30, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, special_bits=SICK3,
+             error_output=ErrorOutput.ALL_ONES),
+        fixes=(lambda c, g: _directly_added(c, g, 12), _multiturn_layout),
+        doc="004 §3.3: 12 + 18 bits + 3 error bits (33 clocks); error -> all ones"),
+    "ATM60": Family(
+        dict(steps_per_rev=8192, revolutions_numerator=4096, data_bits=25, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, formation_period_s=150e-6),
+        dict(sync_reference=SyncReference.LATCH, monoflop_s=150e-6, min_pause_s=150e-6),
+        (_atm60_layout,), doc="004 §3.4: 25 bits Tannenbaum, 12 + 13, optional error bit"),
+    "ATM60_13_12": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=8192, data_bits=25, turn_bits=13,
+             alignment=Alignment.TANNENBAUM, formation_period_s=150e-6),
+        dict(sync_reference=SyncReference.LATCH, monoflop_s=150e-6, min_pause_s=150e-6),
+        (_atm60_layout,), doc="004 §3.4 Figure 17: 13 multiturn + 12 singleturn bits"),
+    "ARS60": Family(
+        dict(steps_per_rev=8192, data_bits=13, alignment=Alignment.LEFT, **_ROTARY_ST),
+        fixes=(_ars60_layout,),
+        doc="004 §3.5: 13 bits up to 8192 steps; 15 bits + 2 error bits above"),
+    "TTK70": Family(
+        dict(linear=True, measuring_step_m=1e-6, data_bits=24,
+             special_bits=(SpecialBit.ERR_DISTANCE, SpecialBit.ERR_TEMPERATURE), max_clocks=31),
+        doc="004 §3.6: 24 position bits + 2 error bits, 26..31 clocks, extra clocks read 0"),
+    "KH53": Family(
+        dict(linear=True, measuring_step_m=1e-4, data_bits=24,
+             error_output=ErrorOutput.ERROR_VALUE, error_value=0xFFFFE),
+        doc="004 §3.7: 24 position bits, no error bits, error value FFFFE hex"),
+    "TR_PROGRAMMABLE": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24),
+        doc="001 §5: programmable scaling, code, data bits, formats, special bits"),
+    "SSI25_POWERFAIL": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.POWER_FAIL,)),
+        doc="003: a 25-bit frame whose last data bit is a PowerFail bit (24 position bits)"),
+    "TR_PARITY": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24,
+             special_bits=(SpecialBit.ENCODER_ERROR, SpecialBit.EVEN_PARITY)),
+        doc="001 §5.5.6/§5.5.7: 24 data bits + encoder error + even parity (26 bits)"),
+    "TR_CHECKSUM": Family(
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=28, turn_bits=12,
+             alignment=Alignment.TANNENBAUM, frame_format=FrameFormat.CHECKSUM),
+        doc="001 §5.2.4.2: 12 revolution + 16 step bits + 15-bit checksum (43 clocks); "
+            "CRC-15 polynomial is a simulation choice (protocol/checksum.py)"),
+}
+FAMILIES["ATM90"] = FAMILIES["ATM60"]
+
+
+def family_config(family: str, **overrides: Any) -> EncoderConfig:
+    """The :class:`EncoderConfig` of a preset with ``overrides`` applied and fixed up."""
+    key = family.upper()
+    if key not in FAMILIES:
+        raise ConfigError(f"unknown encoder family {family!r}; known: {', '.join(sorted(FAMILIES))}")
+    fam = FAMILIES[key]
+    fields: dict[str, Any] = {"name": key, **fam.base}
+    if overrides.get("ssi_mode") is SsiMode.SYNC:
+        fields.update(fam.sync)
+    fields.update(overrides)
+    # the fix-ups need the resolution and mode, so build once permissively, then fix
+    probe = SimpleNamespace(steps_per_rev=fields.get("steps_per_rev", 8192.0),
+                            ssi_mode=fields.get("ssi_mode", SsiMode.ASYNC),
+                            code=fields.get("code", Code.BINARY))
+    for fix in fam.fixes:
+        for k, v in fix(probe, overrides).items():
+            if k not in overrides:
+                fields[k] = v
+    return EncoderConfig(**fields)
+
+
+__all__ = ["FAMILIES", "Family", "family_config", "Code"]

@@ -1,0 +1,365 @@
+"""The simulated CAN wire: frames take their real time at the bit rate, one at a time.
+
+On a simulated interface (``virtual``, ``udp_multicast``) :func:`open_bus` returns a
+:class:`WireBus`: frames take their real time on the wire at the bit rate, one at a time, and
+carry their end-of-frame wire time (``protocol/wire.py``, ``base/timebase.py``). Every
+:class:`WireBus` of one channel in a process shares one :class:`Wire`, so their frames never
+overlap; frames of other processes (udp_multicast) extend its busy time when received.
+:class:`DuePeriodicTask` runs a device's heartbeat on its own timer's schedule.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import can
+
+from ssi_bridge.base.timebase import frame_wire_time, wire_now
+from ssi_bridge.exceptions import BusError
+from ssi_bridge.protocol.dictionary import SYNC_COB_ID
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.protocol.wire import frame_bits
+
+logger = logging.getLogger(__name__)
+
+#: python-can interfaces that are simulated wires: they get :class:`WireBus` (frame timing)
+SIMULATED_INTERFACES = ("virtual", "udp_multicast")
+#: frames a wire remembers (start, end) to fit a late answer in behind its SYNC
+_RECENT_FRAMES = 64
+#: how long (s) a periodic frame that is due but not sent yet holds a receiver's view of the
+#: wire back (:meth:`Wire.owe`): longer than any starvation seen on a loaded machine, short
+#: enough that a producer thread that hangs is still noticed
+OWED_MAX_S = 1.0
+
+
+def open_bus(config: BusConfig) -> can.BusABC:
+    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
+
+    A simulated interface (:data:`SIMULATED_INTERFACES`) comes wrapped in :class:`WireBus`, so
+    its frames take their real time on the wire at ``config.bitrate``.
+    """
+    if config.interface == "udp_multicast":  # our own-frame-free variant (gateway/multicast)
+        from ssi_bridge.base.udp_bus import open_udp_bus
+        try:
+            return WireBus(open_udp_bus(str(config.channel)), wire_for(config))
+        except (can.CanError, OSError) as err:
+            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
+    kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
+    if config.interface == "virtual":
+        kwargs["preserve_timestamps"] = True  # receivers see the WireBus end-of-frame time
+    elif config.interface != "udp_multicast":
+        kwargs["bitrate"] = config.bitrate
+    try:
+        bus = can.Bus(**kwargs)
+    except (can.CanError, OSError, ValueError, ImportError) as err:
+        raise BusError(
+            f"cannot open CAN bus {config.interface}:{config.channel} "
+            f"at {config.bitrate} bit/s: {err}") from err
+    logger.debug("opened %s:%s", config.interface, config.channel)
+    if config.interface in SIMULATED_INTERFACES:
+        return WireBus(bus, wire_for(config))
+    return bus
+
+
+class Wire:
+    """The time line of one simulated CAN wire: busy until the end of the last frame on it.
+
+    Shared by every :class:`WireBus` of one channel in a process (the gateway's and the
+    master's), so their frames never overlap; frames from another process (udp_multicast)
+    are learnt when they arrive (their timestamp is their end on the wire).
+    """
+
+    def __init__(self, bitrate: int) -> None:
+        self.bitrate = bitrate
+        self.lock = threading.Lock()
+        #: wire time (s) at which the last frame known to this process ends
+        self.busy_until = 0.0
+        #: end (s) of the newest SYNC (COB-ID 0x080) put on this wire in this process
+        self.last_sync = 0.0
+        # frames on the wire not yet handed to the receivers (id -> end): a sender thread
+        # that stalls after its frame ended delays the frame, not the wire's time line
+        self._pending: dict[int, float] = {}
+        # (start, end) of the newest frames known here: where an answer to a SYNC fits
+        self._recent: deque[tuple[float, float]] = deque(maxlen=_RECENT_FRAMES)
+        # periodic producers of this process (key -> wire time their next frame is due)
+        self._owed: dict[int, float] = {}
+
+    def claim(self, bits: int, ready: float) -> float:
+        """Put a frame of ``bits`` ready at ``ready`` on the wire; return its end (s)."""
+        with self.lock:
+            start = ready if ready > self.busy_until else self.busy_until
+            end = start + bits / self.bitrate
+            self.busy_until = end
+            self._recent.append((start, end))
+            return end
+
+    def _first_gap(self, ready: float, length: float) -> float:
+        """The earliest start at or after ``ready`` where ``length`` s fit between the frames
+        known here (call under the lock)."""
+        start = ready
+        for s, e in sorted(self._recent):
+            if e <= start:
+                continue
+            if s >= start + length:
+                break
+            start = e
+        return start
+
+    def claim_all(self, frames: Sequence[can.Message], ready: float,
+                  answering: float | None = None) -> bool:
+        """Stamp ``frames`` back to back from ``ready`` with their ends; all or nothing.
+
+        ``answering`` is the wire time of the SYNC these frames answer: when a newer SYNC is
+        already on the wire they are not sent (False). A CANopen device sends synchronous
+        TPDOs inside the cycle of their SYNC (CiA 301 synchronous window), so a master can
+        tell which SYNC a TPDO belongs to by its order on the wire. Such frames go in the
+        first gap after their SYNC long enough for them, not behind every frame known: a
+        station process that gets to its SYNCs late (starved) answers each where it would
+        have, before the heartbeat its other thread sent meanwhile, instead of behind it and
+        so inside a newer SYNC's cycle.
+        """
+        rate = self.bitrate
+        lengths = [frame_bits(m.arbitration_id, m.data, m.is_remote_frame, m.dlc) / rate
+                   for m in frames]
+        with self.lock:
+            if answering is not None:
+                if self.last_sync > answering:
+                    return False
+                at = self._first_gap(ready, sum(lengths))
+            else:
+                at = ready if ready > self.busy_until else self.busy_until
+            for msg, length in zip(frames, lengths):
+                self._recent.append((at, at + length))
+                at += length
+                msg.timestamp = at
+                self._pending[id(msg)] = at
+                if msg.arbitration_id == SYNC_COB_ID:
+                    self.last_sync = at
+            if at > self.busy_until:
+                self.busy_until = at
+            return True
+
+    def delivered(self, msg: can.Message) -> None:
+        """``msg`` (claimed here) has been handed to the receivers, or never will be."""
+        with self.lock:
+            self._pending.pop(id(msg), None)
+
+    def owe(self, key: int, due: float | None) -> None:
+        """The periodic producer ``key`` sends its next frame at wire time ``due`` (None: it
+        sends nothing, e.g. muted or stopped)."""
+        with self.lock:
+            if due is None:
+                self._owed.pop(key, None)
+            else:
+                self._owed[key] = due
+
+    def undelivered_since(self) -> float:
+        """End of the oldest frame claimed in this process and not yet handed over (inf: none).
+
+        A receiver has seen the wire only up to just before it: a frame with that time stamp
+        may still arrive (its sender's thread did not get to hand it over yet). A periodic
+        frame of this process that is due but not sent yet counts the same, for up to
+        :data:`OWED_MAX_S`: the simulated device's timer is hardware and sends on time; only
+        the thread standing in for it is late.
+        """
+        with self.lock:
+            oldest = min(self._pending.values(), default=math.inf)
+            if self._owed:
+                horizon = wire_now() - OWED_MAX_S
+                for due in self._owed.values():
+                    if horizon < due < oldest:
+                        oldest = due
+            return oldest
+
+    def observe(self, end: float, sync: bool = False, length: float = 0.0) -> None:
+        """A frame of another process (``length`` s long) ended at ``end``: the wire was busy
+        until then."""
+        if sync and end > self.last_sync:
+            self.last_sync = end
+        if end > self.busy_until:
+            with self.lock:
+                if end > self.busy_until:
+                    self.busy_until = end
+                    self._recent.append((end - length, end))
+
+
+_wires: dict[tuple[str, str, int], Wire] = {}
+_wires_lock = threading.Lock()
+
+
+def wire_for(config: BusConfig) -> Wire:
+    """The process's :class:`Wire` of ``config``'s interface, channel and bit rate."""
+    key = (config.interface, str(config.channel), config.bitrate)
+    with _wires_lock:
+        wire = _wires.get(key)
+        if wire is None:
+            wire = _wires[key] = Wire(config.bitrate)
+        return wire
+
+
+class WireBus(can.BusABC):
+    """A simulated bus whose frames take their real time on the wire (CAN 2.0A at the bit rate).
+
+    ``send`` puts the frame on the :class:`Wire` after whatever is on it (SOF to IFS with its
+    actual stuff bits, ``protocol/wire.py``), stamps it with its end and hands it to the
+    receivers only then (sleeping, not spinning: Python sleeps ~0.05-0.1 ms late, which does
+    not add up over a burst because every frame's end is computed, not measured).
+    :meth:`send_batch` sends frames that are ready together in arbitration order (lowest
+    identifier first), as CAN arbitration would. Frames two nodes make ready within the same
+    bit time are sent in the order they were handed over (first come), not arbitrated.
+    Received frames extend the wire's busy time (frames of other processes).
+    """
+
+    def __init__(self, inner: can.BusABC, wire: Wire) -> None:
+        self._inner = inner
+        self.wire = wire
+        self._inner_steps = type(inner).recv is can.BusABC.recv
+        super().__init__(channel=getattr(inner, "channel_info", "wire"))
+        self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send one frame; returns when its last bit is on the wire."""
+        self.send_batch([msg], timeout=timeout)
+
+    def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None,
+                   timeout: float | None = None) -> bool:
+        """Send frames ready at the same instant, lowest identifier first.
+
+        ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
+        the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
+        Otherwise they are ready at that SYNC's end, not when this thread got to them: the
+        simulated device answers on the wire's time line (in the first gap after its SYNC),
+        as a real one does inside its SYNC's cycle. A sending thread that ran late (a station
+        process starved under load) then neither stamps its answer into the next SYNC's
+        cycle (where the master would count it) nor sleeps again for frames already over.
+        """
+        ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
+        ready = wire_now() if answering is None else answering
+        if not self.wire.claim_all(ordered, ready, answering):
+            return False
+        delivered = self.wire.delivered
+        try:
+            for msg in ordered:
+                wait = msg.timestamp - wire_now()
+                if wait > 0:
+                    time.sleep(wait)
+                if self._is_shutdown:
+                    return False  # shut down while the frame was on the wire: nobody gets it
+                self._inner.send(msg, timeout)
+                delivered(msg)
+        finally:
+            for msg in ordered:
+                delivered(msg)
+        return True
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._inner_steps:
+            msg, filtered = self._inner._recv_internal(timeout)
+            if msg is not None and not filtered and not self._inner._matches_filters(msg):
+                return None, False
+        else:
+            msg = self._inner.recv(timeout)
+        if msg is not None:
+            end = frame_wire_time(msg)
+            if end > self.wire.busy_until:  # a frame of another process: its place in time
+                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID, frame_bits(
+                    msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
+                    / self.wire.bitrate)
+            elif end:
+                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID)
+        return msg, False
+
+    def shutdown(self) -> None:
+        """Shut the wrapped bus down too."""
+        super().shutdown()
+        self._inner.shutdown()
+
+
+def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
+    """The bus a gateway or master runs on: a new one for a config, or the one handed over.
+
+    A handed-over bus belongs to its taker, which shuts it down when it stops; so it can be
+    taken once. ``owner`` ("this gateway", ...) names the taker in the error.
+    """
+    if isinstance(source, BusConfig):
+        return open_bus(source)
+    if source is None:
+        raise BusError(f"{owner}'s bus was handed over and already shut down")
+    return source
+
+
+class DuePeriodicTask:
+    """A simulated device's periodic frame (its heartbeat), on the schedule of its own timer.
+
+    A device's producer timer is hardware: its frames go out every ``period`` whatever else
+    happens. The thread standing in for it can be starved of CPU on a loaded machine, so
+    while its next frame is due but not sent the wire owes it (:meth:`Wire.owe`) and a
+    receiver on this wire does not judge the wire past that due time: the thread's delay is
+    not taken for the device's silence. A frame sent late is stamped when it is sent (the
+    wire's order is the receivers' order), and slots missed meanwhile are skipped, not sent
+    in a burst. A muted bus owes nothing (the "gateway silent" fault is a real silence).
+    Implements what canopen's ``PeriodicMessageTask`` uses: ``stop()``, ``modify_data(msg)``.
+    ``bus`` is the device's :class:`~ssi_bridge.sim.gateway.bus.LossyBus` (its ``muted``).
+    """
+
+    def __init__(self, bus: Any, wire: Wire, msg: can.Message, period: float, *,
+                 autostart: bool = True) -> None:
+        if not period > 0:
+            raise ValueError(f"period {period} s must be > 0")
+        self.period = period
+        self._bus = bus
+        self._wire = wire
+        self._msg = msg
+        self._stopped = threading.Event()
+        self._thread: threading.Thread | None = None
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Send the first frame now and then every period until :meth:`stop`."""
+        if self._thread is not None and self._thread.is_alive():
+            return
+        self._stopped.clear()
+        self._thread = threading.Thread(target=self._run, daemon=True,
+                                        name=f"periodic-0x{self._msg.arbitration_id:03X}")
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop sending; the wire owes nothing more (does not wait for the thread)."""
+        self._stopped.set()
+        self._wire.owe(id(self), None)
+
+    def modify_data(self, msg: can.Message) -> None:
+        """Send ``msg``'s data from the next frame on (canopen's ``update``: a new NMT state)."""
+        self._msg = msg
+
+    def _run(self) -> None:
+        key, bus, wire, period = id(self), self._bus, self._wire, self.period
+        due = wire_now()
+        try:
+            while not self._stopped.is_set():
+                wait = due - wire_now()
+                if wait > 0 and self._stopped.wait(wait):
+                    break
+                m = self._msg
+                try:
+                    bus.send(can.Message(arbitration_id=m.arbitration_id, data=bytes(m.data),
+                                         is_extended_id=m.is_extended_id,
+                                         is_remote_frame=m.is_remote_frame, dlc=m.dlc))
+                except (can.CanError, BusError) as err:
+                    logger.debug("periodic frame 0x%03X not sent: %s", m.arbitration_id, err)
+                due += period
+                late = wire_now() - due
+                if late > 0:
+                    due += period * math.ceil(late / period)  # skip the slots missed
+                wire.owe(key, None if bus.muted else due)
+        finally:
+            wire.owe(key, None)
+
+
