@@ -135,3 +135,16 @@ def scheduling_of_this_thread() -> str:
     if policy == os.SCHED_RR:
         return f"SCHED_RR {os.sched_getparam(0).sched_priority}"
     return "normal"
+
+
+def pin_process(cpus: tuple[int, ...]) -> None:
+    """Pin every thread of this process (DDS, bus notifiers, cycle) to ``cpus``.
+
+    ``sched_setaffinity(0)`` moves only the calling thread on Linux; threads started later
+    inherit from their creator, so the existing ones are moved one by one.
+    """
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except (ProcessLookupError, PermissionError):
+            pass  # a thread that just ended

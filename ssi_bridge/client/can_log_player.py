@@ -64,6 +64,18 @@ class CanLogPlayer:
         logger.info("replaying %s onto virtual:%s at %gx", self.path, self.channel, self.rate)
         self._thread.start()
 
+    def start_when(self, heard: Callable[[], bool], timeout: float,
+                   running: Callable[[], bool]) -> None:
+        """Start once ``heard()`` (someone listens) or ``timeout`` passed, from a thread of
+        its own; not at all if ``running()`` turned false meanwhile (the node stopped)."""
+        def wait() -> None:
+            deadline = time.monotonic() + timeout
+            while not heard() and time.monotonic() < deadline and running():
+                time.sleep(0.02)
+            if running():
+                self.start()
+        threading.Thread(target=wait, name="replay-wait", daemon=True).start()
+
     def stop(self, timeout: float = 2.0) -> None:
         """Stop playing and close the bus; safe to call twice."""
         self._stop.set()

@@ -12,8 +12,10 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 from ssi_bridge.base.realtime import run_this_thread_at
+from ssi_bridge.protocol import wire
 
 logger = logging.getLogger(__name__)
 
@@ -44,6 +46,24 @@ def cycle_waits(period: float, cycle_wire_s: float) -> tuple[float, float]:
     if cycle_wire_s > period:
         first = max(first, WIRE_WAIT_FACTOR * cycle_wire_s)
     return first, max(min(max(0.9 * period, STARVED_WAIT_S), MAX_WAIT_S), first)
+
+
+def cycle_wire_time(s: Any, warn: Callable[[str], None]) -> float:
+    """The worst-case wire time (s) of one cycle of the settings ``s`` (a ``NodeSettings``);
+    ``warn`` says so when publish_rate's cycles do not fit the wire at bus.bitrate
+    (protocol/wire.py). Several stations share the bus's budget: one SYNC, every TPDO."""
+    counts = [max(j.slot for j in s.station_joints(sid)) for sid in s.station_ids]
+    seconds = wire.frame_seconds(wire.stations_cycle_bits(counts), s.bus_bitrate)
+    if s.listen_only or wire.stations_fits(counts, s.bus_bitrate, s.publish_rate):
+        return seconds
+    what = (f"{counts[0]} slot(s)" if len(counts) == 1 else
+            f"{len(counts)} stations with {'+'.join(map(str, counts))} slots")
+    warn(f"publish_rate {s.publish_rate:g} Hz does not fit the CAN wire: one cycle of "
+         f"{what} (SYNC + TPDOs) takes up to {seconds * 1e3:.3f} ms at "
+         f"{s.bus_bitrate} bit/s, plus {wire.SDO_RESERVE_FRAMES} frames reserved for register "
+         f"traffic; the highest rate that fits is "
+         f"{wire.stations_max_cycle_rate(counts, s.bus_bitrate):g} Hz (docs/canopen.md)")
+    return seconds
 
 
 class LoopThread:

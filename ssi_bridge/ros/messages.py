@@ -13,7 +13,7 @@ from ssi_bridge_msgs.msg import ChannelStatus
 from ssi_bridge.protocol.images import ProcessInput
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.ros.diagnostics import ChannelCounters
-from ssi_bridge.ros.frame_watch import FrameWatch
+from ssi_bridge.core.frame_watch import FrameWatch
 
 #: register whose content the cyclic process image carries in REG_RD_DATA while no handshake
 #: runs: the raw SSI frame, so ~/status shows it every cycle as a PLC would read it

@@ -397,5 +397,4 @@ def declare_parameters(node: Node) -> NodeSettings:
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
         replay_wait_for_subscribers=values["replay.wait_for_subscribers"],
-        foxglove_port=values["foxglove.port"],
-        foxglove_address=str(values["foxglove.address"]).strip())
+        foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip())

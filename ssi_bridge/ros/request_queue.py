@@ -12,12 +12,14 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from contextlib import ExitStack
 from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ssi_bridge.ros.rclpy_compat import (
+    service_pointer, take_request, wait_for_requests,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -70,7 +72,7 @@ class RequestQueue:
     rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
     1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a
     queue. Here a taker thread waits on the services alone and takes every waiting request
-    per wake-up (the calls rclpy's executor makes: ``service_take_request`` and
+    per wake-up (the calls rclpy's executor makes, through ``ros/rclpy_compat.py``, and
     ``send_response``); a worker thread runs them one at a time and replies; beyond ``limit``
     waiting requests the taker refuses at once.
     """
@@ -125,7 +127,7 @@ class RequestQueue:
                 ready = self._wait(context)
                 used = cpu()
                 for service, handler, refuse in self._services:
-                    if service.handle.pointer in ready:
+                    if service_pointer(service) in ready:
                         self._take_all(service, handler, refuse)
                 # a burst's requests wait in the KEEP_ALL history meanwhile (none is lost)
                 self._rest(cpu() - used)
@@ -137,27 +139,16 @@ class RequestQueue:
 
     def _wait(self, context: Any) -> list[int]:
         """Block until a request (or :meth:`stop`) arrives; the ready services' pointers."""
-        with ExitStack() as stack:
-            handles = [s.handle for s, _h, _r in self._services]
-            for handle in handles:
-                stack.enter_context(handle)
-            stack.enter_context(self._wake.handle)
-            stack.enter_context(context.handle)
-            wait_set = _rclpy.WaitSet(0, 1, 0, 0, len(handles), 0, context.handle)
-            wait_set.clear_entities()
-            for handle in handles:
-                wait_set.add_service(handle)
-            wait_set.add_guard_condition(self._wake.handle)
-            wait_set.wait(200_000_000)  # ns; also re-checks stop and the context
-            return wait_set.get_ready_entities("service")
+        # 0.2 s: also re-checks stop and the context
+        return wait_for_requests([s for s, _h, _r in self._services], self._wake, context,
+                                 200_000_000)
 
     def _take_all(self, service: Any, handler: Callable[[Any, Any], Any],
                   refuse: Callable[[Any, Any, int], None]) -> None:
         """Take up to TAKE_PER_PASS waiting requests (the rest stay in DDS for the next pass)."""
         for _ in range(TAKE_PER_PASS):
-            with service.handle:
-                taken = service.handle.service_take_request(service.srv_type.Request)
-            if taken is None or taken[1] is None:
+            taken = take_request(service)
+            if taken is None:
                 return
             request, header = taken
             response = service.srv_type.Response()

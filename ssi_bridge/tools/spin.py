@@ -21,6 +21,11 @@ def spin_until_shutdown(node: Node, on_exit: Callable[[], None] | None = None) -
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # Ctrl-C shuts the context down under a take in progress (rclpy raises from the
+        # binding); an error of a context that is still up is a real one
+        if node.context.ok():
+            raise
     finally:
         if on_exit is not None:
             on_exit()

@@ -51,6 +51,7 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor  # 
 from rclpy.node import Node  # noqa: E402
 
 from ssi_bridge.exceptions import SsiBridgeError  # noqa: E402
+from ssi_bridge.ros.rclpy_compat import executor_tasks  # noqa: E402
 
 #: errors that mean "this configuration cannot run", reported in one line
 START_ERRORS = (SsiBridgeError, ParameterException, NameValidationException, ValueError, OSError)
@@ -129,7 +130,7 @@ def _wait_for_callbacks(executor: MultiThreadedExecutor, node: Node,
     wakes, so the executor's task list is read here, before it is shut down.
     """
     deadline = time.monotonic() + timeout
-    for task in list(getattr(executor, "_futures", ())):
+    for task in executor_tasks(executor):
         while not task.done() and time.monotonic() < deadline:
             time.sleep(0.01)
         if task.done() and task.exception() is not None:

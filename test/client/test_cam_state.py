@@ -1,7 +1,7 @@
 """The bridge's per-cycle CAM state (``~/status`` cam_state) equals object 0x6B00 (000 Table 42).
 
 The node reads the CAM objects 0x6B01 / 0x6B10 / 0x6B20 / 0x6B02 over SDO and computes the
-state from REG_SSI_POS each cycle (``ros/frame_watch.py``, ROS-free); here the same reads go
+state from REG_SSI_POS each cycle (``core/frame_watch.py``, ROS-free); here the same reads go
 through the real client and SDO, and the result is compared with the gateway's own 0x6B00.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 
 from ssi_bridge.protocol.registers import Reg
-from ssi_bridge.ros.frame_watch import FrameWatch, read_cam
+from ssi_bridge.core.frame_watch import FrameWatch, read_cam
 
 
 def _watch_from_objects(client, slot: int) -> FrameWatch:

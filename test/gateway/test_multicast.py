@@ -156,7 +156,7 @@ def test_another_process_on_the_channel_is_heard(name: str) -> None:
     """Two processes: the point of the interface (the station runs as a child process)."""
     channel = derive_channel(name)
     bus = open_bus(BusConfig(interface="udp_multicast", channel=channel))
-    code = ("import sys, can; from ssi_bridge.sim.gateway.bus import BusConfig, open_bus;"
+    code = ("import sys, can; from ssi_bridge.protocol.settings import BusConfig; from ssi_bridge.sim.gateway.bus import open_bus;"
             f"b = open_bus(BusConfig(interface='udp_multicast', channel='{channel}'));"
             "m = b.recv(10.0); b.send(can.Message(arbitration_id=m.arbitration_id + 1,"
             " data=m.data, is_extended_id=False)); b.shutdown()")

@@ -28,7 +28,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "config" / "diagnostic_analyzers.yaml"
 STATION = REPO / "config" / "ssi_bridge.yaml"
-NODE_SRC = REPO / "ssi_bridge" / "ros" / "node.py"
+NODE_SRC = REPO / "ssi_bridge" / "ros" / "node_status.py"  # where the node names its statuses
 
 BUS_STATUS = "/ssi_bridge: bus"
 MATCHERS = ("regex", "expected", "name", "startswith", "find_and_remove_prefix", "contains")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import random
 
-from ssi_bridge.ros.diagnostics import ERROR, OK, STALE, WARN, ChannelHealth
+from ssi_bridge.core.health import ERROR, OK, STALE, WARN, ChannelHealth
 
 PERIOD = 0.01  # 100 Hz
 

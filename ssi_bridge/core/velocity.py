@@ -10,7 +10,7 @@ import math
 from collections import deque
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.ros.joint_scale import JointScale, to_int32
+from ssi_bridge.core.joint_scale import JointScale, to_int32
 
 
 class VelocityEstimator:

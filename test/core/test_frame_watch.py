@@ -7,7 +7,7 @@ from ssi_bridge.sim.encoder.encoder import make_encoder
 from ssi_bridge.sim.encoder.motion import Still
 from ssi_bridge.protocol.images import encode_input
 from ssi_bridge.protocol.registers import Reg
-from ssi_bridge.ros.frame_watch import CamSettings, FrameWatch
+from ssi_bridge.core.frame_watch import CamSettings, FrameWatch
 
 
 def _image(frame: int, adr: int = int(Reg.REG_SSI_FRAME), abort: bool = False) -> bytes:

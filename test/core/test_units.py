@@ -7,8 +7,8 @@ import math
 import pytest
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.ros.joint_scale import JointScale, to_int32
-from ssi_bridge.ros.velocity import VelocityEstimator
+from ssi_bridge.core.joint_scale import JointScale, to_int32
+from ssi_bridge.core.velocity import VelocityEstimator
 
 
 @pytest.mark.parametrize("raw, signed", [

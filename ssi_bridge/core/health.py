@@ -1,0 +1,256 @@
+"""A joint's health: counters, the level of one status byte, the windowed, debounced level.
+
+ROS-free; the levels are the values of ``diagnostic_msgs/DiagnosticStatus`` (OK 0, WARN 1,
+ERROR 2, STALE 3), so ``ros/diagnostics.py`` puts them into messages unchanged.
+
+Level mapping (docs/node.md has the table):
+
+=================================================  =========
+condition                                           level
+=================================================  =========
+no fresh sample for ``stale_cycles`` cycles          STALE
+>= 50 % of the SYNCs of the last 0.5 s stale         ERROR
+ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
+>= 10 % of the SYNCs of the last 0.5 s stale         WARN
+a jump beyond ``max_speed`` in the last 0.5 s        WARN
+STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
+otherwise                                           OK
+gateway silent (no heartbeat) / not connected       ERROR (bus)
+achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
+=================================================  =========
+
+A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
+has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
+so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
+better level held CLEAR_AFTER_S. The window and the debounce run on SYNC wire time, and every
+SYNC sent counts (one the node never handled as lost), so load does not thin the window.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from ssi_bridge.protocol.images import ModuleStatus, ProcessInput
+
+#: diagnostic levels, the byte values of diagnostic_msgs/DiagnosticStatus
+OK, WARN, ERROR, STALE = b"\x00", b"\x01", b"\x02", b"\x03"
+
+
+@dataclass
+class ChannelCounters:
+    """Per-joint counters the node keeps between diagnostics messages."""
+
+    samples: int = 0
+    stale_cycles: int = 0
+    consecutive_stale: int = 0
+    error_cycles: int = 0
+    handshake_failures: int = 0
+    #: samples whose step from the previous one exceeded ``<joint>.max_speed``
+    implausible: int = 0
+    #: the latest 8-byte process input image (decoded only when a status is built)
+    last_image: bytes | None = None
+    last_position: int = 0
+    #: cycles whose frame failed the parity / filler check, and the latest verdict
+    #: (a ``FrameVerdict``, None when the latest image carried no checked frame)
+    frame_errors: int = 0
+    frame: Any = None
+
+    @property
+    def last_input(self) -> ProcessInput | None:
+        """The latest process input image, decoded."""
+        return ProcessInput.decode(self.last_image) if self.last_image is not None else None
+
+    @property
+    def last_sts(self) -> int | None:
+        """Byte 7 of the latest image (STS_STOP, ERR_PARA, ... SSI_DIAG), None before one."""
+        return self.last_image[7] if self.last_image is not None else None
+
+
+_WARN_BITS = (
+    (int(ModuleStatus.STS_OFLW), "STS_OFLW: above REG_UPPER_LIMIT"),
+    (int(ModuleStatus.STS_UFLW), "STS_UFLW: below REG_LOWER_LIMIT"),
+    (int(ModuleStatus.SSI_DIAG), "SSI_DIAG: an enabled encoder status bit is set"),
+    (int(ModuleStatus.STS_STOP), "STS_STOP: acquisition stopped by STOP"),
+)
+_WARN_MASK = sum(bit for bit, _ in _WARN_BITS)
+_ERR_PARA, _ERR_SSI = int(ModuleStatus.ERR_PARA), int(ModuleStatus.ERR_SSI)
+
+
+def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
+                  ) -> tuple[int, str]:
+    """Level and one-line message of a joint channel from byte 7 of its process input.
+
+    Plain int tests: this runs every cycle for every joint.
+    """
+    if sts is None:
+        return STALE, "no sample received yet"
+    if consecutive_stale >= stale_limit:
+        return STALE, f"no fresh sample for {consecutive_stale} cycles"
+    if sts & _ERR_PARA:
+        return ERROR, "ERR_PARA: the module rejected REG_PARA1, encoder not read"
+    if sts & _ERR_SSI:
+        return ERROR, "ERR_SSI: SSI encoder signal faulty (wire break or no data)"
+    if sts & _WARN_MASK:
+        return WARN, "; ".join(text for bit, text in _WARN_BITS if sts & bit)
+    return OK, "reading"
+
+
+#: window (s) of SYNC wire time over which the stale ratio and implausible jumps are counted
+RATIO_WINDOW_S = 0.5
+#: stale ratio (lost share of the SYNCs in the window) at or above which a joint is WARN / ERROR
+STALE_RATIO_WARN = 0.10
+STALE_RATIO_ERROR = 0.50
+#: the ratio counts only over at least this many SYNCs, and from 2 windows after the first
+#: sample on (the cycles of the start-up say little about the link)
+MIN_WINDOW_CYCLES = 10
+#: a worse level is published once it held this long; a better one once it held this long
+RAISE_AFTER_S = 0.1
+CLEAR_AFTER_S = 1.0
+
+
+class ChannelHealth:
+    """One joint's level over time: stale ratio and jumps over a window, debounced changes.
+
+    The window is wire time of the SYNCs, and its denominator is the SYNCs sent, not the
+    cycles the node got round to: :meth:`observe` takes the SYNC's wire time and sequence
+    number, and a SYNC the node never observed (a gap in the sequence) counts as wholly lost.
+    So a loaded node that handles fewer cycles sees the same ratio as the wire has, instead
+    of a thinned window. Each observed SYNC counts the share of the joint's data of that SYNC
+    that did not arrive (``lost``: 0, 1, or 1/2 for one of its two TPDOs).
+
+    :meth:`observe` runs every cycle (cheap: a deque of the window's SYNCs and a short list of
+    level changes); :attr:`level` / :attr:`message` are what the diagnostics publish.
+    """
+
+    def __init__(self, window_s: float = RATIO_WINDOW_S, raise_after_s: float = RAISE_AFTER_S,
+                 clear_after_s: float = CLEAR_AFTER_S) -> None:
+        self.window_s = window_s
+        self.raise_after_s = raise_after_s
+        self.clear_after_s = clear_after_s
+        #: (SYNC wire time, lost share, SYNCs, implausible) per observed SYNC (or gap of them)
+        self._syncs: deque[tuple[float, float, int, bool]] = deque()
+        self.lost_in_window = 0.0
+        self.syncs_in_window = 0
+        self.jumps_in_window = 0
+        #: the last observed SYNC (sequence number, wire time), for the gaps
+        self._last_seq: int | None = None
+        self._last_t = 0.0
+        #: the raw level once a rise held RAISE_AFTER_S (falls at once)
+        self._confirmed = STALE
+        #: time of the first sample (the stale ratio counts from two windows after it)
+        self._first_t: float | None = None
+        #: a sample has been seen (before it, STALE "no sample received yet" is no condition)
+        self._sampled = False
+        #: (since, lowest raw level) while the raw level is above ``_confirmed``
+        self._up: tuple[float, int] | None = None
+        #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
+        self._history: deque[tuple[float, int]] = deque()
+        self.level = STALE
+        self.message = "no sample received yet"
+        self._messages: dict[int, str] = {STALE: self.message}
+
+    @property
+    def stale_ratio(self) -> float:
+        """Lost share of the SYNCs of the window (0 before any SYNC)."""
+        return self.lost_in_window / self.syncs_in_window if self.syncs_in_window else 0.0
+
+    def observe(self, now: float, *, stale: bool, implausible: bool, sts: int | None,
+                consecutive_stale: int, stale_limit: int, seq: int | None = None,
+                lost: float | None = None) -> int:
+        """Count one SYNC and return the debounced level.
+
+        :param now: wire time of the SYNC (the window's clock)
+        :param stale: no complete fresh sample of this SYNC
+        :param seq: the SYNC's sequence number; SYNCs skipped since the last one count lost
+        :param lost: the share of the joint's data of this SYNC that is missing (default:
+            all of it when ``stale``)
+        """
+        share = (1.0 if stale else 0.0) if lost is None else min(max(lost, 0.0), 1.0)
+        syncs = self._syncs
+        if seq is not None:
+            last = self._last_seq
+            if last is not None and seq > last + 1:
+                missed = seq - last - 1  # SYNCs on the wire that the node never handled
+                syncs.append((0.5 * (self._last_t + now), float(missed), missed, False))
+                self.lost_in_window += missed
+                self.syncs_in_window += missed
+            self._last_seq = seq
+        self._last_t = now
+        syncs.append((now, share, 1, implausible))
+        self.lost_in_window += share
+        self.syncs_in_window += 1
+        self.jumps_in_window += implausible
+        horizon = now - self.window_s
+        while syncs and syncs[0][0] < horizon:
+            _t, was_lost, count, was_jump = syncs.popleft()
+            self.lost_in_window -= was_lost
+            self.syncs_in_window -= count
+            self.jumps_in_window -= was_jump
+        if not syncs:
+            self.lost_in_window = 0.0  # no float residue once the window empties
+        raw, message = channel_level(sts, consecutive_stale, stale_limit)
+        n = self.syncs_in_window
+        ratio = self.lost_in_window / n if n else 0.0
+        if self._first_t is None and sts is not None:
+            self._first_t = now
+        settled = self._first_t is not None and now - self._first_t >= 2 * self.window_s
+        if raw != STALE and settled and n >= MIN_WINDOW_CYCLES:
+            if ratio >= STALE_RATIO_ERROR and raw < ERROR:
+                raw, message = ERROR, self._ratio_text(ratio, n)
+            elif ratio >= STALE_RATIO_WARN and raw < WARN:
+                raw, message = WARN, self._ratio_text(ratio, n)
+            elif self.jumps_in_window and raw < WARN:
+                raw, message = WARN, (f"position jumped faster than max_speed "
+                                      f"({self.jumps_in_window} sample(s) in the last "
+                                      f"{self.window_s:g} s)")
+        self._messages[raw] = message
+        return self._debounce(now, raw)
+
+    def _ratio_text(self, ratio: float, n: int) -> str:
+        return (f"{ratio:.0%} of the last {n} SYNCs' data stale or lost ({self.window_s:g} s "
+                f"of wire time; WARN from {STALE_RATIO_WARN:.0%}, ERROR from "
+                f"{STALE_RATIO_ERROR:.0%})")
+
+    def _debounce(self, now: float, raw: int) -> int:
+        """Two stages. ``confirmed`` follows the raw level down at once but up only when the
+        worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
+        follows ``confirmed`` up at once and down to the worst confirmed level of the last
+        CLEAR_AFTER_S, so it falls only when the better level held that long."""
+        if not self._sampled:
+            if raw == STALE:
+                return self.level  # still no sample: nothing to debounce yet
+            # the first sample: "no sample yet" is no condition to hold on to
+            self._sampled = True
+            self._confirmed = self.level = raw
+            self._history.append((now, raw))
+            self.message = self._messages[raw]
+            return raw
+        confirmed = self._confirmed
+        if raw < confirmed:
+            confirmed, self._up = raw, None
+        elif raw > confirmed:
+            if self._up is None:
+                self._up = (now, raw)
+            elif raw < self._up[1]:
+                self._up = (self._up[0], raw)
+            if now - self._up[0] >= self.raise_after_s:
+                confirmed, self._up = self._up[1], None
+        else:
+            self._up = None
+        history = self._history
+        if confirmed != self._confirmed or not history:
+            history.append((now, confirmed))
+        self._confirmed = confirmed
+        horizon = now - self.clear_after_s
+        while len(history) > 1 and history[1][0] <= horizon:
+            history.popleft()  # history[0] stays the level in force at the horizon
+        if confirmed > self.level:
+            self.level = confirmed
+        elif confirmed < self.level and history[0][0] <= horizon:
+            worst = max(level for _t, level in history)
+            if worst < self.level:
+                self.level = worst
+        self.message = self._messages.get(self.level, self.message)
+        return self.level

@@ -1,0 +1,278 @@
+"""One joint of the bridge, ROS-free: what a sample of each cycle becomes, and the joint's health.
+
+A :class:`Joint` owns everything the node knows of one encoder channel: the counts -> units
+scale for the REG_PARA1 in force, the velocity filter, the frame checks, the counters, the
+windowed and debounced health, and the REG_PARA1 gate. :meth:`Joint.update` takes the
+channel's newest sample of one SYNC and returns what is published for it
+(:class:`JointOutput`); the rules (docs/node.md):
+
+* a sample latched while REG_PARA1 changed is unknown: position and velocity NaN;
+* a frame that failed its parity / filler / check-sum check (001 5.5.7, 004 3) keeps the last
+  good position and speed;
+* while the module does not measure (ERR_SSI, ERR_PARA, STS_STOP: 000 "Error detection") the
+  position is the last REG_SSI_POS and the speed unknown (NaN); the estimate restarts;
+* no fresh sample for ``stale_cycles`` cycles: the speed is unknown (NaN), the estimate restarts;
+* otherwise the estimate takes the fresh sample; a step faster than ``max_speed`` counts as
+  implausible (WARN).
+
+Every cycle, published or not, counts for the health at its SYNC's wire time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ssi_bridge.core.frame_watch import FrameWatch, edges
+from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth
+from ssi_bridge.core.joint_scale import JointScale
+from ssi_bridge.core.velocity import VelocityEstimator
+from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.protocol.encoder_config import EncoderConfig
+from ssi_bridge.protocol.families import family_config
+from ssi_bridge.protocol.images import ModuleStatus
+from ssi_bridge.protocol.joint_encoder import count_factor, joint_config, para1_mismatch
+from ssi_bridge.protocol.settings import JointSettings
+
+#: status bits under which the module does not acquire (000 "Error detection / messages")
+NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.STS_STOP)
+#: status bits counted as error cycles
+ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
+
+
+def spec_max_speed(family: str) -> float:
+    """The highest speed (rad/s) a family's manual specifies, 0 where it states none.
+
+    Only the TR encoders give one in these manuals: the overspeed limit, at most 6000 1/min
+    (001 §5.4.2); SICK's 004 states no speeds for its families.
+    """
+    if not family.upper().startswith("TR"):
+        return 0.0
+    cfg = family_config(family)
+    return 0.0 if cfg.linear else cfg.overspeed_rpm / 60.0 * 2.0 * math.pi
+
+
+def encoder_layout(joint: JointSettings) -> tuple[EncoderConfig | None, str]:
+    """The joint's encoder layout from its parameters, or (None, why not)."""
+    try:
+        return joint_config(joint), ""
+    except ConfigError as err:
+        return None, str(err)
+
+
+def joint_scale(joint: JointSettings, cfg: EncoderConfig | None, para1: int) -> JointScale:
+    """Counts -> units for ``para1``: one path for simulated and real stations.
+
+    The encoder layout the joint's parameters describe (family preset, ``steps_per_rev`` /
+    ``revolutions`` / ``measuring_step``) and REG_PARA1's frame length and invalid LSB bits
+    (:func:`count_factor`, 000 Table 19). Without a usable layout, ``steps_per_rev`` /
+    ``revolutions`` or ``measuring_step`` are taken as the resolution of REG_SSI_POS itself.
+    """
+    if cfg is not None:
+        factor = count_factor(cfg, para1)
+        if cfg.linear:
+            return JointScale(linear=True, measuring_step_m=cfg.measuring_step_m / factor,
+                              direction=joint.direction)
+        return JointScale(counts_per_rev=cfg.steps_per_unit * factor,
+                          revolutions=cfg.revolutions_numerator / cfg.revolutions_divisor,
+                          direction=joint.direction)
+    if joint.measuring_step > 0:
+        return JointScale(linear=True, measuring_step_m=joint.measuring_step,
+                          direction=joint.direction)
+    return JointScale(counts_per_rev=joint.steps_per_rev or 8192,
+                      revolutions=joint.revolutions or 4096, direction=joint.direction)
+
+
+@dataclass
+class JointOutput:
+    """What one cycle of a joint publishes, and what it has to say on ``~/events``."""
+
+    #: joint units (rad or m), NaN while unknown
+    position: float
+    #: joint units/s, NaN while unknown
+    velocity: float
+    #: (success, sentence) for ``~/events``: frame-check edges and failures
+    events: list[tuple[bool, str]] = field(default_factory=list)
+
+
+class Joint:
+    """The rules of one joint, fed one sample per cycle (see the module docstring).
+
+    :param settings: the joint's parameters
+    :param velocity_window: samples the velocity fit spans
+    :param max_speed: ``<joint>.max_speed`` (joint units/s; -1: the family's specification;
+        0: off)
+    :param stale_cycles: cycles without a fresh sample before the joint is STALE
+    """
+
+    def __init__(self, settings: JointSettings, *, velocity_window: int, max_speed: float,
+                 stale_cycles: int) -> None:
+        self.settings = settings
+        self.name = settings.name
+        self.slot = settings.slot
+        #: the encoder layout from the parameters (None: unknown, ``layout_problem`` says why)
+        self.config, self.layout_problem = encoder_layout(settings)
+        self.stale_cycles = stale_cycles
+        self._window = velocity_window
+        self.max_speed = self._limit(max_speed)
+        #: REG_PARA1 the module holds, as written or read back (one truth: :meth:`adopt_para1`)
+        self.para1 = settings.para1
+        #: why the REG_PARA1 in force does not fit the encoder (a WARN), or ""
+        self.para1_note = self._note(self.para1)
+        self.scale = joint_scale(settings, self.config, self.para1)
+        self.velocity = VelocityEstimator(self.scale, velocity_window, self.max_speed)
+        #: samples latched at or before this wire time may carry another REG_PARA1 (inf: a
+        #: change is in flight): their position and velocity are unknown (NaN)
+        self.para1_since = -math.inf
+        self.frames = FrameWatch(self.config, self.para1)
+        self.counters = ChannelCounters()
+        self.health = ChannelHealth()
+        #: the last published position (joint units)
+        self.position = 0.0
+
+    # -- settings that change at run time ---------------------------------------------------
+    def _limit(self, max_speed: float) -> float:
+        return spec_max_speed(self.settings.family) if max_speed < 0 else max_speed
+
+    def set_max_speed(self, max_speed: float) -> None:
+        """``<joint>.max_speed``: -1 = the family's limit, 0 = off (ConfigError otherwise < 0)."""
+        if not (max_speed >= 0 or max_speed == -1):
+            raise ConfigError(f"{self.name}.max_speed {max_speed}: >= 0 (0: off) or -1 "
+                              "(the encoder family's limit)")
+        self.max_speed = self._limit(max_speed)
+        self.velocity.max_speed = self.max_speed
+
+    def set_velocity_window(self, window: int) -> None:
+        """A new window for the velocity fit (the estimate restarts)."""
+        self._window = window
+        self.velocity = VelocityEstimator(self.scale, window, self.max_speed)
+
+    # -- the REG_PARA1 gate -----------------------------------------------------------------
+    def _note(self, para1: int) -> str:
+        mismatch = para1_mismatch(self.config, para1) if self.config is not None else None
+        return f"REG_PARA1 0x{para1:08X} does not fit the encoder: {mismatch}" if mismatch else ""
+
+    def para1_changing(self) -> None:
+        """A REG_PARA1 change (write or LD20 reset) starts: samples are unknown until adopted."""
+        self.para1_since = math.inf
+        self.velocity.reset(after=math.inf)
+
+    def adopt_para1(self, value: int, since: float) -> None:
+        """The module now holds ``value``: scale, estimate and frame checks follow.
+
+        Samples latched before wire time ``since`` were acquired with the old REG_PARA1 and are
+        unknown (NaN).
+        """
+        self.scale = joint_scale(self.settings, self.config, value)
+        estimator = VelocityEstimator(self.scale, self._window, self.max_speed)
+        estimator.reset(after=since)
+        self.velocity = estimator
+        self.frames.set_para1(value)
+        self.para1 = value
+        self.para1_note = self._note(value)
+        self.para1_since = since
+
+    # -- one cycle --------------------------------------------------------------------------
+    @property
+    def level(self) -> bytes:
+        """The level the joint's diagnostics publish (the health's, WARN for a REG_PARA1 note)."""
+        return max(self.health.level, WARN if self.para1_note else OK)
+
+    def observe(self, now: float, *, stale: bool, implausible: bool, seq: int | None = None,
+                lost: float | None = None) -> None:
+        """One SYNC (wire time ``now``, number ``seq``) for the joint's windowed health."""
+        counters = self.counters
+        self.health.observe(now, stale=stale, implausible=implausible, sts=counters.last_sts,
+                            consecutive_stale=counters.consecutive_stale,
+                            stale_limit=self.stale_cycles, seq=seq, lost=lost)
+
+    def quiet(self, now: float) -> None:
+        """A period without SYNC (listen-only): a stale cycle."""
+        self.counters.stale_cycles += 1
+        self.counters.consecutive_stale += 1
+        self.observe(now, stale=True, implausible=False)
+
+    def _settle(self, settled: tuple[float, float] | None, seq: int, implausible: bool) -> None:
+        """The health of the SYNC before this one, judged now (``settled``: its wire time and
+        the share of its data lost, None for the first SYNC): an answer on the wire in time but
+        handled late is counted for its SYNC, so the stale ratio measures the bus."""
+        if settled is not None:
+            t_prev, lost = settled
+            self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
+                         lost=lost)
+
+    def missing(self, seq: int, settled: tuple[float, float] | None) -> None:
+        """No sample of this channel yet: a stale cycle."""
+        self.counters.stale_cycles += 1
+        self.counters.consecutive_stale += 1
+        self._settle(settled, seq, False)
+
+    def count(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float) -> bool:
+        """Count the newest sample (latched at ``sample_time``) for the SYNC at ``t_sync``;
+        True when it is fresh (latched at this SYNC)."""
+        counters = self.counters
+        fresh = sample_time >= t_sync
+        if fresh:
+            counters.samples += 1
+            counters.consecutive_stale = 0
+        else:
+            counters.stale_cycles += 1
+            counters.consecutive_stale += 1
+        counters.last_image = image
+        counters.last_position = reg_ssi_pos
+        if image[7] & ERRORS:
+            counters.error_cycles += 1
+        return fresh
+
+    def update(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float, *,
+               seq: int, settled: tuple[float, float] | None) -> JointOutput:
+        """What the joint publishes for the sample it has at the SYNC ``t_sync`` (number
+        ``seq``). Call :meth:`count` first; ``settled`` as for :meth:`missing`."""
+        counters = self.counters
+        fresh = sample_time >= t_sync
+        estimator = self.velocity
+        position = estimator.scale.position(reg_ssi_pos)
+        implausible = False
+        out = JointOutput(position, math.nan)
+        watch = self.frames
+        # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
+        seen = watch.evaluate(image) if image != watch.image else None
+        corrupt = seen is not None and seen[1].corrupt
+        if seen is not None:
+            out.events += [(True, text) for text in edges(*seen)]
+            if corrupt:
+                counters.frame_errors += 1
+                text = watch.failures.failed(t_sync, seen[1])
+                if text:
+                    out.events.append((False, text))
+        counters.frame = watch.verdict if watch.checked else None
+        sts = image[7]
+        if sample_time <= self.para1_since:
+            position = velocity = math.nan  # latched while REG_PARA1 changed
+        elif corrupt:
+            position, velocity = self.position, estimator.velocity  # keep the last good ones
+        elif sts & NOT_MEASURING:
+            estimator.reset()  # REG_SSI_POS is frozen: the speed is unknown, restarts after
+            velocity = math.nan
+        elif fresh:
+            velocity = estimator.update(sample_time, reg_ssi_pos)
+            implausible = estimator.last_implausible
+            if implausible:
+                counters.implausible += 1
+        elif counters.consecutive_stale >= self.stale_cycles:
+            estimator.reset()  # the position is frozen: the speed is unknown
+            velocity = math.nan
+        else:
+            velocity = estimator.velocity
+        self._settle(settled, seq, implausible)
+        self.position = position
+        out.position, out.velocity = position, velocity
+        return out
+
+    def skipped(self, seq: int, settled: tuple[float, float] | None) -> None:
+        """The cycle is not published (another joint missed its SYNC): it still counts."""
+        self._settle(settled, seq, False)
+
+
+__all__ = ["ERRORS", "Joint", "JointOutput", "NOT_MEASURING", "encoder_layout", "joint_scale",
+           "spec_max_speed"]
