@@ -76,6 +76,7 @@ class CanMaster:
         self.bus = ReceiveWatch(inner)
         self.network = MasterNetwork(self.bus)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
+        self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
@@ -92,11 +93,21 @@ class CanMaster:
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
             self.clients.append(client)
+        self._count_faults_for(client, True)
+
+    def _count_faults_for(self, client: Attached, on: bool) -> None:
+        """Receive faults (undecodable frames, receive and callback errors) of the bus are
+        counted in ``client``'s counters too while it is attached (the node publishes them)."""
+        if self._listener is None or client.counters is self.counters:
+            return
+        also = [c for c in self._listener.also if c is not client.counters]
+        self._listener.also = also + [client.counters] if on else also
 
     def detach(self, client: Attached) -> None:
         """Take a station's client off the master (its RemoteNode off the network)."""
         if client in self.clients:
             self.clients.remove(client)
+        self._count_faults_for(client, False)
         if self.network is not None:
             self.network.nodes.pop(client.node_id, None)
 

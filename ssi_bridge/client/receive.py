@@ -25,7 +25,7 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.base.timebase import WireTimeListener
+from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.dictionary import tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
 
@@ -42,8 +42,15 @@ ImageHandler = Callable[[int, int, bytearray, float], None]
 PositionHandler = Callable[[list[int], int, bytearray, float], None]
 
 
-class FrameListener(WireTimeListener):
+class FrameListener(GuardedListener):
     """canopen's listener feeding the network wire times, counting every frame on the way.
+
+    A :class:`~ssi_bridge.base.rx_guard.GuardedListener`: a datagram that is not a CAN frame,
+    a receive error or a subscriber that raises is counted in the matching
+    :class:`ClientCounters` field (``undecodable_frames``, ``receive_errors``,
+    ``callback_errors``) of the master and of every ``also`` counter set (the attached
+    stations' clients, whose counters the node publishes), logged at most once per second per
+    kind, and receiving goes on.
 
     One listener per frame instead of canopen's plus a separate counter: the notifier calls
     each listener for each frame of the bus. With ``priority`` the notifier's thread, which
@@ -53,8 +60,10 @@ class FrameListener(WireTimeListener):
 
     def __init__(self, network: canopen.Network, counters: ClientCounters,
                  load: BusLoad | None = None, priority: int = 0) -> None:
-        super().__init__(network)
+        super().__init__(network, "master")
         self._counters = counters
+        #: further counter sets a fault is counted in (the attached stations' clients)
+        self.also: list[ClientCounters] = []
         self._load = load
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
@@ -67,6 +76,12 @@ class FrameListener(WireTimeListener):
             logger.debug("%s runs with normal scheduling: SCHED_FIFO %d not permitted",
                          RX_THREAD_NAME, self._priority)
 
+    def count(self, kind: str) -> None:
+        """One fault of ``kind`` (a :class:`ClientCounters` field) in every counter set."""
+        super().count(kind)
+        for counters in (self._counters, *self.also):
+            setattr(counters, kind, getattr(counters, kind) + 1)
+
     def on_message_received(self, msg: can.Message) -> None:
         """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
         if not self.scheduling:
@@ -77,7 +92,7 @@ class FrameListener(WireTimeListener):
             counters.can_errors += 1
         if self._load is not None:
             self._load.add(msg)
-        WireTimeListener.on_message_received(self, msg)
+        GuardedListener.on_message_received(self, msg)
 
 
 class TpdoRoutes:

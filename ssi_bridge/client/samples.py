@@ -60,6 +60,18 @@ class ClientCounters:
     restarts: int = 0
     #: EMCY frames received
     emergencies: int = 0
+    #: received datagrams that were not CAN frames (udp_multicast), dropped
+    undecodable_frames: int = 0
+    #: errors of the bus's receive call (the receive path went on)
+    receive_errors: int = 0
+    #: exceptions raised by a handler of a received frame (the receive path went on)
+    callback_errors: int = 0
+    #: heartbeats whose NMT state is none of CiA 301's (0, 4, 5, 127), ignored
+    invalid_nmt_states: int = 0
+    #: stations found STOPPED or PRE-OPERATIONAL by heartbeat and started again
+    nmt_restarts: int = 0
+    #: rounds of the supervisor thread that raised an unexpected exception (it went on)
+    supervisor_errors: int = 0
 
 
 @dataclass
