@@ -100,6 +100,7 @@ class BridgeClient:
         self.master = (CanMaster(bus, self.counters, opener=opener) if not isinstance(bus, CanMaster)
                        else bus)
         self.table = SlotTable(slots, self.master.gate)
+        self.table.counters = self.counters
         #: bus load from frame timestamps (for the bus diagnostics): the master's, one bus
         self.load: BusLoad = self.master.load
         self.bus: ReceiveWatch | None = None
