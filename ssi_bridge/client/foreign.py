@@ -1,4 +1,4 @@
-"""Frames on the master's own identifiers that the master did not send (issue #23 item 6).
+"""Frames on the master's own identifiers that the master did not send.
 
 CiA 301 has one SYNC producer (COB-ID 0x080) and one NMT master (COB-ID 0x000) per network.
 The master never receives its own frames (python-can buses do not echo them by default, the

@@ -1,6 +1,6 @@
 """SYNC and NMT frames of another node are seen, and a cycle uses only the master's SYNCs.
 
-Issue #23 item 6. CiA 301 allows one SYNC producer (COB-ID 0x080) and one NMT master
+CiA 301 allows one SYNC producer (COB-ID 0x080) and one NMT master
 (COB-ID 0x000) per network. Another node on the test's virtual channel sends SYNC at 1 kHz
 while the master cycles at 2 ms: the station answers every SYNC (000 chapter 4: TPDOs of
 type 1 after each SYNC), latching its module at that SYNC. The master counts the foreign

@@ -1,6 +1,6 @@
 """A register read sets REG_RD_ADR back to the address it found (the node's idle read).
 
-Issue #23 item 5 / item 9. 000 "Internal registers": REG_RD_DATA of the process input shows the
+000 "Internal registers": REG_RD_DATA of the process input shows the
 register that REG_RD_ADR (process output byte 4) names, in every cycle, and the input echoes
 REG_RD_ADR. The node keeps REG_RD_ADR at REG_SSI_FRAME (33) while no handshake runs, so its
 frame checks (parity, filler, check sum, PowerFail, encoder error bit) read the raw frame

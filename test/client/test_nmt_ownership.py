@@ -1,6 +1,6 @@
 """The master owns the NMT state of its station; no heartbeat content kills its supervisor.
 
-Issue #23 items 3 and 4. Another node on the bus (a second python-can ``virtual`` bus on the
+Another node on the bus (a second python-can ``virtual`` bus on the
 test's channel) sends what any CAN tool may send: a heartbeat whose state byte is none of
 CiA 301's (§7.2.8.3.2.1 heartbeat protocol: 0 boot-up, 4 STOPPED, 5 OPERATIONAL, 127
 PRE-OPERATIONAL), and NMT module control commands (§7.2.8.3.1: 0x02 stop, 0x80 enter
@@ -27,7 +27,7 @@ from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 from .conftest import ScriptedReader, lossy_wire
 
 NODE = 5
-#: a state byte outside CiA 301 (0x35 = 53), as sent in issue #23
+#: a state byte outside CiA 301 (0x35 = 53), as a CAN tool sent it
 INVALID_STATE = 0x35
 
 

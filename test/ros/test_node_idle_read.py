@@ -1,4 +1,4 @@
-"""After a register read the node still checks the joint's frames (issue #23 item 5).
+"""After a register read the node still checks the joint's frames.
 
 The node keeps REG_RD_ADR = REG_SSI_FRAME (33) while no handshake runs, so REG_RD_DATA carries
 the raw SSI frame every cycle and the frame checks (PowerFail, parity, filler, check sum,

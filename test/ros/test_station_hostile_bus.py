@@ -1,6 +1,6 @@
 """A standalone ``station`` program is not made deaf by a datagram that is no CAN frame.
 
-Issue #23 item 1: before, one undecodable datagram on its group ended the station's receive
+Before, one undecodable datagram on its group ended the station's receive
 thread (python-can's CanOperationError), it answered no master any more and exited 1 on
 SIGTERM. Now its receive path (``base/rx_guard.GuardedListener``) drops and counts it, logs it
 at most once per second, and a master configured afterwards cycles with it. The installed
