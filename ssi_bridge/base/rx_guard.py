@@ -45,6 +45,11 @@ CALLBACK_ERROR = "callback_errors"
 ERROR_PAUSE = 0.005
 
 
+def receive_error_kind(exc: BaseException) -> str:
+    """:data:`UNDECODABLE` for a datagram that is no CAN frame, else :data:`RECEIVE_ERROR`."""
+    return UNDECODABLE if isinstance(exc, UndecodableFrame) else RECEIVE_ERROR
+
+
 def raised_at(err: BaseException) -> str:
     """``file:line`` where ``err`` was raised (its innermost frame), for a one-line log."""
     frames = traceback.extract_tb(err.__traceback__)
@@ -97,7 +102,7 @@ class GuardedListener(WireTimeListener):
         notifier = getattr(self.network, "notifier", None)
         if notifier is not None and notifier.exception is exc:
             notifier.exception = None  # handled: canopen's check() must not raise it
-        if isinstance(exc, UndecodableFrame):
+        if receive_error_kind(exc) == UNDECODABLE:
             self.count(UNDECODABLE)
             self._log.warning(UNDECODABLE, "%s: dropped a datagram that is not a CAN frame: %s",
                               self.name, exc)
@@ -109,4 +114,4 @@ class GuardedListener(WireTimeListener):
 
 
 __all__ = ["CALLBACK_ERROR", "ERROR_PAUSE", "GuardedListener", "RECEIVE_ERROR", "UNDECODABLE",
-           "raised_at"]
+           "raised_at", "receive_error_kind"]

@@ -209,3 +209,36 @@ def test_a_subscriber_that_raises_stops_neither_the_others_nor_the_receive_path(
         network.disconnect()
     assert seen == [b"\x01", b"\x02"]
     assert listener.faults[CALLBACK_ERROR] == 2
+
+
+def test_the_listen_only_observer_and_the_can_log_survive_undecodable_datagrams(
+        tmp_path, request: pytest.FixtureRequest) -> None:
+    """The other two receive paths on a udp_multicast bus: the listen-only observer
+    (``client/listener.py``) and the CAN log (``client/sniffer.py``) count the datagrams by
+    kind and still take the next frame. Before: the first one ended their notifier thread
+    (the sniffer had no ``on_error``; the observer logged every one)."""
+    from ssi_bridge.client.listener import ListenOnlyClient
+    from ssi_bridge.client.sniffer import CanSniffer
+
+    channel = derive_channel(f"observers-{os.getpid()}-{request.node.name}")
+    endpoint = parse_channel(channel)
+    config = BusConfig(interface="udp_multicast", channel=channel)
+    observer = ListenOnlyClient(config, NODE, 1)
+    observer.connect()
+    sniffer = CanSniffer(config, tmp_path / "bus.log")
+    sender, other = _raw_sender(), open_udp_bus(channel)
+    try:
+        for i in range(50):
+            sender.sendto(GARBAGE if i % 2 else BAD_FRAME, (endpoint.group, endpoint.port))
+        other.send(can.Message(arbitration_id=0x701, data=[0x05], is_extended_id=False))
+        deadline = time.monotonic() + 2.0
+        while observer.nmt_state is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        sender.close()
+        other.shutdown()
+        logged = sniffer.stop()
+        observer.close()
+    assert observer.nmt_state == 5, "the observer must hear the heartbeat after the datagrams"
+    assert observer.counters.undecodable_frames == 50
+    assert logged == 1 and sniffer.dropped == {"undecodable_frames": 50}
