@@ -41,7 +41,6 @@ from ssi_bridge.protocol.dictionary import (
 logger = logging.getLogger(__name__)
 
 HEARTBEAT_OBJECT = 0x1017
-NMT_BOOTUP, NMT_OPERATIONAL = NMT_STATE_BOOTUP, NMT_STATE_OPERATIONAL
 #: heartbeat states in which the master starts its station again
 NOT_STARTED = (NMT_STATE_STOPPED, NMT_STATE_PRE_OPERATIONAL)
 
@@ -141,12 +140,12 @@ class Liveness:
         if at > self.last_heartbeat:
             self.last_heartbeat = at
         self.state = state
-        if state == NMT_BOOTUP:
+        if state == NMT_STATE_BOOTUP:
             self._client.counters.restarts += 1
             logger.warning("gateway node %d booted (restart?); re-configuring",
                            self._client.node_id)
             self._reconfigure.set()
-        elif state != NMT_OPERATIONAL and not self.configuring:
+        elif state != NMT_STATE_OPERATIONAL and not self.configuring:
             if at - self.started_at <= self._client.heartbeat_timeout:
                 return  # sent before the NMT start took effect (see the module docstring)
             if not self._reconfigure.is_set():
