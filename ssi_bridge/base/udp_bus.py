@@ -10,8 +10,13 @@ traffic. :class:`UdpCanBus` is that interface with three things a CAN wire needs
   datagrams from that socket's address are dropped on receipt;
 * the group is joined on one chosen interface (``127.0.0.1`` by default) and sent from it,
   so a station on the same host never puts a frame on the LAN;
-* ``IP_MULTICAST_ALL`` is off, so a bus hears only its own group even when another bus on
-  the machine uses the same port.
+* the receive socket is bound to the group address itself (not 0.0.0.0), so the kernel
+  hands it only datagrams sent to the group: a datagram unicast to the port (``127.0.0.1:PORT``
+  or any address of the host) never reaches the bus; with ``IP_MULTICAST_ALL`` off it hears
+  only its own group even when another bus on the machine uses the same port;
+* a datagram that is not a python-can CAN frame raises :class:`UndecodableFrame` (a
+  ``can.CanOperationError``, as python-can's own udp_multicast raises) with what was wrong;
+  the receive paths of master and station (``base/rx_guard.py``) count and drop it and go on.
 
 The channel string is ``GROUP[:PORT][@INTERFACE_ADDRESS]``, e.g. ``239.74.163.2:43113@127.0.0.1``.
 Receive timestamps are the kernel's (``SO_TIMESTAMPNS``, ``time.time()`` base), as python-can
@@ -33,7 +38,9 @@ import struct
 from dataclasses import dataclass
 
 import can
-from can.interfaces.udp_multicast.bus import GeneralPurposeUdpMulticastBus, UdpMulticastBus
+from can.interfaces.udp_multicast.bus import (
+    SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus,
+)
 from can.interfaces.udp_multicast.utils import unpack_message
 
 from ssi_bridge.exceptions import ConfigError
@@ -62,6 +69,10 @@ WIRE_TIME_PLAUSIBLE = 1.0
 _new_message = can.Message.__new__
 #: the fields of a can.Message (its __slots__ minus the weak-reference slot)
 _FIELDS = tuple(n for n in can.Message.__slots__ if n != "__weakref__")
+
+
+class UndecodableFrame(can.CanOperationError):
+    """A datagram on the group that is not a CAN frame (the bus drops it; the next goes on)."""
 
 
 class UdpFrame(can.Message):
@@ -205,13 +216,25 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
         self.own_address = send.getsockname()
 
     def _create_socket(self, address_family: socket.AddressFamily) -> socket.socket:
-        sock = super()._create_socket(address_family)  # bound to the port, group on any iface
+        """The receive socket: python-can's options, bound to GROUP:PORT (not 0.0.0.0:PORT),
+        the group joined on the endpoint's interface only."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         group = socket.inet_aton(self.group)
         iface = socket.inet_aton(self._endpoint.interface)
         try:
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL,
+                            struct.pack("@I", self.hop_limit))
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+            sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+            self.timestamp_nanosecond = True
+            # the destination must be the group: unicast datagrams to the port are not ours
+            sock.bind((self.group, self.port))
+        except OSError as err:
+            sock.close()
+            raise can.CanInitializationError("could not create or configure socket") from err
+        try:
             sock.setsockopt(socket.IPPROTO_IP, IP_MULTICAST_ALL, 0)
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_DROP_MEMBERSHIP,
-                            group + struct.pack("@I", socket.INADDR_ANY))
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group + iface)
         except OSError as err:
             sock.close()
@@ -257,10 +280,16 @@ class UdpCanBus(UdpMulticastBus):
         try:
             msg = unpack_frame(data, timestamp)
         except Exception as err:  # noqa: BLE001 - a foreign datagram on the group
-            raise can.CanOperationError("could not unpack received message") from err
+            raise UndecodableFrame(
+                f"could not unpack received message: {len(data)} bytes from "
+                f"{sender[0]}:{sender[1]} ({type(err).__name__}: {err})") from err
         if msg.is_fd:
             return None, False
         return msg, False
+
+
+__all__ = ["DEFAULT_PORT", "Endpoint", "LOOPBACK", "UdpCanBus", "UdpFrame", "UndecodableFrame",
+           "derive_channel", "open_udp_bus", "parse_channel", "unpack_frame", "wire_time_of"]
 
 
 def open_udp_bus(channel: str) -> can.BusABC:

@@ -140,6 +140,14 @@ class MasterNetwork(canopen.Network):
     #: called with every frame :meth:`send_message` sent (the master's bus load)
     on_sent: Callable[[can.Message], None] | None = None
 
+    def check(self) -> None:
+        """Nothing to check: the receive thread never stops on an error.
+
+        canopen raises the receive thread's last exception here at every send; the master's
+        listener (``client/receive.FrameListener``, a ``base/rx_guard.GuardedListener``)
+        handles every receive error and keeps receiving, so none is left to raise.
+        """
+
     def send_message(self, can_id: int, data: bytes, remote: bool = False) -> can.Message:
         """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
         connected)."""

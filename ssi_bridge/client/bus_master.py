@@ -76,6 +76,8 @@ class CanMaster:
         self.bus = ReceiveWatch(inner)
         self.network = MasterNetwork(self.bus)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
+        self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
+        self._listener.foreign.on_sync = self._on_foreign_sync
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
@@ -92,13 +94,35 @@ class CanMaster:
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
             self.clients.append(client)
+        self._count_faults_for(client, True)
+
+    def _count_faults_for(self, client: Attached, on: bool) -> None:
+        """Receive faults (undecodable frames, receive and callback errors) of the bus are
+        counted in ``client``'s counters too while it is attached (the node publishes them)."""
+        if self._listener is None or client.counters is self.counters:
+            return
+        also = [c for c in self._listener.also if c is not client.counters]
+        self._listener.also = also + [client.counters] if on else also
 
     def detach(self, client: Attached) -> None:
         """Take a station's client off the master (its RemoteNode off the network)."""
         if client in self.clients:
             self.clients.remove(client)
+        self._count_faults_for(client, False)
         if self.network is not None:
             self.network.nodes.pop(client.node_id, None)
+
+    def _on_foreign_sync(self, at: float) -> None:
+        """Another producer's SYNC at wire time ``at`` (receive thread): no TPDO after it
+        counts for this master's cycle (``client/foreign.py``)."""
+        with self.gate.cond:
+            for client in self.clients:
+                client.table.on_foreign_sync(at)
+
+    def foreign_traffic(self, window: float) -> str:
+        """SYNC / NMT frames of other nodes seen within ``window`` s, in words ("" if none):
+        for a WARN of the bus diagnostics."""
+        return self._listener.foreign.recent(window) if self._listener is not None else ""
 
     def sync(self) -> float:
         """Send one SYNC for every station; return its wire time (``gateway/timebase``).

@@ -8,6 +8,12 @@ Write: wait until REG_WR_AKN = 0 with REG_WR = 0 (default state); send REG_WR_DA
 REG_WR_ADR and REG_WR = 1; wait for REG_WR_AKN = 1 and take REG_WR_ACCEPT; send REG_WR = 0
 and wait for REG_WR_AKN = 0 to return to the default state.
 
+A read leaves REG_RD_ADR as it found it: the address the output image held before (the
+node's idle read, REG_SSI_FRAME = 33, whose REG_RD_DATA the frame checks read every cycle)
+is sent again after the read, and on success its echo awaited for one step, so the idle read
+and what depends on it resume at once (000 "Internal registers": REG_RD_DATA shows the register
+REG_RD_ADR names, in every cycle).
+
 Each step has its own timeout (``step_timeout``) and the whole transaction a deadline, so a
 call is bounded whatever the bus does. Bytes 6/7 of the output (comparator control, STOP)
 belong to ``set_control`` and are never touched here.
@@ -88,25 +94,59 @@ class Handshake:
                                f"(total budget {self.total_timeout:.3f} s); {seen}")
 
     def read(self, slot: int, addr: int) -> int:
-        """Read register ``addr`` of ``slot`` through the process images."""
+        """Read register ``addr`` of ``slot`` through the process images; REG_RD_ADR is then
+        set back to the address it held before (see the module docstring)."""
         check_address(addr, write=False)
         deadline = time.monotonic() + self.total_timeout
+        before: list[int] = []  # REG_RD_ADR of the output image before this read
 
         def request(out: bytearray) -> None:
+            if not before:
+                before.append(out[OUT_RD_ADR])
             out[OUT_RD_ADR] = addr & ADDRESS_MASK
 
         def send() -> None:
             self.port.edit_output(slot, request)
 
         send()
-        image = self._await(slot, addr, "read", "REG_RD_ADR echo", deadline,
-                            lambda i: i.reg_rd_adr == addr, send)
+        try:
+            image = self._await(slot, addr, "read", "REG_RD_ADR echo", deadline,
+                                lambda i: i.reg_rd_adr == addr, send)
+        except Exception:
+            self._restore_read_address(slot, before, wait=False)
+            raise
+        self._restore_read_address(slot, before, wait=True)
         if image.reg_rd_abort:
             reason = describe_refusal(addr, write=False) or "module answered REG_RD_ABORT = 1"
             raise RegisterReadError(addr, reason,
                                     f"slot {slot}: register 0x{addr:02X} ({addr}) cannot be "
                                     f"read: {reason} (REG_RD_ABORT = 1)")
         return image.reg_rd_data
+
+    def _restore_read_address(self, slot: int, before: list[int], wait: bool) -> None:
+        """Send REG_RD_ADR = ``before[0]`` again; with ``wait``, await its echo for one step
+        (re-sent on an image without it). Never raises: the read itself is done."""
+        if not before:
+            return
+        idle = before[0]
+
+        def restore(out: bytearray) -> None:
+            out[OUT_RD_ADR] = idle
+
+        def send() -> None:
+            self.port.edit_output(slot, restore)
+
+        send()
+        if not wait:
+            return
+        address = idle & ADDRESS_MASK
+        try:
+            self._await(slot, address, "read", "REG_RD_ADR back to the idle read",
+                        time.monotonic() + self.step_timeout,
+                        lambda i: i.reg_rd_adr == address, send)
+        except (HandshakeTimeout, GatewayUnavailable) as err:
+            logger.warning("slot %d: REG_RD_ADR set back to %d, not echoed yet: %s", slot,
+                           idle, err)
 
     def write(self, slot: int, addr: int, value: int) -> None:
         """Write ``value`` to register ``addr`` of ``slot`` (000 write handshake)."""

@@ -23,11 +23,14 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import deque
 from dataclasses import dataclass
 
 import can
 
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.base.rx_guard import ERROR_PAUSE, RECEIVE_ERROR, receive_error_kind
 from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
@@ -95,6 +98,7 @@ class ListenOnlyClient(can.Listener):
         self._open: tuple[int, float] | None = None  # (seq, time) of a cycle not yet reported
         self._cycles: deque[ObservedCycle] = deque(maxlen=KEEP_CYCLES)
         self._cycles_cond = threading.Condition()
+        self._log = RateLimitedLog(logger)
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self) -> None:
@@ -226,9 +230,13 @@ class ListenOnlyClient(can.Listener):
                 self._emcy_log.on_emcy(msg.data[0] | msg.data[1] << 8, bytes(msg.data[3:8]))
 
     def on_error(self, exc: Exception) -> None:
-        """A receive error of the bus: counted, the listener keeps going."""
-        self.counters.can_errors += 1
-        logger.warning("listen-only receive error: %s", exc)
+        """A receive error of the bus (a datagram that is no CAN frame, an interface gone
+        down): counted by kind, logged at most once per second, the listener keeps going."""
+        kind = receive_error_kind(exc)
+        setattr(self.counters, kind, getattr(self.counters, kind) + 1)
+        self._log.warning(kind, "listen-only receive error (%s): %s", kind, exc)
+        if kind == RECEIVE_ERROR:
+            time.sleep(ERROR_PAUSE)
 
     def _on_sync(self, timestamp: float) -> None:
         if self._open is not None:

@@ -10,6 +10,16 @@ sending (a CAN controller's transmit mailbox) when the command came, so it is no
 While no heartbeat comes at all the gateway is probed over SDO
 every 5 periods: a restarted station has its heartbeat producer off again (0x1017 = 0), so it
 only shows up by answering.
+
+The master owns the NMT state of its stations (CiA 301 §7.2.8.2.1: one NMT master per
+network): a heartbeat in STOPPED or PRE-OPERATIONAL, put there by another node's NMT command or
+by the station itself, wakes the supervisor at once; ``configure()`` sends NMT "enter
+PRE-OPERATIONAL" first (a STOPPED node serves no SDO), configures and starts the station again
+(counted in ``nmt_restarts``). A heartbeat whose state is none of CiA 301's (0 boot-up,
+4 STOPPED, 5 OPERATIONAL, 127 PRE-OPERATIONAL, §7.2.8.3.2.1) is no heartbeat: it is counted
+(``invalid_nmt_states``), logged at most once per second, and changes nothing. No exception
+of one supervisor round ends the thread: it is counted (``supervisor_errors``), logged at most
+once per second, and the next round runs.
 """
 
 from __future__ import annotations
@@ -18,14 +28,21 @@ import logging
 import threading
 from typing import Any, Protocol
 
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.base.rx_guard import raised_at
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.exceptions import SsiBridgeError
 from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.protocol.dictionary import (
+    NMT_STATE_BOOTUP, NMT_STATE_OPERATIONAL, NMT_STATE_PRE_OPERATIONAL, NMT_STATE_STOPPED,
+    NMT_STATES,
+)
 
 logger = logging.getLogger(__name__)
 
 HEARTBEAT_OBJECT = 0x1017
-NMT_BOOTUP, NMT_OPERATIONAL = 0, 5
+#: heartbeat states in which the master starts its station again
+NOT_STARTED = (NMT_STATE_STOPPED, NMT_STATE_PRE_OPERATIONAL)
 
 
 class Supervised(Protocol):
@@ -65,6 +82,10 @@ class Liveness:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._was_alive = False
+        self._log = RateLimitedLog(logger)
+        self._next_probe = 0.0
+        #: the heartbeat state that asked for the pending re-configuration (None: other cause)
+        self._restart_from: int | None = None
 
     def alive(self) -> bool:
         """True unless the wire was watched for a heartbeat timeout without a heartbeat.
@@ -85,10 +106,18 @@ class Liveness:
 
     def on_heartbeat_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
         """The heartbeat frame (network thread): its receive time, then the NMT state."""
-        if data:
-            if timestamp > self.last_heartbeat:
-                self.last_heartbeat = timestamp
-            self.on_heartbeat(data[0] & 0x7F, at=timestamp)
+        if not data:
+            return
+        state = data[0] & 0x7F
+        if state not in NMT_STATES:
+            self._client.counters.invalid_nmt_states += 1
+            self._log.warning("invalid_nmt_state", "gateway node %d: heartbeat 0x%03X [%s] "
+                              "carries NMT state %d, none of CiA 301's (0, 4, 5, 127): ignored",
+                              self._client.node_id, can_id, data.hex(" "), state)
+            return
+        if timestamp > self.last_heartbeat:
+            self.last_heartbeat = timestamp
+        self.on_heartbeat(state, at=timestamp)
 
     def start(self) -> None:
         """Start the supervisor thread (after the first configuration)."""
@@ -111,38 +140,70 @@ class Liveness:
         if at > self.last_heartbeat:
             self.last_heartbeat = at
         self.state = state
-        if state == NMT_BOOTUP:
+        if state == NMT_STATE_BOOTUP:
             self._client.counters.restarts += 1
             logger.warning("gateway node %d booted (restart?); re-configuring",
                            self._client.node_id)
             self._reconfigure.set()
-        elif state != NMT_OPERATIONAL and not self.configuring:
+        elif state != NMT_STATE_OPERATIONAL and not self.configuring:
             if at - self.started_at <= self._client.heartbeat_timeout:
                 return  # sent before the NMT start took effect (see the module docstring)
+            if not self._reconfigure.is_set():
+                self._restart_from = state
             self._reconfigure.set()
 
     def _supervise(self) -> None:
+        """Rounds every heartbeat period, or at once when a re-configuration is asked for."""
         client = self._client
         period = max(client.heartbeat_ms / 1000.0, 0.02)
-        next_probe = 0.0
-        while not self._stop.wait(period):
-            alive = client.gateway_alive
-            if self._was_alive and not alive:
-                logger.warning("gateway node %d silent: no heartbeat for %.3f s",
-                               client.node_id, client.heartbeat_timeout)
-            self._was_alive = alive
-            if not alive and wire_now() >= next_probe and not self._reconfigure.is_set():
-                next_probe = wire_now() + 5 * period
-                try:
-                    client.read_object(HEARTBEAT_OBJECT)
-                    self._reconfigure.set()  # it answers but sends no heartbeat: restarted
-                except SsiBridgeError:
-                    client.counters.timeouts += 1
-            if self._reconfigure.is_set() and not self._stop.is_set():
-                self._reconfigure.clear()
-                try:
-                    client.configure()
-                except SsiBridgeError as err:
-                    self._reconfigure.set()
-                    logger.warning("gateway node %d re-configuration failed: %s",
-                                   client.node_id, err)
+        self._next_probe = 0.0
+        while not self._stop.is_set():
+            self._reconfigure.wait(period)
+            if self._stop.is_set():
+                break
+            try:
+                if not self._round(period):
+                    self._stop.wait(period)  # a failed configuration: retried next period
+            except Exception as err:  # noqa: BLE001 - no round may end the thread
+                client.counters.supervisor_errors += 1
+                self._log.error("supervisor_error", "%s: round failed, the thread goes on: "
+                                "%r at %s", threading.current_thread().name, err, raised_at(err))
+                self._stop.wait(period)
+
+    def _round(self, period: float) -> bool:
+        """One supervisor round: liveness, SDO probe, re-configuration; False if that failed."""
+        client = self._client
+        alive = client.gateway_alive
+        if self._was_alive and not alive:
+            logger.warning("gateway node %d silent: no heartbeat for %.3f s",
+                           client.node_id, client.heartbeat_timeout)
+        self._was_alive = alive
+        if not alive and wire_now() >= self._next_probe and not self._reconfigure.is_set():
+            self._next_probe = wire_now() + 5 * period
+            try:
+                client.read_object(HEARTBEAT_OBJECT)
+                self._reconfigure.set()  # it answers but sends no heartbeat: restarted
+            except SsiBridgeError:
+                client.counters.timeouts += 1
+        if not self._reconfigure.is_set() or self._stop.is_set():
+            return True
+        self._reconfigure.clear()
+        restart_from, self._restart_from = self._restart_from, None
+        try:
+            client.configure()
+        except Exception as err:
+            # asked for again: the next round retries (an unexpected error is counted there)
+            if restart_from is not None and self._restart_from is None:
+                self._restart_from = restart_from
+            self._reconfigure.set()
+            if not isinstance(err, SsiBridgeError):
+                raise
+            self._log.warning("reconfigure", "gateway node %d re-configuration failed: %s",
+                              client.node_id, err)
+            return False
+        if restart_from in NOT_STARTED:
+            client.counters.nmt_restarts += 1
+            self._log.warning("nmt_restart", "gateway node %d was %s (heartbeat; not by this "
+                              "master): started again", client.node_id,
+                              NMT_STATES[restart_from])
+        return True

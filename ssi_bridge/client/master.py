@@ -41,7 +41,8 @@ from ssi_bridge.client.bus import BusOpener, ReceiveWatch
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.dictionary import (
-    MAX_SLOTS, PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base,
+    MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
+    rpdo_cob_base,
 )
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.protocol.images import CmpControl, CmpStatus, Control, ProcessInput
@@ -99,6 +100,7 @@ class BridgeClient:
         self.master = (CanMaster(bus, self.counters, opener=opener) if not isinstance(bus, CanMaster)
                        else bus)
         self.table = SlotTable(slots, self.master.gate)
+        self.table.counters = self.counters
         #: bus load from frame timestamps (for the bus diagnostics): the master's, one bus
         self.load: BusLoad = self.master.load
         self.bus: ReceiveWatch | None = None
@@ -123,6 +125,10 @@ class BridgeClient:
         assert self.network is not None
         self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
         self.network.add_node(self.node)
+        # the master sends its own NMT commands (send_nmt) and consumes the heartbeat itself:
+        # canopen's tracking of NMT commands on 0x000 would look states up that a foreign
+        # heartbeat may have left outside CiA 301 (KeyError)
+        self.network.unsubscribe(NMT_COB_ID, self.node.nmt.on_command)
         self.sdo = SdoAccess(self.node, self.sdo_timeout)
         self.network.subscribe(0x700 + self.node_id, self._liveness.on_heartbeat_frame)
         self.node.emcy.add_callback(self._on_emcy)
@@ -157,12 +163,13 @@ class BridgeClient:
         with self.sdo.lock:
             self._liveness.configuring = True
             try:
+                # first, so a STOPPED station (another node's NMT stop) serves SDO again
+                self.send_nmt(NMT_ENTER_PRE_OPERATIONAL)
                 self.sdo.read(0x1000)  # probe: a clear error when nobody answers
-                self.node.nmt.state = "PRE-OPERATIONAL"
                 self.sdo.configure_pdos(self.slots, images=self.transport == "pdo")
                 self._routes.release_maps(self.node)
                 self.sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
-                self.node.nmt.state = "OPERATIONAL"
+                self.send_nmt(NMT_START)
             finally:
                 self._liveness.configuring = False
             self._liveness.last_heartbeat = self._liveness.started_at = wire_now()
@@ -171,6 +178,20 @@ class BridgeClient:
             self._send_output(slot, bytes(self.table.slot(slot).output))
         logger.info("gateway node %d configured (%d slot(s), %s transport)", self.node_id,
                     self.slots, self.transport)
+
+    def send_nmt(self, command: int) -> None:
+        """Send NMT module control ``command`` (CiA 301 §7.2.8.3.1) to this station.
+
+        Sent by the master itself, not through canopen's ``NmtMaster``, whose state lookup
+        raises KeyError once a heartbeat carried a state outside CiA 301. Raises BusError when
+        the bus refuses the frame.
+        """
+        try:
+            self.master.send(NMT_COB_ID, bytes((command, self.node_id)))
+        except can.CanError as err:
+            self.counters.can_errors += 1
+            raise BusError(f"gateway node {self.node_id}: NMT command 0x{command:02X} not "
+                           f"sent: {err}") from err
 
     # -- cyclic data ------------------------------------------------------------------------
     def sync(self) -> float:

@@ -25,8 +25,10 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.base.timebase import WireTimeListener
-from ssi_bridge.protocol.dictionary import tpdo_cob_base
+from ssi_bridge.base.rx_guard import GuardedListener
+from ssi_bridge.base.timebase import frame_wire_time
+from ssi_bridge.client.foreign import ForeignTraffic
+from ssi_bridge.protocol.dictionary import NMT_COB_ID, SYNC_COB_ID, tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
@@ -34,6 +36,8 @@ logger = logging.getLogger(__name__)
 #: kernel name of the master's receive thread (``top -H``)
 RX_THREAD_NAME = "ssi_can_rx"
 
+#: identifiers only the master sends (NMT, SYNC): received, they are another node's
+_MASTER_IDS = (NMT_COB_ID, SYNC_COB_ID)
 #: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
 #: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
@@ -42,8 +46,15 @@ ImageHandler = Callable[[int, int, bytearray, float], None]
 PositionHandler = Callable[[list[int], int, bytearray, float], None]
 
 
-class FrameListener(WireTimeListener):
+class FrameListener(GuardedListener):
     """canopen's listener feeding the network wire times, counting every frame on the way.
+
+    A :class:`~ssi_bridge.base.rx_guard.GuardedListener`: a datagram that is not a CAN frame,
+    a receive error or a subscriber that raises is counted in the matching
+    :class:`ClientCounters` field (``undecodable_frames``, ``receive_errors``,
+    ``callback_errors``) of the master and of every ``also`` counter set (the attached
+    stations' clients, whose counters the node publishes), logged at most once per second per
+    kind, and receiving goes on.
 
     One listener per frame instead of canopen's plus a separate counter: the notifier calls
     each listener for each frame of the bus. With ``priority`` the notifier's thread, which
@@ -53,8 +64,12 @@ class FrameListener(WireTimeListener):
 
     def __init__(self, network: canopen.Network, counters: ClientCounters,
                  load: BusLoad | None = None, priority: int = 0) -> None:
-        super().__init__(network)
+        super().__init__(network, "master")
         self._counters = counters
+        #: further counter sets a fault is counted in (the attached stations' clients)
+        self.also: list[ClientCounters] = []
+        #: SYNC and NMT frames of other nodes (``client/foreign.py``)
+        self.foreign = ForeignTraffic(self.count)
         self._load = load
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
@@ -67,6 +82,12 @@ class FrameListener(WireTimeListener):
             logger.debug("%s runs with normal scheduling: SCHED_FIFO %d not permitted",
                          RX_THREAD_NAME, self._priority)
 
+    def count(self, kind: str) -> None:
+        """One fault of ``kind`` (a :class:`ClientCounters` field) in every counter set."""
+        super().count(kind)
+        for counters in (self._counters, *self.also):
+            setattr(counters, kind, getattr(counters, kind) + 1)
+
     def on_message_received(self, msg: can.Message) -> None:
         """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
         if not self.scheduling:
@@ -77,7 +98,11 @@ class FrameListener(WireTimeListener):
             counters.can_errors += 1
         if self._load is not None:
             self._load.add(msg)
-        WireTimeListener.on_message_received(self, msg)
+        if msg.arbitration_id in _MASTER_IDS and not (msg.is_error_frame or msg.is_remote_frame
+                                                      or msg.is_extended_id):
+            # the master hears none of its own frames: another node's SYNC or NMT command
+            self.foreign.observe(msg.arbitration_id, msg.data, frame_wire_time(msg))
+        GuardedListener.on_message_received(self, msg)
 
 
 class TpdoRoutes:

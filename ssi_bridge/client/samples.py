@@ -60,6 +60,24 @@ class ClientCounters:
     restarts: int = 0
     #: EMCY frames received
     emergencies: int = 0
+    #: received datagrams that were not CAN frames (udp_multicast), dropped
+    undecodable_frames: int = 0
+    #: errors of the bus's receive call (the receive path went on)
+    receive_errors: int = 0
+    #: exceptions raised by a handler of a received frame (the receive path went on)
+    callback_errors: int = 0
+    #: heartbeats whose NMT state is none of CiA 301's (0, 4, 5, 127), ignored
+    invalid_nmt_states: int = 0
+    #: stations found STOPPED or PRE-OPERATIONAL by heartbeat and started again
+    nmt_restarts: int = 0
+    #: rounds of the supervisor thread that raised an unexpected exception (it went on)
+    supervisor_errors: int = 0
+    #: SYNC frames of another producer received (CiA 301: one per network)
+    foreign_syncs: int = 0
+    #: TPDOs not taken for the master's cycle: they followed another producer's SYNC
+    foreign_sync_answers: int = 0
+    #: NMT commands received that this master did not send
+    foreign_nmt_commands: int = 0
 
 
 @dataclass
@@ -141,6 +159,12 @@ class SlotTable:
         self._input_waiters = 0
         #: TPDOs that answered an older SYNC than the current one (not counted for it)
         self.late_frames = 0
+        #: wire time of the first SYNC of another producer after the current SYNC, or None
+        self._foreign_since: float | None = None
+        #: TPDOs that followed another producer's SYNC (not taken at all)
+        self.foreign_answers = 0
+        #: where ``foreign_sync_answers`` is counted too (the station's client), or None
+        self.counters: ClientCounters | None = None
 
     def slot(self, slot: int) -> _Slot:
         """The state of ``slot`` (raises KeyError with the valid range)."""
@@ -157,6 +181,7 @@ class SlotTable:
         """
         with self.cond:
             self.sync_seq += 1
+            self._foreign_since = None
             self._due = 2 * self.slots
             self.sync_time = self.last_sync_time = wire_now() if at is None else at
             self._times[self.sync_seq] = self.sync_time
@@ -171,6 +196,8 @@ class SlotTable:
         """
         with self.cond:
             self.sync_time = self.last_sync_time = at
+            if self._foreign_since is not None and self._foreign_since <= at:
+                self._foreign_since = None  # it was on the wire before this SYNC, not after
             seq = self.sync_seq
             self._times[seq] = at
             was_complete = self._due == 0
@@ -187,6 +214,22 @@ class SlotTable:
                 self._gate.pending += 1  # counted as complete too early: not any more
             return at
 
+    def on_foreign_sync(self, at: float) -> None:
+        """Another producer's SYNC ended on the wire at ``at`` (call under :attr:`cond`): a
+        TPDO after it answers that SYNC, latched then, and is not taken for this cycle."""
+        if at > self.sync_time and (self._foreign_since is None or at < self._foreign_since):
+            self._foreign_since = at
+
+    def _foreign(self, timestamp: float) -> bool:
+        """True for a TPDO that followed another producer's SYNC (counted, not taken)."""
+        since = self._foreign_since
+        if since is not None and timestamp > since:
+            self.foreign_answers += 1
+            if self.counters is not None:
+                self.counters.foreign_sync_answers += 1
+            return True
+        return False
+
     def _late(self, timestamp: float) -> bool:
         """True for a frame that was on the wire before the current SYNC (a late answer)."""
         if 0.0 < timestamp < self.sync_time:
@@ -202,6 +245,8 @@ class SlotTable:
         """
         with self.cond:
             st = self._slots[slot]
+            if self._foreign(timestamp):
+                return st
             completed = False
             if self._late(timestamp):
                 st.image_seq = max(st.image_seq, self.sync_seq - 1)
@@ -225,6 +270,8 @@ class SlotTable:
         else:
             values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
         with self.cond:
+            if self._foreign(timestamp):
+                return
             late = self._late(timestamp)
             seq = self.sync_seq
             completed = False

@@ -21,6 +21,8 @@ import logging
 import copy
 import os
 import threading
+import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 
@@ -29,7 +31,10 @@ import can
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.client.bus import open_bus
 from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.base.rx_guard import ERROR_PAUSE, RECEIVE_ERROR, receive_error_kind
 from ssi_bridge.base.timebase import frame_wire_time
+from ssi_bridge.base.udp_bus import UndecodableFrame
 
 logger = logging.getLogger(__name__)
 
@@ -71,6 +76,9 @@ class _Tee(can.Listener):
         self.frames = 0
         self.failed = False
         self._on_fail = on_fail
+        #: receive errors by kind (``base/rx_guard``: undecodable_frames, receive_errors)
+        self.dropped: Counter[str] = Counter()
+        self._log = RateLimitedLog(logger)
 
     def on_message_received(self, msg: can.Message) -> None:
         if self.failed:
@@ -86,6 +94,15 @@ class _Tee(can.Listener):
             self._on_fail(err)
             return
         self.frames += 1
+
+    def on_error(self, exc: Exception) -> None:
+        """A receive error (a datagram that is no CAN frame, an interface gone down): counted
+        in :attr:`dropped` by kind, logged at most once per second; logging goes on."""
+        kind = receive_error_kind(exc)
+        self.dropped[kind] += 1
+        self._log.warning(kind, "CAN log: receive error (%s), logging goes on: %s", kind, exc)
+        if kind == RECEIVE_ERROR:
+            time.sleep(ERROR_PAUSE)
 
     def stop(self) -> None:
         pass  # the sniffer closes the writer itself, after draining
@@ -122,6 +139,11 @@ class CanSniffer:
         return self._tee.frames
 
     @property
+    def dropped(self) -> dict[str, int]:
+        """Receive errors by kind (undecodable_frames, receive_errors); logging went on."""
+        return dict(self._tee.dropped)
+
+    @property
     def failed(self) -> bool:
         """True once a write error stopped the log."""
         return self._tee.failed
@@ -139,16 +161,25 @@ class CanSniffer:
             self._closed = True
             self._notifier.stop()
             if not self._tee.failed:
-                try:
-                    while (msg := self._bus.recv(0)) is not None:
-                        self._tee.on_message_received(msg)
-                        if self._tee.failed:
-                            break
-                except can.CanError as err:
-                    logger.warning("CAN log %s: draining the bus failed: %s", self.path, err)
+                self._drain()
             self._close_file()
             self._bus.shutdown()
         return self.frames
+
+    def _drain(self) -> None:
+        """Log the frames still queued on the bus (a datagram that is no frame is skipped)."""
+        while not self._tee.failed:
+            try:
+                msg = self._bus.recv(0)
+            except UndecodableFrame as err:
+                self._tee.on_error(err)
+                continue
+            except can.CanError as err:
+                logger.warning("CAN log %s: draining the bus failed: %s", self.path, err)
+                return
+            if msg is None:
+                return
+            self._tee.on_message_received(msg)
 
     def _fail(self, err: OSError | ValueError) -> None:
         """First write error: say why (path, errno), then stop in the background."""

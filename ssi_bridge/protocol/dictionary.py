@@ -49,6 +49,24 @@ dt = DataType
 SYNC_COB_ID = 0x080
 #: number of XN-1SSI modules a station may hold
 MAX_SLOTS = 8
+
+#: CiA 301 NMT module control (COB-ID 0x000, 2 bytes: command specifier, node id; 0 = all)
+NMT_COB_ID = 0x000
+NMT_START = 0x01
+NMT_STOP = 0x02
+NMT_ENTER_PRE_OPERATIONAL = 0x80
+NMT_RESET_NODE = 0x81
+NMT_RESET_COMMUNICATION = 0x82
+#: CiA 301 error control (heartbeat / boot-up) COB-ID base: 0x700 + node id
+NMT_ERROR_CONTROL = 0x700
+#: CiA 301 heartbeat states (byte 0, bits 6..0): the only values a heartbeat may carry
+NMT_STATE_BOOTUP = 0x00
+NMT_STATE_STOPPED = 0x04
+NMT_STATE_OPERATIONAL = 0x05
+NMT_STATE_PRE_OPERATIONAL = 0x7F
+NMT_STATES = {NMT_STATE_BOOTUP: "BOOT-UP", NMT_STATE_STOPPED: "STOPPED",
+              NMT_STATE_OPERATIONAL: "OPERATIONAL",
+              NMT_STATE_PRE_OPERATIONAL: "PRE-OPERATIONAL"}
 #: 0x1000 device type: CiA 401 generic I/O (the gateway's first device profile)
 DEVICE_TYPE = 0x0000_0191
 #: 0x6FFF device type of the second profile: DS406, multi-sensor encoder interface (Table 49)

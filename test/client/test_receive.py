@@ -69,14 +69,13 @@ def test_one_handler_per_tpdo_after_connect_and_reconfigure(channel: str) -> Non
 
 
 def test_frame_listener_counts_and_forwards() -> None:
+    import canopen
+
     seen: list[tuple[int, bytes]] = []
-
-    class Network:
-        def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
-            seen.append((can_id, bytes(data)))
-
+    network = canopen.Network()  # not connected: the listener only dispatches to subscribers
+    network.subscribe(0x185, lambda can_id, data, t: seen.append((can_id, bytes(data))))
     counters = ClientCounters()
-    listener = FrameListener(Network(), counters)  # type: ignore[arg-type]
+    listener = FrameListener(network, counters)
     assert isinstance(listener, MessageListener)
     listener(can.Message(arbitration_id=0x185, is_extended_id=False, data=b"\x01"))
     listener(can.Message(is_error_frame=True))

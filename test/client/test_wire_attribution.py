@@ -33,14 +33,13 @@ NODE = 1
 
 
 def test_the_listener_hands_the_network_the_wire_time_of_a_frame() -> None:
+    import canopen
+
     seen: list[float] = []
-
-    class Network:
-        def notify(self, can_id: int, data: bytearray, timestamp: float) -> None:
-            seen.append(timestamp)
-
+    network = canopen.Network()  # not connected: the listener only dispatches to subscribers
+    network.subscribe(0x181, lambda can_id, data, t: seen.append(t))
     sent = can.Message(arbitration_id=0x181, is_extended_id=False, data=bytes(8), timestamp=5.0)
-    listener = FrameListener(Network(), ClientCounters())  # type: ignore[arg-type]
+    listener = FrameListener(network, ClientCounters())
     listener(UdpFrame.of(sent, timestamp=5.004, wire_time=5.0))  # arrived 4 ms late
     listener(can.Message(arbitration_id=0x181, is_extended_id=False, timestamp=6.0))
     assert seen == [5.0, 6.0]

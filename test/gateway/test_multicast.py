@@ -92,10 +92,12 @@ def test_derived_ports_lie_above_the_ephemeral_ports() -> None:
 
 
 def test_a_taken_port_is_named_with_the_reason() -> None:
-    """A port held by a socket without SO_REUSEADDR: the error says so (python-can's own
-    message is only "could not create or configure socket") and names the ephemeral range."""
+    """A port held on every address by a socket without SO_REUSEADDR: the error says so
+    (python-can's own message is only "could not create or configure socket") and names the
+    ephemeral range. (A socket on one address, 127.0.0.1:port, no longer stands in the way:
+    the bus binds GROUP:PORT.)"""
     holder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    holder.bind(("127.0.0.1", 0))  # as DDS's and every client's sockets do
+    holder.bind(("", 0))  # as DDS's and many clients' sockets do
     port = holder.getsockname()[1]
     try:
         with pytest.raises(BusError) as err:
@@ -156,7 +158,8 @@ def test_another_process_on_the_channel_is_heard(name: str) -> None:
     """Two processes: the point of the interface (the station runs as a child process)."""
     channel = derive_channel(name)
     bus = open_bus(BusConfig(interface="udp_multicast", channel=channel))
-    code = ("import sys, can; from ssi_bridge.protocol.settings import BusConfig; from ssi_bridge.sim.gateway.bus import open_bus;"
+    code = ("import sys, can; from ssi_bridge.sim.gateway.bus import open_bus;"
+            "from ssi_bridge.protocol.settings import BusConfig;"
             f"b = open_bus(BusConfig(interface='udp_multicast', channel='{channel}'));"
             "m = b.recv(10.0); b.send(can.Message(arbitration_id=m.arbitration_id + 1,"
             " data=m.data, is_extended_id=False)); b.shutdown()")

@@ -31,7 +31,7 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
-from ssi_bridge.base.timebase import WireTimeListener
+from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, LossyBus, take_bus
 from ssi_bridge.base.od import build_dictionary
@@ -132,7 +132,9 @@ class XnGateway:
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
         # subscribers get each frame's wire time: a SYNC latches where it was on the wire
-        self.network.listeners[:] = [WireTimeListener(self.network)]
+        # and no undecodable datagram, receive error or raising callback stops the station
+        listener = GuardedListener(self.network, f"gateway node {self.node_id}")
+        self.network.listeners[:] = [listener]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
         self.network.add_node(self.node)

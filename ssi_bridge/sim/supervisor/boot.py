@@ -41,7 +41,11 @@ class BootWatch:
             if left <= 0:
                 raise GatewayUnavailable(
                     f"no boot-up from node {self.node_id} within {timeout:g} s")
-            msg = self.bus.recv(min(left, 0.1))
+            try:
+                msg = self.bus.recv(min(left, 0.1))
+            except can.CanOperationError as err:  # e.g. a datagram that is no CAN frame
+                logger.debug("waiting for boot-up of node %d: %s", self.node_id, err)
+                continue
             if msg is not None and msg.arbitration_id == cob and not msg.is_remote_frame \
                     and len(msg.data) == 1:
                 return time.monotonic() - start

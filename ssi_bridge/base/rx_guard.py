@@ -1,0 +1,117 @@
+"""A canopen network listener that no frame, receive error or callback exception can stop.
+
+python-can's ``Notifier`` runs the receive loop of a canopen ``Network``: an exception from
+``bus.recv`` (an undecodable datagram on udp_multicast, an interface gone down) or from a
+listener ends that thread unless a listener handles it in ``on_error``, and canopen's
+``Network.check`` then raises the same exception at every later send (SYNC, NMT, SDO). A
+subscriber that raises (a malformed frame on a COB-ID it handles) stops the other subscribers
+of that frame. :class:`GuardedListener` is the one listener of the master's and the station's
+networks, and:
+
+* calls every subscriber of a frame on its own, so one that raises neither stops the others
+  nor the receive path (kind :data:`CALLBACK_ERROR`);
+* handles every receive error in ``on_error`` (kind :data:`UNDECODABLE` for a datagram that
+  is not a CAN frame, :data:`RECEIVE_ERROR` for any other), and clears the notifier's record
+  of it, so canopen's ``Network.check`` does not raise it at the next send;
+* counts each kind (:attr:`GuardedListener.faults`, and :meth:`GuardedListener.count` for an
+  owner that keeps its own counters) and logs it at most once per second per kind;
+* pauses :data:`ERROR_PAUSE` after a receive error, so an interface that fails every call does
+  not spin the receive thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import traceback
+from collections import Counter
+
+import can
+import canopen
+
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
+from ssi_bridge.base.udp_bus import UndecodableFrame
+
+logger = logging.getLogger(__name__)
+
+#: a received datagram that is not a CAN frame (``base/udp_bus.UndecodableFrame``)
+UNDECODABLE = "undecodable_frames"
+#: an error of the bus's receive call other than an undecodable datagram (e.g. ENETDOWN)
+RECEIVE_ERROR = "receive_errors"
+#: an exception raised by a subscriber of a received frame
+CALLBACK_ERROR = "callback_errors"
+#: the receive thread rests this long (s) after a receive error before it calls recv again
+ERROR_PAUSE = 0.005
+
+
+def receive_error_kind(exc: BaseException) -> str:
+    """:data:`UNDECODABLE` for a datagram that is no CAN frame, else :data:`RECEIVE_ERROR`."""
+    return UNDECODABLE if isinstance(exc, UndecodableFrame) else RECEIVE_ERROR
+
+
+def raised_at(err: BaseException) -> str:
+    """``file:line`` where ``err`` was raised (its innermost frame), for a one-line log."""
+    frames = traceback.extract_tb(err.__traceback__)
+    if not frames:
+        return "?"
+    last = frames[-1]
+    return f"{last.filename.rsplit('/', 1)[-1]}:{last.lineno}"
+
+
+class GuardedListener(WireTimeListener):
+    """canopen's network listener (wire times) that survives every fault of a frame or a bus.
+
+    :param network: the canopen network it feeds
+    :param name: who receives ("master", "gateway node 1"), for the log lines
+    """
+
+    def __init__(self, network: canopen.Network, name: str = "receive path") -> None:
+        super().__init__(network)
+        self.name = name
+        #: faults by kind (:data:`UNDECODABLE`, :data:`RECEIVE_ERROR`, :data:`CALLBACK_ERROR`)
+        self.faults: Counter[str] = Counter()
+        self._log = RateLimitedLog(logger)
+
+    def count(self, kind: str) -> None:
+        """One fault of ``kind`` (receive thread); an owner overrides it to count it too."""
+        self.faults[kind] += 1
+
+    def on_message_received(self, msg: can.Message) -> None:
+        """Dispatch ``msg`` to each subscriber of its COB-ID on its own (wire time)."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            return
+        network = self.network
+        can_id = msg.arbitration_id
+        subscribers = network.subscribers.get(can_id)
+        if subscribers:
+            wire_t = frame_wire_time(msg)
+            for callback in subscribers:  # as canopen's notify (no copy per frame)
+                try:
+                    callback(can_id, msg.data, wire_t)
+                except Exception as err:  # noqa: BLE001 - one subscriber must not stop the bus
+                    self.count(CALLBACK_ERROR)
+                    self._log.error(CALLBACK_ERROR, "%s: frame 0x%03X [%s] raised in %s: %r "
+                                    "at %s; receiving goes on", self.name, can_id,
+                                    msg.data.hex(" "), getattr(callback, "__qualname__", callback),
+                                    err, raised_at(err))
+        network.scanner.on_message_received(can_id)
+
+    def on_error(self, exc: Exception) -> None:
+        """A receive error (receive thread): counted and logged; receiving goes on."""
+        notifier = getattr(self.network, "notifier", None)
+        if notifier is not None and notifier.exception is exc:
+            notifier.exception = None  # handled: canopen's check() must not raise it
+        if receive_error_kind(exc) == UNDECODABLE:
+            self.count(UNDECODABLE)
+            self._log.warning(UNDECODABLE, "%s: dropped a datagram that is not a CAN frame: %s",
+                              self.name, exc)
+            return
+        self.count(RECEIVE_ERROR)
+        self._log.error(RECEIVE_ERROR, "%s: receive error, receiving goes on: %r", self.name,
+                        exc)
+        time.sleep(ERROR_PAUSE)
+
+
+__all__ = ["CALLBACK_ERROR", "ERROR_PAUSE", "GuardedListener", "RECEIVE_ERROR", "UNDECODABLE",
+           "raised_at", "receive_error_kind"]

@@ -1,0 +1,97 @@
+"""Frames on the master's own identifiers that the master did not send.
+
+CiA 301 has one SYNC producer (COB-ID 0x080) and one NMT master (COB-ID 0x000) per network.
+The master never receives its own frames (python-can buses do not echo them by default, the
+CAN-over-UDP bus filters them), so every SYNC or NMT command it receives is another node's:
+
+* a SYNC from another producer is counted (``foreign_syncs``), logged at most once per
+  second, and handed to the master's slot tables, which then take no TPDO that followed it
+  on the wire for the master's own cycle (``foreign_sync_answers``): the station latched
+  those at the other producer's SYNC, and stamping them with the master's SYNC time would
+  break the velocity estimate;
+* an NMT command is counted (``foreign_nmt_commands``) and logged at most once per second,
+  naming the command and the node it addressed; the liveness supervisor starts a station it
+  stopped again (``client/liveness.py``).
+
+:meth:`ForeignTraffic.recent` says what was seen within a window, for a WARN of the bus
+diagnostics.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.protocol.dictionary import (
+    NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_RESET_COMMUNICATION, NMT_RESET_NODE, NMT_START,
+    NMT_STOP, SYNC_COB_ID,
+)
+
+logger = logging.getLogger(__name__)
+
+#: ClientCounters fields this module counts
+FOREIGN_SYNCS = "foreign_syncs"
+FOREIGN_NMT = "foreign_nmt_commands"
+#: CiA 301 §7.2.8.3.1 command specifiers, for the log and the diagnostics
+NMT_COMMAND_NAMES = {NMT_START: "start", NMT_STOP: "stop",
+                     NMT_ENTER_PRE_OPERATIONAL: "enter PRE-OPERATIONAL",
+                     NMT_RESET_NODE: "reset node", NMT_RESET_COMMUNICATION: "reset communication"}
+
+
+def describe_nmt(data: bytes) -> str:
+    """An NMT frame's payload in words: "NMT stop (0x02) to node 1", "... to all nodes"."""
+    if len(data) < 2:
+        return f"NMT frame [{data.hex(' ')}] (not 2 bytes)"
+    command, node = data[0], data[1]
+    name = NMT_COMMAND_NAMES.get(command, "unknown command")
+    target = "all nodes" if node == 0 else f"node {node}"
+    return f"NMT {name} (0x{command:02X}) to {target}"
+
+
+class ForeignTraffic:
+    """SYNC and NMT frames of other nodes the master's receive path handed over.
+
+    :param count: counts one event of a ClientCounters field in every counter set
+    :param on_sync: called with the wire time of another producer's SYNC (the slot tables)
+    """
+
+    def __init__(self, count: Callable[[str], None],
+                 on_sync: Callable[[float], None] | None = None) -> None:
+        self._count = count
+        self.on_sync = on_sync
+        self._log = RateLimitedLog(logger)
+        self._lock = threading.Lock()
+        #: what was seen last of each kind: (wire time, words)
+        self.last: dict[str, tuple[float, str]] = {}
+
+    def observe(self, can_id: int, data: bytes, wire_t: float) -> None:
+        """A received frame on 0x000 or 0x080 (receive thread); others are ignored."""
+        if can_id == SYNC_COB_ID:
+            self._count(FOREIGN_SYNCS)
+            if self.on_sync is not None:
+                self.on_sync(wire_t)
+            words = "SYNC on 0x080 from another producer (CiA 301: one per network)"
+            kind = FOREIGN_SYNCS
+        elif can_id == NMT_COB_ID:
+            self._count(FOREIGN_NMT)
+            words = f"{describe_nmt(bytes(data))} not sent by this master"
+            kind = FOREIGN_NMT
+        else:
+            return
+        with self._lock:
+            self.last[kind] = (wire_t or wire_now(), words)
+        self._log.warning(kind, "%s", words)
+
+    def recent(self, window: float, now: float | None = None) -> str:
+        """What was seen within the last ``window`` s ("" if nothing), for a bus WARN."""
+        now = wire_now() if now is None else now
+        with self._lock:
+            seen = [words for t, words in self.last.values() if now - t <= window]
+        return "; ".join(sorted(seen))
+
+
+__all__ = ["FOREIGN_NMT", "FOREIGN_SYNCS", "ForeignTraffic", "NMT_COMMAND_NAMES",
+           "describe_nmt"]
