@@ -133,6 +133,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         self._cycle_times: deque[float] = deque()
         self._cycle_started = wire_now()
         self._last_levels: tuple = ()
+        self._last_bus_counts: dict = {}
 
     def _connect_stations(self, s: NodeSettings) -> None:
         """The master, one client per station, and each joint's start-up configuration."""

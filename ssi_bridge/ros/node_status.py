@@ -15,8 +15,16 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 
 from ssi_bridge.base.timebase import wire_now
-from ssi_bridge.core.health import WARN
+from ssi_bridge.core.health import ERROR, WARN
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
+
+
+#: bus counters whose growth since the last diagnostics message is a WARN: what the bus did
+#: that the receive path survived, another node's SYNC or NMT commands, stations restarted
+BUS_WARN_COUNTS = ("undecodable_frames", "receive_errors", "callback_errors",
+                   "invalid_nmt_states", "nmt_restarts", "foreign_syncs", "foreign_nmt_commands")
+#: and an ERROR: a round of a station's supervisor thread failed (it goes on; the log says why)
+BUS_ERROR_COUNT = "supervisor_errors"
 
 
 class NodeDiagnostics:
@@ -39,6 +47,35 @@ class NodeDiagnostics:
     _cycle_times: Any
     _cycle_started: float
     _last_levels: tuple
+    _last_bus_counts: dict
+
+    def _bus_findings(self, counters: dict[str, Any]) -> tuple[bytes | None, str]:
+        """What the bus did since the last diagnostics message: (level, message), or (None, "").
+
+        Counters of :data:`BUS_WARN_COUNTS` that grew and other nodes' SYNC / NMT frames of the
+        last two periods are a WARN; a failed supervisor round an ERROR.
+        """
+        names = (*BUS_WARN_COUNTS, BUS_ERROR_COUNT)
+        last = self._last_bus_counts
+        grown = {k: counters.get(k, 0) - last.get(k, 0) for k in names
+                 if counters.get(k, 0) > last.get(k, 0)}
+        self._last_bus_counts = {k: counters.get(k, 0) for k in names}
+        if grown.get(BUS_ERROR_COUNT):
+            return ERROR, (f"bridge-supervisor thread: {grown[BUS_ERROR_COUNT]} round(s) "
+                           "failed (see the log)")
+        parts = [f"{k} +{n}" for k, n in grown.items()]
+        if self.master is not None:
+            foreign = self.master.foreign_traffic(2 * self.settings.diagnostics_period)
+            if foreign:
+                parts.append(foreign)
+        return (WARN, "; ".join(parts)) if parts else (None, "")
+
+    def _with_bus_findings(self, status: Any, counters: dict[str, Any]) -> Any:
+        """``status`` raised to the level of :meth:`_bus_findings` where that is worse."""
+        level, message = self._bus_findings(counters)
+        if level is not None and status.level < level:
+            status.level, status.message = level, message
+        return status
 
     def achieved_rate(self) -> float:
         """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
@@ -96,12 +133,12 @@ class NodeDiagnostics:
         if meter is not None:
             counters.update(meter.figures())
         counters.update(self.liveview.counters())
-        out.append(bus_status(
+        out.append(self._with_bus_findings(bus_status(
             status_name(fqn, "bus"),
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
             alive=self.client.gateway_alive, connected=self.client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self._bus_problem()))
+            extra_error=self._bus_problem()), counters))
         return out
 
     def _cycle_counters(self) -> dict[str, Any]:
@@ -129,11 +166,14 @@ class NodeDiagnostics:
         counters.update(self._cycle_counters())
         counters.update(self.master.load.figures())
         silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
-        out = [bus_status(
+        totals = dict(counters)  # each station's supervisor counts into its own client
+        for key in ("invalid_nmt_states", "nmt_restarts", BUS_ERROR_COUNT):
+            totals[key] = sum(getattr(c.counters, key, 0) for c in self.station_clients.values())
+        out = [self._with_bus_findings(bus_status(
             status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
             f"{list(self.station_clients)}", alive=True, connected=self.master.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self._bus_problem())]
+            extra_error=self._bus_problem()), totals)]
         if silent:
             out[0].values.append(KeyValue(key="silent_stations", value=str(silent)))
         for sid, client in self.station_clients.items():

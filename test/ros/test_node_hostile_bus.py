@@ -81,6 +81,11 @@ def test_the_node_survives_a_hostile_bus_and_says_what_it_saw(running, probe, do
                    and int(_values(st).get("nmt_restarts", 0)) >= 1
                    and int(_values(st)["undecodable_frames"]) >= 300, 2 * PERIOD + 2,
                    "the faults in the bus diagnostics", node)
+    # the bus status said so: WARN naming what grew, in one of the messages meanwhile
+    warned = [st.message for _t, m in diags for st in m.status
+              if st.name == "/ssi_bridge: bus" and st.level == DiagnosticStatus.WARN]
+    assert any("undecodable_frames" in w for w in warned), warned
+    assert any("invalid_nmt_states" in w or "nmt_restarts" in w for w in warned), warned
     bus = _values(latest_status(diags, "/ssi_bridge: bus"))
     # the unicast half never reached the bus (bound to the group)
     assert int(bus["undecodable_frames"]) == 300, bus

@@ -7,12 +7,15 @@ station is on the bus; a heartbeat of the node counts as well (it was already up
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 
 import can
 
 from ssi_bridge.exceptions import GatewayUnavailable
+
+logger = logging.getLogger(__name__)
 
 NMT_ERROR_CONTROL = 0x700
 
