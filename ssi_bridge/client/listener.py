@@ -89,7 +89,8 @@ class ListenOnlyClient(can.Listener):
         self.nmt_state: int | None = None
         self._bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
-        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions).routes
+        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions,
+                                  self._on_malformed).routes
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
@@ -99,6 +100,13 @@ class ListenOnlyClient(can.Listener):
         self._cycles: deque[ObservedCycle] = deque(maxlen=KEEP_CYCLES)
         self._cycles_cond = threading.Condition()
         self._log = RateLimitedLog(logger)
+
+    def _on_malformed(self, can_id: int, length: int, expected: int) -> None:
+        """A TPDO whose length is not its mapping's: counted, not decoded."""
+        self.counters.malformed_pdos += 1
+        self._log.warning("malformed_pdo", "gateway node %d: TPDO 0x%03X with %d byte(s), "
+                           "its mapping has %d: not decoded", self.node_id, can_id, length,
+                           expected)
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self) -> None:

@@ -26,6 +26,7 @@ from collections.abc import Callable
 import can
 import canopen
 
+from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.client.bus_master import SYNC_COB_ID, CanMaster
 from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
@@ -95,6 +96,7 @@ class BridgeClient:
         self.assist_after = assist_after
         self.counters = ClientCounters()
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
+        self._rx_log = RateLimitedLog(logger)
         #: the bus' master; a private one (counting into this client) unless one was given
         self._owns_master = not isinstance(bus, CanMaster)
         self.master = (CanMaster(bus, self.counters, opener=opener) if not isinstance(bus, CanMaster)
@@ -111,7 +113,8 @@ class BridgeClient:
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
         self._send_lock = self.master.send_lock
         self._liveness = Liveness(self)
-        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions)
+        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions,
+                                  self._on_malformed)
 
     # -- life cycle -------------------------------------------------------------------------
     def connect(self) -> None:
@@ -343,6 +346,12 @@ class BridgeClient:
 
     # -- network thread callbacks ------------------------------------------------------------
     # TPDOs arrive raw on their COB-IDs (client/receive.py), not through canopen's PdoMaps
+    def _on_malformed(self, can_id: int, length: int, expected: int) -> None:
+        self.counters.malformed_pdos += 1
+        self._rx_log.warning("malformed_pdo", "gateway node %d: TPDO 0x%03X with %d byte(s), "
+                             "its mapping has %d: not decoded (%d so far)", self.node_id,
+                             can_id, length, expected, self.counters.malformed_pdos)
+
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
         self.table.on_positions(slots, data, timestamp)

@@ -105,6 +105,25 @@ class FrameListener(GuardedListener):
         GuardedListener.on_message_received(self, msg)
 
 
+#: ``on_malformed(can_id, length, expected)``: a TPDO whose length is not its mapping's
+MalformedHandler = Callable[[int, int, int], None]
+#: bytes of a process image TPDO (000 "Process input": 8 bytes) and of one slot's 0x6820
+#: (Integer32) in an encoder default TPDO (000 Table 15)
+IMAGE_BYTES, POSITION_BYTES = 8, 4
+
+
+def _checked(expected: int, handler: Subscriber, on_malformed: MalformedHandler) -> Subscriber:
+    """``handler`` for frames of ``expected`` bytes; any other length goes to
+    ``on_malformed`` and is never decoded (CiA 301: a PDO shorter than its mapping is an
+    error; a longer one is no frame this mapping produced)."""
+    def route(can_id: int, data: bytearray, timestamp: float) -> None:
+        if len(data) == expected:
+            handler(can_id, data, timestamp)
+        else:
+            on_malformed(can_id, len(data), expected)
+    return route
+
+
 class TpdoRoutes:
     """The client's handlers on the COB-IDs of the TPDOs it maps (000 Table 15).
 
@@ -112,17 +131,21 @@ class TpdoRoutes:
     :param slots: modules in the station (TPDO 1..slots carry the images)
     :param on_image: called with the slot for TPDO s
     :param on_positions: called with the slots carried for TPDO 9..12
+    :param on_malformed: called instead for a TPDO whose length differs from its mapping
     """
 
     def __init__(self, node_id: int, slots: int, on_image: ImageHandler,
-                 on_positions: PositionHandler) -> None:
+                 on_positions: PositionHandler,
+                 on_malformed: MalformedHandler | None = None) -> None:
         self.routes: dict[int, Subscriber] = {}
         #: PDO number of each route (the RemoteNode's map on the same COB-ID)
         self.pdo_numbers: dict[int, int] = {}
+        refuse = on_malformed or (lambda can_id, length, expected: None)
         for slot in range(1, slots + 1):
-            self._add(slot, node_id, partial(on_image, slot))
+            self._add(slot, node_id, _checked(IMAGE_BYTES, partial(on_image, slot), refuse))
         for pdo_no, carried in position_pdos(slots):
-            self._add(pdo_no, node_id, partial(on_positions, carried))
+            self._add(pdo_no, node_id, _checked(POSITION_BYTES * len(carried),
+                                                partial(on_positions, carried), refuse))
 
     def _add(self, pdo_no: int, node_id: int, handler: Subscriber) -> None:
         cob_id = tpdo_cob_base(pdo_no) + node_id

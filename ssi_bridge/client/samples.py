@@ -62,6 +62,8 @@ class ClientCounters:
     emergencies: int = 0
     #: received datagrams that were not CAN frames (udp_multicast), dropped
     undecodable_frames: int = 0
+    #: TPDOs on the master's COB-IDs whose length differs from their mapping, not decoded
+    malformed_pdos: int = 0
     #: errors of the bus's receive call (the receive path went on)
     receive_errors: int = 0
     #: exceptions raised by a handler of a received frame (the receive path went on)
