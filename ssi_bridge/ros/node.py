@@ -73,7 +73,8 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
             from ssi_bridge.sim.supervisor import Simulation
 
             # the node and its simulated station meet on this bus (sim/supervisor/station.py)
-            self.settings = Simulation.bus_settings(self.settings)
+            self.settings = Simulation.bus_settings(self.settings,
+                                                    self.get_fully_qualified_name())
             self._simulation = Simulation
         s = self.settings
         #: the simulated station's clock: wire time since the node started (fault durations)

@@ -34,9 +34,10 @@ class Simulation:
         self.stations: ChildStation | InProcessStation | StationGroup | None = None
 
     @staticmethod
-    def bus_settings(settings: NodeSettings) -> NodeSettings:
-        """``settings`` with the bus the node shares with its simulated stations."""
-        return with_station_bus(settings)
+    def bus_settings(settings: NodeSettings, node: str) -> NodeSettings:
+        """``settings`` with the bus the node ``node`` (its fully qualified name) shares with
+        its simulated stations."""
+        return with_station_bus(settings, node)
 
     @staticmethod
     def open_bus(config: BusConfig) -> can.BusABC:

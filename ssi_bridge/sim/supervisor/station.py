@@ -44,16 +44,23 @@ PR_SET_PDEATHSIG = 1
 _LIBC = ctypes.CDLL(None, use_errno=True)
 
 
-def with_station_bus(s: NodeSettings) -> NodeSettings:
-    """``s`` with the bus the node shares with its simulated station.
+#: the node's default fully qualified name: its derived bus is the one of ``bus.channel`` alone
+DEFAULT_NODE = "/ssi_bridge"
 
-    udp_multicast: the user's udp_multicast channel, else a group and port of their own
-    derived from ``bus.channel`` on loopback; virtual: the bus as configured. The node's
-    client, CAN log sniffer and diagnostics all use the result.
+
+def with_station_bus(s: NodeSettings, node: str = DEFAULT_NODE) -> NodeSettings:
+    """``s`` with the bus the node ``node`` (fully qualified name) shares with its station.
+
+    udp_multicast: the user's udp_multicast channel, else a group and port of their own on
+    loopback, derived from ``bus.channel`` and, for any other node name than the default,
+    from the name too: bridges in different namespaces never meet on one bus by accident (a
+    CAN bus has one master). virtual: the bus as configured (it is the process's own). The
+    node's client, CAN log sniffer and diagnostics all use the result.
     """
     if s.simulation_transport == "udp_multicast" and s.bus_interface != "udp_multicast":
+        key = s.bus_channel if node == DEFAULT_NODE else f"{node}:{s.bus_channel}"
         return dataclasses.replace(s, bus_interface="udp_multicast",
-                                   bus_channel=derive_channel(s.bus_channel))
+                                   bus_channel=derive_channel(key))
     return s
 
 
