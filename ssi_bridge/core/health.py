@@ -108,6 +108,13 @@ MIN_WINDOW_CYCLES = 10
 #: a worse level is published once it held this long; a better one once it held this long
 RAISE_AFTER_S = 0.1
 CLEAR_AFTER_S = 1.0
+#: a WARN or ERROR that flaps (present in some cycles, absent in others) is confirmed too once
+#: it was the raw level in at least this share of the cycles of the last RAISE_AFTER_S and its
+#: cycles span at least half of that time: an encoder error bit in 40 % of the cycles shows
+#: within about RAISE_AFTER_S, a load hiccup (a short run of cycles) still never does
+FLAP_SHARE = 0.25
+#: at least this many cycles in the window for the flap rule (at low rates the run rule holds)
+FLAP_MIN_CYCLES = 4
 
 
 class ChannelHealth:
@@ -145,6 +152,8 @@ class ChannelHealth:
         self._sampled = False
         #: (since, lowest raw level) while the raw level is above ``_confirmed``
         self._up: tuple[float, int] | None = None
+        #: (time, raw level) of the cycles of the last RAISE_AFTER_S (the flap rule)
+        self._recent: deque[tuple[float, int]] = deque()
         #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
         self._history: deque[tuple[float, int]] = deque()
         self.level = STALE
@@ -213,6 +222,27 @@ class ChannelHealth:
                 f"of wire time; WARN from {STALE_RATIO_WARN:.0%}, ERROR from "
                 f"{STALE_RATIO_ERROR:.0%})")
 
+    def _flapping(self, now: float, raw: int) -> int | None:
+        """The worst WARN/ERROR that flaps in the last RAISE_AFTER_S (:data:`FLAP_SHARE` of its
+        cycles, spanning half of it), or None. Its message says in how many cycles."""
+        recent = self._recent
+        recent.append((now, raw))
+        horizon = now - self.raise_after_s
+        while recent and recent[0][0] < horizon:
+            recent.popleft()
+        n = len(recent)
+        if n < FLAP_MIN_CYCLES or self.raise_after_s <= 0:
+            return None
+        for level in (ERROR, WARN):
+            times = [t for t, r in recent if level <= r < STALE]
+            if (times and len(times) >= FLAP_SHARE * n
+                    and times[-1] - times[0] >= 0.5 * self.raise_after_s):
+                worst = max(r for t, r in recent if level <= r < STALE)
+                text = self._messages.get(worst, "").split(" (in ")[0]
+                self._messages[worst] = f"{text} (in {len(times)} of the last {n} cycles)"
+                return worst
+        return None
+
     def _debounce(self, now: float, raw: int) -> int:
         """Two stages. ``confirmed`` follows the raw level down at once but up only when the
         worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
@@ -228,7 +258,10 @@ class ChannelHealth:
             self.message = self._messages[raw]
             return raw
         confirmed = self._confirmed
-        if raw < confirmed:
+        flapped = self._flapping(now, raw)
+        if flapped is not None and flapped > confirmed:
+            confirmed, raw, self._up = flapped, flapped, None
+        elif raw < confirmed:
             confirmed, self._up = raw, None
         elif raw > confirmed:
             if self._up is None:
