@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from typing import Any
 
 import can
 import canopen
 
 from ssi_bridge.base.timebase import wire_now
-from ssi_bridge.base.udp_bus import open_udp_bus
+from ssi_bridge.base.buses import open_python_can
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.settings import BusConfig
 
@@ -37,28 +36,9 @@ BusOpener = Callable[[BusConfig], can.BusABC]
 
 
 def open_bus(config: BusConfig) -> can.BusABC:
-    """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
-
-    ``udp_multicast`` is this package's CAN-over-UDP interface (:mod:`ssi_bridge.base.udp_bus`:
-    no echo of its own frames, one group on one interface), every other name python-can's
-    own. Raises BusError with the interface, channel, bit rate and the reason.
-    """
-    if config.interface == "udp_multicast":
-        try:
-            return open_udp_bus(str(config.channel))
-        except (can.CanError, OSError) as err:
-            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
-    kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
-    if config.interface != "virtual":
-        kwargs["bitrate"] = config.bitrate
-    try:
-        bus = can.Bus(**kwargs)
-    except (can.CanError, OSError, ValueError, ImportError) as err:
-        raise BusError(
-            f"cannot open CAN bus {config.interface}:{config.channel} "
-            f"at {config.bitrate} bit/s: {err}") from err
-    logger.debug("opened %s:%s", config.interface, config.channel)
-    return bus
+    """Open a new python-can bus for ``config`` (:func:`~ssi_bridge.base.buses.open_python_can`);
+    the caller must ``shutdown()`` it. Raises BusError with the reason."""
+    return open_python_can(config)
 
 
 def take_bus(source: BusConfig | can.BusABC | None, owner: str,

@@ -15,14 +15,13 @@ ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
 a jump beyond ``max_speed`` in the last 0.5 s        WARN
 STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
 otherwise                                           OK
-gateway silent (no heartbeat) / not connected       ERROR (bus)
-achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
 =================================================  =========
 
 A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
 has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
 so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
-better level held CLEAR_AFTER_S. The window and the debounce run on SYNC wire time, and every
+better level held CLEAR_AFTER_S; a WARN/ERROR that flaps is confirmed by its share of the
+cycles (:data:`FLAP_SHARE`). The window and the debounce run on SYNC wire time, and every
 SYNC sent counts (one the node never handled as lost), so load does not thin the window.
 """
 

@@ -1,26 +1,10 @@
 """Diagnostic statuses of the bridge: one per joint channel and one for the bus/gateway.
 
-Level mapping (docs/node.md has the table):
-
-=================================================  =========
-condition                                           level
-=================================================  =========
-no fresh sample for ``stale_cycles`` cycles          STALE
->= 50 % of the SYNCs of the last 0.5 s stale         ERROR
-ERR_PARA (invalid REG_PARA1) or ERR_SSI (wire)       ERROR
->= 10 % of the SYNCs of the last 0.5 s stale         WARN
-a jump beyond ``max_speed`` in the last 0.5 s        WARN
-STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
-otherwise                                           OK
-gateway silent (no heartbeat) / not connected       ERROR (bus)
-achieved rate < 90 % of publish_rate, CAN errors    WARN (bus)
-=================================================  =========
-
-A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
-has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
-so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
-better level held CLEAR_AFTER_S. The window and the debounce run on SYNC wire time, and every
-SYNC sent counts (one the node never handled as lost), so load does not thin the window.
+The levels and messages of a joint come from its core (``core/health.py`` has the level
+table and the debounce, docs/node.md the same for a reader); this module puts them, every
+status bit and the counters into ``diagnostic_msgs``. The bus status adds: gateway silent
+(no heartbeat) or not connected ERROR; achieved rate below 90 % of publish_rate or CAN errors
+WARN.
 """
 
 from __future__ import annotations

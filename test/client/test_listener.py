@@ -100,7 +100,8 @@ def test_incomplete_cycle_is_reported_when_the_next_sync_comes(channel: str) -> 
         first = listener.next_cycle(1.0)
         assert first is not None and not first.complete and first.seq == 1
         bus.send(can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False))
-        bus.send(can.Message(arbitration_id=0x1E1, data=(7).to_bytes(4, "little") + bytes(4),
+        # one slot: TPDO9 carries 0x6820 of slot 1 only (4 bytes, 000 Table 15)
+        bus.send(can.Message(arbitration_id=0x1E1, data=(7).to_bytes(4, "little"),
                              is_extended_id=False))
         second = listener.next_cycle(1.0)
         assert second is not None and second.complete and second.seq == 2

@@ -19,7 +19,6 @@ from typing import Any
 import can
 import canopen
 
-from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.sim.gateway.wire_bus import (
     OWED_MAX_S, SIMULATED_INTERFACES, DuePeriodicTask, Wire, WireBus, open_bus, take_bus, wire_for,
@@ -50,10 +49,6 @@ class LossyBus(can.BusABC):
         self.muted = False
         #: frames dropped so far (sent + received)
         self.dropped = 0
-        #: newest timestamp of a frame this side has handled, and the wire time at which a
-        #: receive last found nothing waiting: what the receive path has seen of the wire
-        self.rx_latest = 0.0
-        self.rx_idle_at = 0.0
         # an inner bus with python-can's own recv() loop is read one receive step at a time
         # (its _recv_internal plus its filters): this wrapper's recv() is that same loop
         self._inner_steps = type(inner).recv is can.BusABC.recv
@@ -130,27 +125,7 @@ class LossyBus(can.BusABC):
             msg = self._inner._recv_internal(timeout)[0]
         else:
             msg = super().recv(timeout)
-        # what this side has seen of the wire, never past a frame of this process that is
-        # still on its way (claimed, or a periodic frame due): it may land behind this one
-        wire = self._wire
-        if msg is None:
-            now = wire_now()
-            self.rx_idle_at = now if wire is None else min(now, wire.undelivered_since())
-        elif msg.timestamp > self.rx_latest:
-            ts = msg.timestamp
-            self.rx_latest = ts if wire is None else min(ts, wire.undelivered_since())
         return msg
-
-    def seen_until(self) -> float:
-        """Wire time up to which every frame on the wire has been handled by this side.
-
-        Never past a frame of this process that is on the wire but not handed over yet
-        (:meth:`Wire.undelivered_since`): its sender's thread may be the one stalled.
-        """
-        seen = max(self.rx_latest, self.rx_idle_at)
-        if self._wire is not None:
-            seen = min(seen, self._wire.undelivered_since())
-        return seen
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         inner = self._inner

@@ -21,6 +21,7 @@ from typing import Any
 import can
 
 from ssi_bridge.base.timebase import frame_wire_time, wire_now
+from ssi_bridge.base.buses import open_python_can
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.settings import BusConfig
@@ -42,26 +43,10 @@ def open_bus(config: BusConfig) -> can.BusABC:
     """Open a new python-can bus for ``config``; the caller must ``shutdown()`` it.
 
     A simulated interface (:data:`SIMULATED_INTERFACES`) comes wrapped in :class:`WireBus`, so
-    its frames take their real time on the wire at ``config.bitrate``.
+    its frames take their real time on the wire at ``config.bitrate`` (receivers on
+    ``virtual`` see the WireBus end-of-frame time). Raises BusError.
     """
-    if config.interface == "udp_multicast":  # our own-frame-free variant (gateway/multicast)
-        from ssi_bridge.base.udp_bus import open_udp_bus
-        try:
-            return WireBus(open_udp_bus(str(config.channel)), wire_for(config))
-        except (can.CanError, OSError) as err:
-            raise BusError(f"cannot open CAN bus udp_multicast:{config.channel}: {err}") from err
-    kwargs: dict[str, Any] = {"interface": config.interface, "channel": config.channel}
-    if config.interface == "virtual":
-        kwargs["preserve_timestamps"] = True  # receivers see the WireBus end-of-frame time
-    elif config.interface != "udp_multicast":
-        kwargs["bitrate"] = config.bitrate
-    try:
-        bus = can.Bus(**kwargs)
-    except (can.CanError, OSError, ValueError, ImportError) as err:
-        raise BusError(
-            f"cannot open CAN bus {config.interface}:{config.channel} "
-            f"at {config.bitrate} bit/s: {err}") from err
-    logger.debug("opened %s:%s", config.interface, config.channel)
+    bus = open_python_can(config, preserve_timestamps=True)
     if config.interface in SIMULATED_INTERFACES:
         return WireBus(bus, wire_for(config))
     return bus
