@@ -1,4 +1,5 @@
-# ssi_bridge: `make run` starts the node on its simulated default, `make test` runs every test.
+# ssi_bridge: `make run` starts the node on its simulated default, `make test` runs every test
+# but the slow tier (load, stress, soak, two hosts), `make test-all` runs them all.
 # Both set up first (idempotent): a CPython 3.12 venv with the pinned wheels, then a colcon
 # build of msg_defs/ (ssi_bridge_msgs) and this package into install/.
 
@@ -16,12 +17,13 @@ ONLY        ?=
 
 SOURCES := $(shell find msg_defs config launch resource -type f 2>/dev/null) setup.py setup.cfg package.xml
 
-.PHONY: help setup run monitor test bench lock clean
+.PHONY: help setup run monitor test test-all bench lock clean
 
 help:
 	@echo "make run    set up if needed, then run ssi_bridge_node (ARGS='--ros-args ...' passes through)"
 	@echo "make monitor  print joints, diagnostics and bus load of a running node each second (ARGS='--namespace ns')"
-	@echo "make test   set up if needed, then run the whole test suite (PYTEST_ARGS=... passes through)"
+	@echo "make test   set up if needed, then run the test suite but the slow tier (PYTEST_ARGS=... passes through)"
+	@echo "make test-all  the same with the slow tier: load, stress, soak and two-host tests"
 	@echo "make bench  run the benchmarks in bench/ (ONLY=<name> runs bench/bench_<name>.py)"
 	@echo "make setup  create .venv from requirements.lock and colcon-build into install/"
 
@@ -52,6 +54,9 @@ monitor: setup
 	@$(ENV) && exec install/ssi_bridge/lib/ssi_bridge/monitor $(ARGS)
 
 test: setup
+	@$(ENV) && python -m pytest -m "not slow" $(PYTEST_ARGS)
+
+test-all: setup
 	@$(ENV) && python -m pytest $(PYTEST_ARGS)
 
 bench: setup
