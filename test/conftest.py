@@ -168,15 +168,18 @@ NODE_FIXTURES = frozenset({"ros_domain", "module_domain"})
 SLOW = {
     "test/ros/test_node_load.py": "load: 60 s at 1 kHz beside two CPU burners",
     "test/ros/test_node_two_hosts.py": "two hosts: three network namespaces",
-    "test/ros/test_node_stop.py::test_can_log_write_error_is_an_error_at_once_and_everything_stays_clean":
+    "test/ros/test_node_stop.py::"
+    "test_can_log_write_error_is_an_error_at_once_and_everything_stays_clean":
         "soak: a 4 MB CAN log filled at 1 kHz, then 30 s of RSS watched",
-    "test/ros/test_node_stop.py::test_double_sigint_10ms_apart_while_recording_exits_0_with_a_whole_bag":
+    "test/ros/test_node_stop.py::"
+    "test_double_sigint_10ms_apart_while_recording_exits_0_with_a_whole_bag":
         "stress: 20 starts, each stopped by two SIGINTs",
     "test/ros/test_node_stop.py::test_stop_signals_at_any_moment_of_start_up_and_shutdown":
         "stress: 15 starts, each hit by a burst of signals",
     "test/ros/test_node_station_process.py::test_station_survives_a_storm_of_stop_signals":
         "stress: 6 stations, 400 signals each",
-    "test/ros/test_node_services.py::test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
+    "test/ros/test_node_services.py::"
+    "test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
         "stress: 1000 service calls at once",
 }
 #: node tests that check the install path (the installed executables start and answer), not
