@@ -1,4 +1,5 @@
-# ssi_bridge: `make run` starts the node on its simulated default, `make test` runs every test.
+# ssi_bridge: `make run` starts the node on its simulated default, `make test` runs every test
+# but the slow tier (load, stress, soak, two hosts), `make test-all` runs them all.
 # Both set up first (idempotent): a CPython 3.12 venv with the pinned wheels, then a colcon
 # build of msg_defs/ (ssi_bridge_msgs) and this package into install/.
 
@@ -12,16 +13,19 @@ STAMP_BUILD := install/.build.stamp
 ENV         := source scripts/env.sh
 ARGS        ?=
 PYTEST_ARGS ?=
+#: pytest-xdist workers of `make test` (0: one process); the slow tier always runs alone
+TEST_WORKERS ?= 2
 ONLY        ?=
 
 SOURCES := $(shell find msg_defs config launch resource -type f 2>/dev/null) setup.py setup.cfg package.xml
 
-.PHONY: help setup run monitor test bench lock clean
+.PHONY: help setup run monitor test test-slow test-all bench lock clean
 
 help:
 	@echo "make run    set up if needed, then run ssi_bridge_node (ARGS='--ros-args ...' passes through)"
 	@echo "make monitor  print joints, diagnostics and bus load of a running node each second (ARGS='--namespace ns')"
-	@echo "make test   set up if needed, then run the whole test suite (PYTEST_ARGS=... passes through)"
+	@echo "make test   set up if needed, then run the test suite but the slow tier (PYTEST_ARGS=... passes through)"
+	@echo "make test-all  make test, then the slow tier: load, stress, soak and two-host tests (make test-slow alone)"
 	@echo "make bench  run the benchmarks in bench/ (ONLY=<name> runs bench/bench_<name>.py)"
 	@echo "make setup  create .venv from requirements.lock and colcon-build into install/"
 
@@ -51,8 +55,15 @@ run: setup
 monitor: setup
 	@$(ENV) && exec install/ssi_bridge/lib/ssi_bridge/monitor $(ARGS)
 
+# make test: TEST_WORKERS processes (pytest-xdist), each module's tests in one of them (they
+# share the module's node); the slow tier one test at a time, nothing beside it
 test: setup
-	@$(ENV) && python -m pytest $(PYTEST_ARGS)
+	@$(ENV) && python -m pytest -m "not slow" -n $(TEST_WORKERS) --dist loadscope $(PYTEST_ARGS)
+
+test-slow: setup
+	@$(ENV) && python -m pytest -m slow $(PYTEST_ARGS)
+
+test-all: test test-slow
 
 bench: setup
 	@$(ENV) && mkdir -p bench/results && : > bench/results/latest.jsonl && \

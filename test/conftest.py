@@ -101,6 +101,22 @@ def ros_domain() -> Iterator[int]:
         os.close(fd)
 
 
+@pytest.fixture(scope="module")
+def module_domain() -> Iterator[int]:
+    """A ROS_DOMAIN_ID held for a whole test module (the node and probe its tests share)."""
+    dom, fd = claim_domain()
+    try:
+        yield dom
+    finally:
+        os.close(fd)
+
+
+@pytest.fixture(scope="module")
+def module_child_preexec() -> Callable[[], None]:
+    """:func:`child_preexec` for a process that lives as long as the test module."""
+    return dies_with_this_process()
+
+
 @pytest.fixture
 def small_fs(tmp_path: Path) -> Iterator[Callable[[int], Path]]:
     """Factory: a tmpfs of ``size`` bytes mounted under tmp_path (root only), unmounted after.
@@ -141,6 +157,71 @@ def fill_up(directory: Path) -> Path:
     finally:
         os.close(fd)
     return filler
+
+
+# -- test tiers: the markers come from here, not from each file ------------------------------
+#: a test with a DDS domain of its own starts a ROS node as a subprocess (the bridge, the
+#: managed node or a ROS tool) and talks to it: ``node``
+NODE_FIXTURES = frozenset({"ros_domain", "module_domain"})
+#: load, stress, soak and two-host tests: ``slow``, left out of ``make test``, run by
+#: ``make test-all``. A file names all its tests, ``file::test`` every case of that test.
+SLOW = {
+    "test/ros/test_node_load.py": "load: 60 s at 1 kHz beside two CPU burners",
+    "test/ros/test_node_two_hosts.py": "two hosts: three network namespaces",
+    "test/ros/test_node_stop.py::"
+    "test_can_log_write_error_is_an_error_at_once_and_everything_stays_clean":
+        "soak: a 4 MB CAN log filled at 1 kHz, then 30 s of RSS watched",
+    "test/ros/test_node_stop.py::"
+    "test_double_sigint_10ms_apart_while_recording_exits_0_with_a_whole_bag":
+        "stress: 20 starts, each stopped by two SIGINTs",
+    "test/ros/test_node_stop.py::test_stop_signals_at_any_moment_of_start_up_and_shutdown":
+        "stress: 15 starts, each hit by a burst of signals",
+    "test/ros/test_node_station_process.py::test_station_survives_a_storm_of_stop_signals":
+        "stress: 6 stations, 400 signals each",
+    "test/ros/test_node_services.py::"
+    "test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
+        "stress: 1000 service calls at once",
+}
+#: node tests that check the install path (the installed executables start and answer), not
+#: the logic again: .ci/run's workspace step runs only these (``-m smoke``)
+SMOKE = {
+    "test/ros/test_node_skeleton.py::test_register_services_over_the_handshake",
+    "test/ros/test_node_skeleton.py::test_diagnostics_ok_for_the_joint",
+    "test/ros/test_node_lifecycle.py::test_walk_through_the_lifecycle",
+    "test/ros/test_node_station_process.py::"
+    "test_node_with_simulation_false_drives_a_separately_started_station",
+    "test/ros/test_monitor.py::test_monitor_prints_the_running_bridge_and_stops_cleanly_on_ctrl_c",
+}
+#: pytest-timeout (s) of a slow test; every other test has setup.cfg's ``timeout``
+SLOW_TIMEOUT = 600
+
+
+def _listed(item: pytest.Item, names: dict[str, str] | set[str]) -> bool:
+    test = item.nodeid.split("[")[0]
+    return test in names or test.split("::")[0] in names
+
+
+def _check_lists(root: Path) -> None:
+    """Every SLOW and SMOKE entry names a test that exists (a renamed test would otherwise
+    fall silently out of its tier)."""
+    for entry in (*SLOW, *SMOKE):
+        path, _, name = entry.partition("::")
+        source = root / path
+        if not source.is_file() or (name and f"def {name}(" not in source.read_text()):
+            raise pytest.UsageError(f"test/conftest.py lists {entry}, which does not exist")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    _check_lists(Path(_REPO))
+    for item in items:
+        if NODE_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.node)
+        if _listed(item, SMOKE):
+            item.add_marker(pytest.mark.smoke)
+        if _listed(item, SLOW):
+            item.add_marker(pytest.mark.slow)
+            if item.get_closest_marker("timeout") is None:
+                item.add_marker(pytest.mark.timeout(SLOW_TIMEOUT))
 
 
 # -- no orphans: a process of this repository that outlived its parent is a defect ----------

@@ -115,7 +115,8 @@ def test_a_taken_port_is_named_with_the_reason() -> None:
 _PORT = 30000 + 2 * (os.getpid() % 5000)
 
 
-@pytest.mark.parametrize("other", [f"239.74.200.2:{_PORT}", f"239.74.200.1:{_PORT + 1}"])
+@pytest.mark.parametrize("other", [f"239.74.200.2:{_PORT}", f"239.74.200.1:{_PORT + 1}"],
+                         ids=["other_group_same_port", "same_group_other_port"])  # no pid in ids
 def test_a_bus_hears_only_its_group_and_port(other: str) -> None:
     """Group and port together isolate (IP_MULTICAST_ALL off): same port, other group is quiet."""
     here = f"239.74.200.1:{_PORT}"

@@ -129,6 +129,37 @@ def _then(first: Callable[[], None], second: Callable[[], None] | None) -> Calla
     return both
 
 
+def launch_node(workdir: Path, domain_id: int, index: int, preexec: Callable[[], None],
+                params: dict[str, Any] | None = None, *, namespace: str = "",
+                params_file: Path | None = None, args: tuple[str, ...] = ()) -> NodeProcess:
+    """Start the installed node in ``domain_id`` with its files (params, log, register bank)
+    under ``workdir``; ``index`` keeps the bus channel and files of several nodes apart."""
+    cmd = [str(installed_executable("ssi_bridge_node")), "--ros-args"]
+    if params_file is not None:
+        cmd += ["--params-file", str(params_file)]
+    values = {"bus.channel": f"test_{domain_id}_{index}",
+              "storage_path": str(workdir / f"bank{index}" / "retentive.json")}
+    values.update(params or {})
+    pfile = workdir / f"params{index}.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
+    cmd += ["--params-file", str(pfile)]
+    if namespace:
+        cmd += ["-r", f"__ns:={namespace}"]
+    cmd += list(args)
+    log_path = workdir / f"node{index}.log"
+    env = dds_env(domain_id)
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                cwd=workdir, start_new_session=True, preexec_fn=preexec)
+    return NodeProcess(proc, domain_id, namespace, log_path, env=env)
+
+
+def _stop_and_report(node: NodeProcess) -> None:
+    code = node.stop()
+    if code not in (0, None) and code != -signal.SIGKILL:
+        print(f"node exited {code}; log:\n{node.log()[-4000:]}")
+
+
 @pytest.fixture
 def start_node(tmp_path: Path, domain_id: int,
                child_preexec: Callable[[], None]) -> Iterator[Callable[..., NodeProcess]]:
@@ -137,40 +168,20 @@ def start_node(tmp_path: Path, domain_id: int,
     Every node dies with the test process (PR_SET_PDEATHSIG) and handles SIGINT; ``preexec``
     runs after that in the child (e.g. a resource limit).
     """
-    node_exe = installed_executable("ssi_bridge_node")
+    installed_executable("ssi_bridge_node")
     started: list[NodeProcess] = []
 
     def _start(params: dict[str, Any] | None = None, *, namespace: str = "",
                params_file: Path | None = None, args: tuple[str, ...] = (),
                preexec: Callable[[], None] | None = None) -> NodeProcess:
-        index = len(started)
-        cmd = [str(node_exe), "--ros-args"]
-        if params_file is not None:
-            cmd += ["--params-file", str(params_file)]
-        values = {"bus.channel": f"test_{domain_id}_{index}",
-                  "storage_path": str(tmp_path / f"bank{index}" / "retentive.json")}
-        values.update(params or {})
-        pfile = tmp_path / f"params{index}.yaml"
-        pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
-        cmd += ["--params-file", str(pfile)]
-        if namespace:
-            cmd += ["-r", f"__ns:={namespace}"]
-        cmd += list(args)
-        log_path = tmp_path / f"node{index}.log"
-        env = dds_env(domain_id)
-        with open(log_path, "wb") as log:
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
-                                    cwd=tmp_path, start_new_session=True,
-                                    preexec_fn=_then(child_preexec, preexec))
-        node = NodeProcess(proc, domain_id, namespace, log_path, env=env)
+        node = launch_node(tmp_path, domain_id, len(started), _then(child_preexec, preexec),
+                           params, namespace=namespace, params_file=params_file, args=args)
         started.append(node)
         return node
 
     yield _start
     for node in started:
-        code = node.stop()
-        if code not in (0, None) and code != -signal.SIGKILL:
-            print(f"node exited {code}; log:\n{node.log()[-4000:]}")
+        _stop_and_report(node)
 
 
 class RosProbe:
@@ -187,6 +198,7 @@ class RosProbe:
         self.node = rclpy.create_node(f"probe_{os.getpid()}", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._subscriptions: list[Any] = []
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
@@ -200,9 +212,15 @@ class RosProbe:
     def subscribe(self, msg_type: Any, topic: str, qos: int = 50) -> list[tuple[float, Any]]:
         """Collect (receive time.monotonic(), message) of ``topic`` into a list."""
         received: list[tuple[float, Any]] = []
-        self.node.create_subscription(msg_type, topic,
-                                      lambda m: received.append((time.monotonic(), m)), qos)
+        self._subscriptions.append(self.node.create_subscription(
+            msg_type, topic, lambda m: received.append((time.monotonic(), m)), qos))
         return received
+
+    def unsubscribe_since(self, count: int) -> None:
+        """Destroy the subscriptions made after the first ``count`` (a test's own, on a probe
+        shared by a module)."""
+        while len(self._subscriptions) > count:
+            self.node.destroy_subscription(self._subscriptions.pop())
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str,
                  node: NodeProcess | None = None) -> None:
@@ -261,6 +279,110 @@ def running(start_node: Callable[..., NodeProcess], probe: RosProbe) -> Callable
         return node
 
     return _run
+
+
+# -- one node per module, for the tests that only read or call it ---------------------------
+#: failed test phases so far in this process: a shared node handed out before a failure is
+#: not handed out again (the failed test may have left it in any state)
+_FAILURES = [0]
+#: module name -> the running shared node of that module and its parameters
+_SHARED: dict[str, dict[str, Any]] = {}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """In each module, the tests that share its node run first, in file order: the node is
+    started once for them and stopped before the module's other tests (which start their own
+    nodes and should not share the CPU with an idle one)."""
+    first = {id(item): "shared_node" in getattr(item, "fixturenames", ()) for item in items}
+    order = {id(item): k for k, item in enumerate(items)}
+    module_start: dict[str, int] = {}
+    for k, item in enumerate(items):
+        module_start.setdefault(item.nodeid.split("::")[0], k)
+    items.sort(key=lambda item: (module_start[item.nodeid.split("::")[0]],
+                                 not first[id(item)], order[id(item)]))
+
+
+@pytest.fixture(autouse=True)
+def _shared_node_only_while_used(request: pytest.FixtureRequest) -> None:
+    """A test that does not use its module's shared node starts with that node stopped."""
+    if "shared_node" in request.fixturenames:
+        return
+    state = _SHARED.get(request.module.__name__)
+    if state and state.get("node") is not None:
+        _stop_and_report(state.pop("node"))
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
+    report = yield
+    if report.failed:
+        _FAILURES[0] += 1
+    return report
+
+
+@pytest.fixture(scope="module")
+def module_probe(module_domain: int) -> Iterator[RosProbe]:
+    """The probe of the module's shared node (its domain); closed after the module."""
+    p = RosProbe(module_domain)
+    yield p
+    p.close()
+
+
+@pytest.fixture
+def shared_probe(module_probe: RosProbe) -> Iterator[RosProbe]:
+    """The module's probe for one test: the subscriptions the test makes end with it."""
+    count = len(module_probe._subscriptions)
+    yield module_probe
+    module_probe.unsubscribe_since(count)
+
+
+@pytest.fixture(scope="module")
+def shared_node(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
+                module_domain: int,
+                module_child_preexec: Callable[[], None],
+                module_probe: RosProbe) -> Iterator[Callable[..., NodeProcess]]:
+    """Factory: the module's running node with these parameters, for tests that only read
+    from it or call it without changing what another test of the module would see.
+
+    A node is started (and its first joint_states awaited) once and handed to each following
+    test that asks for the same parameters; asking for others stops it and starts a new one,
+    so the module's domain holds one node at a time. After any failed test the next one gets a
+    new node. Every node is stopped by PID at the end of the module, pass or fail.
+    """
+    from sensor_msgs.msg import JointState
+
+    workdir = tmp_path_factory.mktemp("shared_node")
+    started: list[NodeProcess] = []
+    current: dict[str, Any] = _SHARED.setdefault(request.module.__name__, {})
+
+    def _get(params: dict[str, Any] | None = None, *, namespace: str = "",
+             params_file: Path | None = None) -> NodeProcess:
+        key = (yaml.safe_dump(params or {}, sort_keys=True), namespace, str(params_file))
+        node = current.get("node")
+        if node is not None and current["key"] == key and current["failures"] == _FAILURES[0]:
+            if node.proc.poll() is not None:
+                pytest.fail(f"the module's shared node exited {node.proc.returncode} after an "
+                            f"earlier test:\n{node.log()[-4000:]}")
+            return node
+        if node is not None:
+            _stop_and_report(node)
+        node = launch_node(workdir, module_domain, len(started), module_child_preexec, params,
+                           namespace=namespace, params_file=params_file)
+        started.append(node)
+        current.update(node=node, key=key, failures=_FAILURES[0])
+        count = len(module_probe._subscriptions)
+        try:
+            seen = module_probe.subscribe(JointState, node.topic("joint_states"))
+            module_probe.wait_for(lambda: len(seen) > 0, 30.0,
+                                  "the first joint_states message", node)
+        finally:
+            module_probe.unsubscribe_since(count)
+        return node
+
+    yield _get
+    _SHARED.pop(request.module.__name__, None)
+    for node in started:
+        _stop_and_report(node)
 
 
 # -- /diagnostics and fault injection, as the node tests read and drive them ---------------------

@@ -110,7 +110,7 @@ def test_total_can_frame_loss_makes_the_joint_stale(running, probe):
     (K(kind=K.DATA_WIRE_BREAK, duration=-1.0), "duration"),
     (K(kind=K.DATA_WIRE_BREAK, joint="nope"), "unknown joint"),
 ])
-def test_bad_fault_requests_are_refused(running, probe, request_, words):
-    node = running()
-    res = probe.call(InjectFault, node.topic("~/inject_fault"), request_)
+def test_bad_fault_requests_are_refused(shared_node, shared_probe, request_, words):
+    node = shared_node()  # a refusal injects nothing: one node serves every case
+    res = shared_probe.call(InjectFault, node.topic("~/inject_fault"), request_)
     assert not res.success and words in res.message, res.message

@@ -4,9 +4,9 @@ On a loaded 2-core machine the bridge reported wire breaks (ERR_SSI, EMCY 0x7000
 that did not happen, stamps that went backwards and a silent gateway that was only a stalled
 process. With one time base (docs/node.md "Time") none of that may happen: 0 ERR_SSI / EMCY,
 0 non-increasing stamps, 0 "gateway silent", and every velocity sample within the bound of
-docs/node.md. Selectable with ``-m load``; part of ``make test``. The station runs as
-``config/ssi_bridge.yaml`` says (in-process); ``SSI_BRIDGE_LOAD_TRANSPORT=udp_multicast`` runs
-it as the node's child process instead.
+docs/node.md. Selectable with ``-m load``; in the slow tier (``make test-all``). The station
+runs as ``config/ssi_bridge.yaml`` says (in-process); ``SSI_BRIDGE_LOAD_TRANSPORT=udp_multicast``
+runs it as the node's child process instead.
 """
 
 from __future__ import annotations

@@ -18,10 +18,10 @@ def _set(probe, node, name, value):
     return res.results[0]
 
 
-def test_parameters_are_described_with_ranges(running, probe):
-    node = running()
+def test_parameters_are_described_with_ranges(shared_node, shared_probe):
+    node = shared_node()
     names = ["publish_rate", "bus.node_id", "joint1.para1", "joint1.slot", "record.root"]
-    res = probe.call(DescribeParameters, node.topic("~/describe_parameters"),
+    res = shared_probe.call(DescribeParameters, node.topic("~/describe_parameters"),
                      DescribeParameters.Request(names=names))
     by_name = {d.name: d for d in res.descriptors}
     assert set(by_name) == set(names)
@@ -47,10 +47,10 @@ def test_runtime_para1_change_is_validated_by_the_module_rules(running, probe):
     assert back.success and back.value == 0x19030000
 
 
-def test_out_of_range_value_is_refused_by_the_descriptor(running, probe):
-    node = running()
+def test_out_of_range_value_is_refused_by_the_descriptor(shared_node, shared_probe):
+    node = shared_node()  # refused: the node is unchanged
     v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5000.0)
-    res = probe.call(SetParameters, node.topic("~/set_parameters"),
+    res = shared_probe.call(SetParameters, node.topic("~/set_parameters"),
                      SetParameters.Request(parameters=[Parameter(name="publish_rate", value=v)]))
     assert not res.results[0].successful
 
@@ -68,9 +68,9 @@ def test_sigterm_closes_the_recording_and_exits_zero(running, probe, tmp_path: P
     assert summary is not None and summary.statistics.message_count > 0
 
 
-def test_stop_recording_without_a_session_is_refused(running, probe):
-    node = running()
-    res = probe.call(StopRecording, node.topic("~/stop_recording"), StopRecording.Request())
+def test_stop_recording_without_a_session_is_refused(shared_node, shared_probe):
+    node = shared_node()  # refused: the node is unchanged
+    res = shared_probe.call(StopRecording, node.topic("~/stop_recording"), StopRecording.Request())
     assert not res.success and "no recording is running" in res.message
 
 
@@ -114,10 +114,10 @@ def test_publish_rate_change_takes_effect_at_once(running, probe):
     assert abs(rate - 20.0) <= 2.0, f"{rate:.1f} Hz after setting publish_rate to 20"
 
 
-def test_read_only_parameters_cannot_change_at_run_time(running, probe):
-    node = running()
+def test_read_only_parameters_cannot_change_at_run_time(shared_node, shared_probe):
+    node = shared_node()  # refused: the node is unchanged
     v = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=5)
-    res = probe.call(SetParameters, node.topic("~/set_parameters"),
+    res = shared_probe.call(SetParameters, node.topic("~/set_parameters"),
                      SetParameters.Request(parameters=[Parameter(name="bus.node_id", value=v)]))
     assert not res.results[0].successful and "read-only" in res.results[0].reason.lower()
 

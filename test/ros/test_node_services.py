@@ -54,9 +54,9 @@ def test_set_preset_moves_the_zero_point(running, probe):
     (float("inf"), "not a finite number"),
     (1e12, "Integer32"),
 ])
-def test_set_preset_refuses_bad_positions(running, probe, position, words):
-    node = running()
-    res = probe.call(SetPreset, node.topic("~/set_preset"), SetPreset.Request(position=position))
+def test_set_preset_refuses_bad_positions(shared_node, shared_probe, position, words):
+    node = shared_node()  # a refusal changes nothing: one node serves every case
+    res = shared_probe.call(SetPreset, node.topic("~/set_preset"), SetPreset.Request(position=position))
     assert not res.success and words in res.message, res.message
 
 
@@ -124,11 +124,12 @@ def test_status_carries_the_raw_frame_and_every_bit(running, probe):
     (ResetRegisters, ResetRegisters.Request(joint="x"), "unknown joint"),
     (SetControl, SetControl.Request(joint="x"), "unknown joint"),
 ])
-def test_each_failure_has_a_distinct_clear_message(running, probe, srv, request_, words):
-    node = running()
+def test_each_failure_has_a_distinct_clear_message(shared_node, shared_probe, srv, request_,
+                                                   words):
+    node = shared_node()  # a refusal changes nothing: one node serves every case
     name = {ReadRegister: "~/read_register", WriteRegister: "~/write_register",
             ResetRegisters: "~/reset_registers", SetControl: "~/set_control"}[srv]
-    res = probe.call(srv, node.topic(name), request_)
+    res = shared_probe.call(srv, node.topic(name), request_)
     assert not res.success
     assert words in res.message, res.message
 

@@ -8,7 +8,6 @@ killed with SIGKILL while it writes its third file and ``replay --recover`` rebu
 from __future__ import annotations
 
 import hashlib
-import os
 import signal
 import subprocess
 import sys
@@ -23,7 +22,6 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import StartRecording, StopRecording
 
-from ..conftest import claim_domain
 from .conftest import NodeProcess, RosProbe, dds_env, installed_executable
 
 SESSION_S = 20.0
@@ -35,10 +33,11 @@ def stamp_ns(msg: JointState) -> int:
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+def session(tmp_path_factory: pytest.TempPathFactory,
+            module_domain: int) -> Iterator[dict[str, Any]]:
     """Record a 20 s session split every 5 s while a subscriber counts joint_states."""
     work = tmp_path_factory.mktemp("split_node")
-    dom, fd = claim_domain()
+    dom = module_domain
     env = dds_env(dom)
     params = {"bus.channel": f"split_{dom}", "record.root": str(work / "rec"),
               "record.max_duration": SPLIT_S,
@@ -81,7 +80,6 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]
         finally:
             probe.close()
             node.stop()
-            os.close(fd)
 
 
 def metadata(bag: Path) -> dict[str, Any]:
