@@ -15,7 +15,6 @@ import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
 
 from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
-from ssi_bridge.protocol.aborts import describe_abort
 from ssi_bridge.protocol.dictionary import (
     PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base, tpdo_cob_base,
 )
@@ -36,6 +35,13 @@ def position_pdos(slots: int) -> list[tuple[int, list[int]]]:
     """Return (PDO number, slots carried) for the encoder default PDOs PDO9-12 in use."""
     return [(FIRST_POSITION_PDO + g, [s for s in (2 * g + 1, 2 * g + 2) if s <= slots])
             for g in range((slots + 1) // 2)]
+
+
+def abort_meaning(code: int) -> str:
+    """The CiA 301 meaning of SDO abort ``code`` as canopen words it (``SdoAbortedError.CODES``),
+    or that the code is none of CiA 301's."""
+    return SdoAbortedError.CODES.get(
+        code, f"abort code 0x{code:08X} is not defined by CiA 301 (manufacturer specific?)")
 
 
 class SdoAccess:
@@ -59,7 +65,7 @@ class SdoAccess:
         where = f"0x{index:04X}:{subindex:02X}"
         if isinstance(err, SdoAbortedError):
             self.aborts += 1
-            meaning = describe_abort(err.code)
+            meaning = abort_meaning(err.code)
             return SdoAbortError(err.code, meaning,
                                  f"SDO {what} of {where} on node {self.node.id} aborted with "
                                  f"0x{err.code:08X}: {meaning}")

@@ -1,8 +1,9 @@
-"""SDO abort codes of CiA 301 (Table 22 of CiA 301 v4.2), as named constants with their text.
+"""SDO abort codes of CiA 301 (Table 22 of CiA 301 v4.2), as named constants.
 
-The gateway raises them at the SDO boundary (canopen's ``SdoServer`` turns an
-``SdoAbortedError`` into the abort frame); the client turns a received code back into an
-:class:`~ssi_bridge.exceptions.SdoAbortError` whose message carries the CiA 301 meaning.
+The simulated gateway raises them at the SDO boundary (canopen's ``SdoServer`` turns an
+``SdoAbortedError`` into the abort frame); the master turns a received code back into an
+:class:`~ssi_bridge.exceptions.SdoAbortError` whose message carries the CiA 301 meaning as
+canopen words it (``client/sdo.py``).
 """
 
 from __future__ import annotations
@@ -45,47 +46,4 @@ class SdoAbort(IntEnum):
     NO_DATA = 0x08000024
 
 
-_MEANING: dict[int, str] = {
-    SdoAbort.TOGGLE_NOT_ALTERNATED: "toggle bit not alternated",
-    SdoAbort.TIMEOUT: "SDO protocol timed out",
-    SdoAbort.INVALID_COMMAND: "client/server command specifier not valid or unknown",
-    SdoAbort.INVALID_BLOCK_SIZE: "invalid block size",
-    SdoAbort.INVALID_SEQUENCE: "invalid sequence number",
-    SdoAbort.CRC_ERROR: "CRC error",
-    SdoAbort.OUT_OF_MEMORY: "out of memory",
-    SdoAbort.UNSUPPORTED_ACCESS: "unsupported access to an object",
-    SdoAbort.WRITE_ONLY: "attempt to read a write only object",
-    SdoAbort.READ_ONLY: "attempt to write a read only object",
-    SdoAbort.NO_SUCH_OBJECT: "object does not exist in the object dictionary",
-    SdoAbort.NOT_MAPPABLE: "object cannot be mapped to the PDO",
-    SdoAbort.PDO_TOO_LONG: "the number and length of the objects to be mapped "
-                           "would exceed PDO length",
-    SdoAbort.INCOMPATIBLE_PARAMETER: "general parameter incompatibility reason",
-    SdoAbort.INCOMPATIBLE_DEVICE: "general internal incompatibility in the device",
-    SdoAbort.HARDWARE_ERROR: "access failed due to a hardware error",
-    SdoAbort.LENGTH_MISMATCH: "data type does not match, length of service parameter "
-                              "does not match",
-    SdoAbort.LENGTH_TOO_HIGH: "data type does not match, length of service parameter too high",
-    SdoAbort.LENGTH_TOO_LOW: "data type does not match, length of service parameter too low",
-    SdoAbort.NO_SUCH_SUBINDEX: "sub-index does not exist",
-    SdoAbort.INVALID_VALUE: "invalid value for parameter (download only)",
-    SdoAbort.VALUE_TOO_HIGH: "value of parameter written too high (download only)",
-    SdoAbort.VALUE_TOO_LOW: "value of parameter written too low (download only)",
-    SdoAbort.MAX_BELOW_MIN: "maximum value is less than minimum value",
-    SdoAbort.RESOURCE_UNAVAILABLE: "resource not available: SDO connection",
-    SdoAbort.GENERAL_ERROR: "general error",
-    SdoAbort.CANNOT_STORE: "data cannot be transferred or stored to the application",
-    SdoAbort.CANNOT_STORE_LOCAL: "data cannot be transferred or stored to the application "
-                                 "because of local control",
-    SdoAbort.CANNOT_STORE_STATE: "data cannot be transferred or stored to the application "
-                                 "because of the present device state",
-    SdoAbort.NO_DATA: "no data available",
-}
-
-
-def describe_abort(code: int) -> str:
-    """Return the CiA 301 text for ``code`` (or say that the code is not a CiA 301 code)."""
-    try:
-        return _MEANING[code]
-    except KeyError:
-        return f"abort code 0x{code:08X} is not defined by CiA 301 (manufacturer specific?)"
+__all__ = ["SdoAbort"]
