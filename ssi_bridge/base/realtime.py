@@ -14,18 +14,11 @@ from __future__ import annotations
 import ctypes
 import os
 import threading
-import time
 
 #: prctl(2) option: name the calling thread (shown by top -H, ps -L, /proc/<pid>/task/*/comm)
 PR_SET_NAME = 15
 #: the kernel keeps 15 bytes of a thread name
 THREAD_NAME_BYTES = 15
-#: listings raise_priority takes at most before it gives up on a process that keeps starting
-#: threads from normally scheduled ones
-RAISE_ROUNDS = 200
-#: how long raise_priority waits before its confirming listing: a thread being started while
-#: the last one was taken is listed by then
-RAISE_SETTLE_S = 0.001
 _LIBC = ctypes.CDLL(None, use_errno=True)
 
 
@@ -93,38 +86,6 @@ def normal_this_thread() -> None:
     inherits its policy, which a slow clean-up job must not keep."""
     if os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-
-
-def raise_priority(pid: int, priority: int) -> bool:
-    """Put every thread of process ``pid`` on SCHED_FIFO ``priority``; False when not permitted.
-
-    Threads started later inherit the policy of the thread that starts them, but one that a
-    still-normal thread starts while this runs would stay normal and is in no listing taken
-    before: so the threads are listed and raised again until two listings in a row, the
-    second a moment later, find every thread raised.
-    """
-    clean = 0
-    for _ in range(RAISE_ROUNDS):
-        threads = _schedules(pid)
-        if threads is None:
-            return True  # the process ended meanwhile (the caller reports that)
-        missed = False
-        for tid, schedule in threads.items():
-            if schedule == (os.SCHED_FIFO, priority):
-                continue
-            missed = True
-            try:
-                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-            except ProcessLookupError:
-                pass  # that thread ended meanwhile
-            except PermissionError:
-                return False
-        clean = 0 if missed else clean + 1
-        if clean == 2:
-            return True
-        if not missed:
-            time.sleep(RAISE_SETTLE_S)  # a thread being started now shows up by then
-    return True  # threads kept appearing unraised for RAISE_ROUNDS listings: as raised as can be
 
 
 def scheduling_of_this_thread() -> str:

@@ -39,11 +39,17 @@ class StopRequests:
         """True once a stop signal (or :meth:`request`) arrived."""
         return self.event.is_set()
 
-    def install(self) -> None:
-        """Route SIGINT and SIGTERM to the watcher (main thread only)."""
+    def install(self, watch: bool = True) -> None:
+        """Route SIGINT and SIGTERM to the watcher (main thread only); ``watch=False`` leaves
+        starting the watcher thread to :meth:`watch` (signals meanwhile wait for it)."""
         for sig in STOP_SIGNALS:
             signal.signal(sig, _ignore)
         signal.set_wakeup_fd(self._writer.fileno(), warn_on_full_buffer=False)
+        if watch:
+            self.watch()
+
+    def watch(self) -> None:
+        """Start the watcher thread (once)."""
         threading.Thread(target=self._watch, name="stop-signals", daemon=True).start()
 
     def on_stop(self, callback: Callable[[], None]) -> None:

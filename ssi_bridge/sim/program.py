@@ -19,6 +19,7 @@ import yaml
 
 from ssi_bridge.exceptions import SsiBridgeError
 from ssi_bridge.protocol.settings import load_params_file, station_settings
+from ssi_bridge.base.realtime import fifo_this_thread
 from ssi_bridge.base.stop_signals import StopRequests
 
 logger = logging.getLogger(__name__)
@@ -74,6 +75,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--channel", help="python-can channel (overrides bus.channel)")
     p.add_argument("--bitrate", type=int, help="bit rate in bit/s (overrides bus.bitrate)")
     p.add_argument("--node-id", type=int, help="CANopen node id 1-127 (overrides bus.node_id)")
+    p.add_argument("--priority", type=int, default=0, metavar="N",
+                   help="run every thread SCHED_FIFO N (1-99; hardware never waits for a CPU), "
+                        "set before the station starts any thread; 0 (default): normal "
+                        "scheduling. Without the right to it: normal, said once")
     p.add_argument("--parent-pid", type=int, default=0, metavar="PID",
                    help="exit when this process is gone (used by the node for its child)")
     p.add_argument("--log-level", default="INFO",
@@ -114,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     # a handler that set an Event itself deadlocked the station for good when a second signal
     # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) landed inside the first one
     stop = StopRequests()
-    stop.install()
+    stop.install(watch=False)  # its thread starts after the priority is set (it inherits it)
     args = _parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="[%(levelname)s] %(name)s: %(message)s")
@@ -130,6 +135,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.parent_pid and os.getppid() != args.parent_pid:
         return 0  # the parent died before we got here
+    if args.priority and not fifo_this_thread(args.priority):
+        logger.info("simulated station runs with normal scheduling: SCHED_FIFO %d not permitted "
+                    "(needs CAP_SYS_NICE or an rtprio limit; simulation.station_priority 0 skips "
+                    "this)", args.priority)
+    stop.watch()  # the first thread: every thread from here on inherits the policy
     try:
         station.start()
     except (SsiBridgeError, OSError) as err:

@@ -1,45 +1,21 @@
-"""base/realtime.py: the station child is raised from outside while its threads start others."""
+"""base/realtime.py and the station program's own priority (docs/node.md, station_priority).
+
+The station sets SCHED_FIFO on its main thread before it starts any thread, so every thread
+it ever starts inherits the policy: nothing raises it from outside while its threads start
+others (the race a re-listing loop used to chase).
+"""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
-from ssi_bridge.base.realtime import fifo_permitted, raise_priority, thread_policies
-
-#: a process whose threads keep starting threads (as a booting station starts its timers and
-#: listeners): each thread starts one successor and ends, so a thread that was normal when it
-#: started its successor hands normal scheduling on unless the raise catches the successor too
-SPAWNER = """
-import threading, time
-def chain():
-    time.sleep(0.0002)
-    threading.Thread(target=chain, daemon=True).start()
-for _ in range(8):
-    threading.Thread(target=chain, daemon=True).start()
-print("up", flush=True)
-time.sleep(60)
-"""
-
-
-@pytest.mark.skipif(not fifo_permitted(7),
-                    reason="SCHED_FIFO not permitted here (no CAP_SYS_NICE)")
-def test_raise_priority_reaches_threads_started_while_it_runs():
-    for _ in range(20):
-        proc = subprocess.Popen([sys.executable, "-c", SPAWNER], stdout=subprocess.PIPE)
-        try:
-            assert proc.stdout is not None and proc.stdout.readline() == b"up\n"
-            assert raise_priority(proc.pid, 7)
-            for _ in range(20):  # the chains go on: every thread they start stays FIFO 7
-                assert thread_policies(proc.pid) == {(os.SCHED_FIFO, 7)}
-                time.sleep(0.002)
-        finally:
-            proc.kill()
-            proc.wait()
+from ssi_bridge.base.realtime import fifo_permitted, thread_policies
+from ssi_bridge.base.udp_bus import derive_channel
 
 
 def _without_fifo_rights() -> None:
@@ -52,20 +28,51 @@ def _without_fifo_rights() -> None:
     resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
 
 
-def test_raise_priority_says_when_not_permitted():
-    """Without the right, False (the node then logs its INFO line) and the process is untouched;
-    fifo_permitted says so beforehand, and its probe leaves no thread of the caller raised."""
-    script = ("import subprocess, os\n"
-              "from ssi_bridge.base.realtime import fifo_permitted, raise_priority, "
-              "thread_policies\n"
-              "p = subprocess.Popen(['sleep', '30'])\n"
-              "print(raise_priority(p.pid, 7), os.sched_getscheduler(p.pid) == os.SCHED_OTHER,\n"
-              "      fifo_permitted(7), thread_policies(os.getpid()) == {(os.SCHED_OTHER, 0)})\n"
-              "p.kill()\n")
-    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                         preexec_fn=_without_fifo_rights, timeout=30)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "True", "False", "True"]
+def _station(name: str, priority: int, preexec=None) -> subprocess.Popen:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ssi_bridge.sim.program", "--interface", "udp_multicast",
+         "--channel", derive_channel(f"rt_{name}_{os.getpid()}"), "--priority", str(priority)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=preexec)
+    assert proc.stdout is not None
+    line = proc.stdout.readline().decode()
+    assert line.startswith("station ready"), (line, proc.stderr.read().decode()[-2000:])
+    return proc
+
+
+def _stop(proc: subprocess.Popen) -> str:
+    proc.send_signal(signal.SIGTERM)
+    _out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err.decode()[-2000:]
+    return err.decode()
+
+
+@pytest.mark.skipif(not fifo_permitted(7),
+                    reason="SCHED_FIFO not permitted here (no CAP_SYS_NICE)")
+def test_every_thread_of_a_station_runs_at_its_priority():
+    proc = _station("fifo", 7)
+    try:
+        for _ in range(5):
+            assert thread_policies(proc.pid) == {(os.SCHED_FIFO, 7)}, thread_policies(proc.pid)
+    finally:
+        _stop(proc)
+
+
+def test_without_the_right_the_station_runs_normally_and_says_so_once():
+    proc = _station("normal", 7, preexec=_without_fifo_rights)
+    try:
+        assert thread_policies(proc.pid) == {(os.SCHED_OTHER, 0)}
+    finally:
+        err = _stop(proc)
+    assert err.count("SCHED_FIFO 7 not permitted") == 1, err
+
+
+def test_priority_0_is_normal_scheduling_without_a_word():
+    proc = _station("zero", 0)
+    try:
+        assert thread_policies(proc.pid) == {(os.SCHED_OTHER, 0)}
+    finally:
+        err = _stop(proc)
+    assert "not permitted" not in err
 
 
 def test_fifo_permitted_leaves_every_thread_as_it_was():

@@ -32,7 +32,6 @@ from ssi_bridge.sim.supervisor.boot import BootWatch
 from ssi_bridge.exceptions import BusError, GatewayUnavailable
 from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.base.udp_bus import derive_channel
-from ssi_bridge.base.realtime import raise_priority
 from ssi_bridge.protocol.settings import BusConfig, JOINT_DEFAULTS, JointSettings, StationSettings
 from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.sim.supervisor.settings import NodeSettings
@@ -127,7 +126,8 @@ class ChildStation:
     def start(self, timeout: float) -> None:
         """Spawn the station and wait for its boot-up (GatewayUnavailable with the reason)."""
         cmd = [sys.executable, "-m", "ssi_bridge.sim.program", "--params-file", "-",
-               "--parent-pid", str(os.getpid())]
+               "--parent-pid", str(os.getpid()),
+               "--priority", str(self.settings.simulation_station_priority)]
         try:
             watch = open_bus(self.bus)  # listening before the station can send its boot-up
         except BusError as err:
@@ -152,7 +152,6 @@ class ChildStation:
             threading.Thread(target=self._reap, name="station-reaper", daemon=True).start()
             BootWatch(watch, self.bus.node_id).wait(timeout, self.problem)
             self.start_time = time.monotonic() - t0
-            self._prioritise(self.settings.simulation_station_priority)
         except GatewayUnavailable as err:
             self.stop()
             detail = f": {self._stderr[-1]}" if self._stderr else ""
@@ -162,16 +161,6 @@ class ChildStation:
             watch.shutdown()
         logger.info("simulated station up as process %d on %s:%s after %.2f s", self.proc.pid,
                     self.bus.interface, self.bus.channel, self.start_time)
-
-    def _prioritise(self, priority: int) -> None:
-        """Hardware never waits for a CPU: once booted (its imports and start-up are CPU work
-        nobody should wait behind), the station runs SCHED_FIFO ``priority``; idle but for
-        microseconds per SYNC, it takes little from anything else. Says once if not permitted."""
-        assert self.proc is not None
-        if priority and not raise_priority(self.proc.pid, priority):
-            logger.info("simulated station runs with normal scheduling: SCHED_FIFO %d not "
-                        "permitted (needs CAP_SYS_NICE or an rtprio limit; "
-                        "simulation.station_priority 0 skips this)", priority)
 
     def _forward_log(self) -> None:
         """The child's log lines into the node's log (and the last ones for errors)."""
