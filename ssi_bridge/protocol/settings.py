@@ -7,6 +7,7 @@ the node's params file (:func:`load_params_file`, :func:`station_settings`).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import IO, Any
@@ -128,10 +129,21 @@ def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
                               start=float(jv["motion.start"])))
 
 
+def check_joint_names(names: list[str], shown: str = "") -> None:
+    """ConfigError unless ``names`` are non-empty, unique, and none is the name of another
+    /diagnostics status of the node (``bus``, ``station <id>``: ``<node>: bus`` would then
+    name two statuses). ``shown`` is how the list is echoed (default: as it is)."""
+    if not names or len(set(names)) != len(names) or not all(names):
+        raise ConfigError(f"joints {shown or names} must be non-empty, unique names")
+    for name in names:
+        if name == "bus" or re.fullmatch(r"station \d+", name):
+            raise ConfigError(f"joint name {name!r} is the name of the node's {name} status in "
+                              f"/diagnostics ('<node>: {name}'): name the joint otherwise")
+
+
 def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSettings, ...]:
     """Joints from ``names`` and per-joint values ``{"<joint>.<key>": value}`` (checked)."""
-    if not names or len(set(names)) != len(names) or not all(names):
-        raise ConfigError(f"joints {names} must be non-empty, unique names")
+    check_joint_names(names)
     if len(names) > 8:
         raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")
     joints = []

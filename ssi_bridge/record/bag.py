@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import threading
 import time
 from dataclasses import dataclass, field
@@ -53,6 +54,8 @@ from ssi_bridge.record.split import MIN_SPLIT_SIZE, SplitPolicy
 
 __all__ = ["CONFIG_METADATA_NAME", "MIN_SPLIT_SIZE", "BagRecorder", "BagSummary", "SplitPolicy"]
 
+#: bytes of a file name on Linux file systems (ext4, xfs, tmpfs: NAME_MAX)
+NAME_MAX = 255
 logger = logging.getLogger(__name__)
 
 #: the node's compression names -> the Chunk record's
@@ -122,6 +125,13 @@ class BagRecorder:
         split = SplitPolicy(max_size, max_duration_s)
         if directory.exists():
             raise RecordingError(f"bag directory {directory} already exists; choose a new name")
+        longest = file_name(directory.name, 99999)  # the bag's files are named after it
+        if len(longest.encode()) > NAME_MAX:
+            raise RecordingError(
+                f"bag name of {len(directory.name.encode())} bytes is too long: its files "
+                f"('{directory.name[:20]}..._0.mcap') must fit the file system's {NAME_MAX}-byte "
+                f"names; at most {NAME_MAX - len(longest.encode()) + len(directory.name.encode())} "
+                "bytes")
         try:
             directory.mkdir(parents=True)
         except OSError as err:
@@ -131,6 +141,7 @@ class BagRecorder:
         try:
             rec._file = rec._open_file()
         except OSError as err:
+            shutil.rmtree(directory, ignore_errors=True)  # refused: nothing left on disk
             raise RecordingError(f"cannot create bag {directory}: {err.strerror or err}") from err
         rec._flusher.start()
         limits = ([f"split at {max_size} B"] if max_size else []) + (

@@ -20,7 +20,7 @@ from ssi_bridge.exceptions import ConfigError
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.protocol.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
-    DEFAULT_PARA1, JointSettings, joint_from_values,
+    DEFAULT_PARA1, JointSettings, check_joint_names, joint_from_values,
 )
 
 #: smallest record.max_size (bytes); the same floor as record/bag.py's MIN_SPLIT_SIZE
@@ -335,8 +335,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError("joints is empty: list at least one joint name, one per XN-1SSI "
                           "channel (e.g. joints: [joint1])")
     names = [str(j) for j in values["joints"]]
-    if len(set(names)) != len(names) or not all(names):
-        raise ConfigError(f"joints {_echo(names)} must be non-empty, unique names")
+    check_joint_names(names, _echo(names))
     stations = _stations(values["stations"], values["bus.node_id"])
     joints = []
     per_station: dict[int, int] = {}

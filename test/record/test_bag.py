@@ -158,3 +158,18 @@ def test_misuse_is_a_recording_error(tmp_path: Path) -> None:
         rec.write("/nope", joint_state(0), T0)
     with pytest.raises(RecordingError, match="compression"):
         BagRecorder.open(tmp_path / "other", compression="gzip")
+
+
+def test_a_name_whose_files_cannot_exist_is_refused_and_leaves_nothing(tmp_path):
+    """Linux file names are at most 255 bytes: a bag called with a 255-character name made its
+    directory and then failed on '<name>_0.mcap', leaving the empty directory behind."""
+    from ssi_bridge.exceptions import RecordingError
+    from ssi_bridge.record.bag import BagRecorder
+
+    before = sorted(tmp_path.iterdir())
+    with pytest.raises(RecordingError, match="too long"):
+        BagRecorder.open(tmp_path / ("x" * 255))
+    assert sorted(tmp_path.iterdir()) == before
+    rec = BagRecorder.open(tmp_path / ("y" * 244))  # 244 + len("_99999.mcap") = 255
+    rec.close()
+    assert (tmp_path / ("y" * 244) / ("y" * 244 + "_0.mcap")).exists()

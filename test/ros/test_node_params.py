@@ -3,6 +3,8 @@ module's ERR_PARA reason, 000 Table 19) and the process life cycle (clean exit c
 
 from __future__ import annotations
 
+import pytest
+
 import signal
 from pathlib import Path
 
@@ -94,6 +96,16 @@ def test_duplicate_slots_are_refused_at_start(start_node):
     node = start_node({"joints": ["a", "b"], "a.slot": 2, "b.slot": 2})
     assert node.proc.wait(30) == 1, node.log()
     assert "share a module slot" in node.log(), node.log()
+
+
+@pytest.mark.parametrize("name", ["bus", "station 3"])
+def test_a_joint_named_like_another_diagnostics_status_is_refused_at_start(start_node, name):
+    """/diagnostics names a status '<node>: <joint>', '<node>: bus' and '<node>: station <id>':
+    a joint called 'bus' made two statuses of one name."""
+    node = start_node({"joints": [name]})
+    assert node.proc.wait(30) == 1, node.log()
+    lines = [line for line in node.log().splitlines() if line.strip()]
+    assert len(lines) == 1 and f"joint name {name!r}" in lines[0], node.log()
 
 
 def test_publish_rate_change_takes_effect_at_once(running, probe):
