@@ -9,6 +9,7 @@ in its timed wire (``sim/gateway/wire_bus.py``).
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -47,4 +48,16 @@ def open_python_can(config: BusConfig, *, preserve_timestamps: bool = False) -> 
     return bus
 
 
-__all__ = ["open_python_can"]
+def take_bus(source: BusConfig | can.BusABC | None, owner: str,
+             opener: Callable[[BusConfig], can.BusABC] = open_python_can) -> can.BusABC:
+    """The bus a master, listener or gateway runs on: ``opener``'s for a config, or the one
+    handed over. A handed-over bus belongs to its taker, which shuts it down when it stops;
+    so it can be taken once. ``owner`` ("this master", ...) names the taker in the error."""
+    if isinstance(source, BusConfig):
+        return opener(source)
+    if source is None:
+        raise BusError(f"{owner}'s bus was handed over and already shut down")
+    return source
+
+
+__all__ = ["open_python_can", "take_bus"]

@@ -22,8 +22,7 @@ import can
 import canopen
 
 from ssi_bridge.base.timebase import wire_now
-from ssi_bridge.base.buses import open_python_can
-from ssi_bridge.exceptions import BusError
+from ssi_bridge.base.buses import open_python_can, take_bus
 from ssi_bridge.protocol.settings import BusConfig
 
 logger = logging.getLogger(__name__)
@@ -39,20 +38,6 @@ def open_bus(config: BusConfig) -> can.BusABC:
     """Open a new python-can bus for ``config`` (:func:`~ssi_bridge.base.buses.open_python_can`);
     the caller must ``shutdown()`` it. Raises BusError with the reason."""
     return open_python_can(config)
-
-
-def take_bus(source: BusConfig | can.BusABC | None, owner: str,
-             opener: BusOpener = open_bus) -> can.BusABC:
-    """The bus a master or listener runs on: a new one for a config, or the one handed over.
-
-    A handed-over bus belongs to its taker, which shuts it down when it stops; so it can be
-    taken once. ``owner`` ("this master", ...) names the taker in the error.
-    """
-    if isinstance(source, BusConfig):
-        return opener(source)
-    if source is None:
-        raise BusError(f"{owner}'s bus was handed over and already shut down")
-    return source
 
 
 class ReceiveWatch(can.BusABC):

@@ -22,6 +22,7 @@ import can
 
 from ssi_bridge.base.timebase import frame_wire_time, wire_now
 from ssi_bridge.base.buses import open_python_can
+from ssi_bridge.base.buses import take_bus as take_any_bus
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.settings import BusConfig
@@ -267,16 +268,9 @@ class WireBus(can.BusABC):
 
 
 def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
-    """The bus a gateway or master runs on: a new one for a config, or the one handed over.
-
-    A handed-over bus belongs to its taker, which shuts it down when it stops; so it can be
-    taken once. ``owner`` ("this gateway", ...) names the taker in the error.
-    """
-    if isinstance(source, BusConfig):
-        return open_bus(source)
-    if source is None:
-        raise BusError(f"{owner}'s bus was handed over and already shut down")
-    return source
+    """The bus a gateway runs on: the simulated wire's for a config (:func:`open_bus`), or the
+    one handed over (:func:`ssi_bridge.base.buses.take_bus`)."""
+    return take_any_bus(source, owner, open_bus)
 
 
 class DuePeriodicTask:
