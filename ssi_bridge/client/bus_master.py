@@ -125,7 +125,7 @@ class CanMaster:
         return self._listener.foreign.recent(window) if self._listener is not None else ""
 
     def sync(self) -> float:
-        """Send one SYNC for every station; return its wire time (``gateway/timebase``).
+        """Send one SYNC for every station; return its wire time (``base/timebase``).
 
         On a simulated wire that is the SYNC frame's end-of-frame timestamp, where the modules
         of every station latch; on a real interface the instant it was handed to the driver.

@@ -11,7 +11,7 @@ pairs, SYNC on 0x080. It fills the same :class:`~ssi_bridge.client.samples.SlotT
 Each observed SYNC opens a cycle; it is reported once through :meth:`next_cycle`, as
 complete when every slot's image and position arrived, or as incomplete when the next SYNC
 comes first. Times: a frame's python-can timestamp (the time it was on the wire, wire time of
-``gateway/timebase``; a replayed log carries its own) *is* ``ChannelSample.sync_time``: no
+``base/timebase``; a replayed log carries its own) *is* ``ChannelSample.sync_time``: no
 clock is read to stamp a cycle.
 
 Liveness: the gateway counts as alive while a heartbeat (0x700 + id) or one of its TPDOs

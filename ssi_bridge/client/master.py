@@ -198,7 +198,7 @@ class BridgeClient:
 
     # -- cyclic data ------------------------------------------------------------------------
     def sync(self) -> float:
-        """Send one SYNC (one module cycle); return its wire time (``gateway/timebase``).
+        """Send one SYNC (one module cycle); return its wire time (``base/timebase``).
 
         On a simulated wire that is the instant the SYNC's last bit was on the wire, where
         the modules latch (the frame's own timestamp); on a real interface the instant it was

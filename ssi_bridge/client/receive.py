@@ -8,7 +8,7 @@ So :class:`TpdoRoutes` subscribes the client's handlers to those COB-IDs directl
 every (re)configuration, takes canopen's ``PdoMap`` handlers that ``PdoMap.save`` subscribed
 off them again: each frame is handled once, from its raw bytes. The SDO configuration itself
 is unchanged. :class:`FrameListener` is canopen's network listener plus the frame counters;
-it hands the subscribers each frame's wire time (``gateway/timebase.frame_wire_time``), so a
+it hands the subscribers each frame's wire time (``base/timebase.frame_wire_time``), so a
 TPDO is matched to the SYNC it followed on the wire, not to the one current when it arrived
 (between processes the arrival is late by however long its sender slept past its end).
 """

@@ -32,7 +32,7 @@ class ChannelSample:
     position: int
     #: the 8-byte process input image (000 "Process input")
     process_input: bytes
-    #: wire time (``gateway/timebase``) of the SYNC that produced this sample (s)
+    #: wire time (``base/timebase``) of the SYNC that produced this sample (s)
     sync_time: float
     #: number of process input images received for this slot
     counter: int

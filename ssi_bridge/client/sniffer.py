@@ -6,7 +6,7 @@ socket — so it records both directions (SYNC, SDO, PDO, EMCY, heartbeat) exact
 bus analyser would. The file is python-can's format chosen by its suffix (``.log`` is the
 candump/can-utils text format, ``.asc`` Vector ASCII, ``.blf`` binary); ``can.LogReader``
 and ``can.Player`` read it back. Each frame is logged at its wire time
-(``gateway/timebase.frame_wire_time``; on udp_multicast the sender's end of frame, not the
+(``base/timebase.frame_wire_time``; on udp_multicast the sender's end of frame, not the
 receive time), so a replay stamps its cycles as the recorded session did.
 
 A write error (disk full, file size limit, I/O error) stops the sniffer at once: it reports

@@ -3,7 +3,7 @@
 A station sends a SYNC's synchronous TPDOs inside that SYNC's cycle (CiA 301 synchronous
 window), so on the wire they lie between their SYNC and the next one. Between processes
 (udp_multicast) a frame arrives when its sender got to send it: under CPU load after the
-master's next SYNC. The master matches it by its wire time (``gateway/timebase``
+master's next SYNC. The master matches it by its wire time (``base/timebase``
 ``frame_wire_time``, the sender's end of frame the datagram carries), not by its arrival:
 the sample keeps its own SYNC's stamp and the newer cycle stays incomplete (docs/node.md
 "Which cycle a TPDO answers"). Real sockets on loopback, a real station for the

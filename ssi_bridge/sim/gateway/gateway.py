@@ -88,7 +88,7 @@ class XnGateway:
         python-can bus (the gateway takes it over and shuts it down in :meth:`stop`)
     :param node_id: CANopen node id 1-127
     :param modules: the XN-1SSI modules in slots 1..n (1-8)
-    :param clock: the station's model clock (wire time minus its start, ``gateway/timebase``):
+    :param clock: the station's model clock (wire time minus its start, ``base/timebase``):
         a SYNC latches the modules at ``clock.at(frame timestamp)``
     """
 

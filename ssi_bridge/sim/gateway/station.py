@@ -107,7 +107,7 @@ class Station:
 
     def __init__(self, settings: StationSettings, bus: can.BusABC | None = None) -> None:
         self.settings = settings
-        #: the model clock: wire time since the station was built (gateway/timebase), the
+        #: the model clock: wire time since the station was built (base/timebase), the
         #: base its SYNC frames' timestamps latch the modules in
         self.model_clock = ModelClock()
         self.sim = SimStation(settings.joints, settings.storage_path)
