@@ -29,6 +29,7 @@ from collections import Counter
 import can
 import canopen
 
+from ssi_bridge.base.canopen_compat import subscribers
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
 from ssi_bridge.base.udp_bus import UndecodableFrame
@@ -83,10 +84,10 @@ class GuardedListener(WireTimeListener):
             return
         network = self.network
         can_id = msg.arbitration_id
-        subscribers = network.subscribers.get(can_id)
-        if subscribers:
+        callbacks = subscribers(network, can_id)
+        if callbacks:
             wire_t = frame_wire_time(msg)
-            for callback in subscribers:  # as canopen's notify (no copy per frame)
+            for callback in callbacks:  # as canopen's notify (no copy per frame)
                 try:
                     callback(can_id, msg.data, wire_t)
                 except Exception as err:  # noqa: BLE001 - one subscriber must not stop the bus

@@ -38,11 +38,10 @@ import struct
 from dataclasses import dataclass
 
 import can
-from can.interfaces.udp_multicast.bus import (
-    SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus,
-)
-from can.interfaces.udp_multicast.utils import unpack_message
 
+from ssi_bridge.base.can_compat import (
+    SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus, mark_shut_down, unpack_message,
+)
 from ssi_bridge.exceptions import ConfigError
 
 logger = logging.getLogger(__name__)
@@ -264,7 +263,7 @@ class UdpCanBus(UdpMulticastBus):
         try:
             self._multicast = _GroupSockets(endpoint, hop_limit)
         except BaseException:
-            self._is_shutdown = True  # nothing opened: no "not properly shut down" warning
+            mark_shut_down(self)  # nothing opened: no "not properly shut down" warning
             raise
         self._can_protocol = can.CanProtocol.CAN_20
         self.endpoint = endpoint

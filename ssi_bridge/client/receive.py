@@ -25,6 +25,7 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
+from ssi_bridge.base.canopen_compat import pdo_handler, subscribers
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import frame_wire_time
 from ssi_bridge.client.foreign import ForeignTraffic
@@ -161,8 +162,8 @@ class TpdoRoutes:
         """Take canopen's PdoMap handlers off the routed COB-IDs (after ``PdoMap.save``)."""
         network = node.network
         for cob_id, pdo_no in self.pdo_numbers.items():
-            handler = node.tpdo[pdo_no].on_message
-            if handler in network.subscribers.get(cob_id, ()):
+            handler = pdo_handler(node, pdo_no)
+            if handler in subscribers(network, cob_id):
                 network.unsubscribe(cob_id, handler)
                 logger.debug("TPDO%d 0x%03X: received raw, not through its PdoMap", pdo_no,
                              cob_id)

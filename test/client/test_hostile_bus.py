@@ -166,6 +166,9 @@ def test_a_receive_error_is_counted_and_the_master_receives_again(channel: str) 
         time.sleep(0.2)
         master_bus.unplugged = False
         assert client.counters.receive_errors > 0
+        # a receive step that saw the interface down just before it came back may still
+        # raise once: the count settles with the first cycles after the return
+        _cycles(client, 3)
         errors = client.counters.receive_errors
         assert _cycles(client, 10) >= 8, "the master must receive again"
         assert client.counters.receive_errors == errors

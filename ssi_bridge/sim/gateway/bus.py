@@ -19,6 +19,7 @@ from typing import Any
 import can
 import canopen
 
+from ssi_bridge.base.can_compat import recv_step, recv_step_unfiltered, steps_itself
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.sim.gateway.wire_bus import (
     OWED_MAX_S, SIMULATED_INTERFACES, DuePeriodicTask, Wire, WireBus, open_bus, take_bus, wire_for,
@@ -51,7 +52,7 @@ class LossyBus(can.BusABC):
         self.dropped = 0
         # an inner bus with python-can's own recv() loop is read one receive step at a time
         # (its _recv_internal plus its filters): this wrapper's recv() is that same loop
-        self._inner_steps = type(inner).recv is can.BusABC.recv
+        self._inner_steps = steps_itself(inner)
         super().__init__(channel=getattr(inner, "channel_info", "lossy"))
         self.channel_info = f"lossy({inner.channel_info})"
 
@@ -122,7 +123,7 @@ class LossyBus(can.BusABC):
         """
         if (self._inner_steps and not self.drop_received and self._filters is None
                 and self._inner.filters is None):
-            msg = self._inner._recv_internal(timeout)[0]
+            msg = recv_step_unfiltered(self._inner, timeout)
         else:
             msg = super().recv(timeout)
         return msg
@@ -131,8 +132,8 @@ class LossyBus(can.BusABC):
         inner = self._inner
         if self._inner_steps:
             # one step of the inner bus: BusABC.recv (ours) retries until the timeout
-            msg, filtered = inner._recv_internal(timeout)
-            if msg is not None and not filtered and not inner._matches_filters(msg):
+            msg = recv_step(inner, timeout)
+            if msg is None:
                 return None, False
         else:
             msg = inner.recv(timeout)

@@ -22,6 +22,7 @@ import can
 
 from ssi_bridge.base.timebase import frame_wire_time, wire_now
 from ssi_bridge.base.buses import open_python_can
+from ssi_bridge.base.can_compat import is_shut_down, recv_step, steps_itself
 from ssi_bridge.base.buses import take_bus as take_any_bus
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
@@ -205,7 +206,7 @@ class WireBus(can.BusABC):
     def __init__(self, inner: can.BusABC, wire: Wire) -> None:
         self._inner = inner
         self.wire = wire
-        self._inner_steps = type(inner).recv is can.BusABC.recv
+        self._inner_steps = steps_itself(inner)
         super().__init__(channel=getattr(inner, "channel_info", "wire"))
         self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
 
@@ -235,7 +236,7 @@ class WireBus(can.BusABC):
                 wait = msg.timestamp - wire_now()
                 if wait > 0:
                     time.sleep(wait)
-                if self._is_shutdown:
+                if is_shut_down(self):
                     return False  # shut down while the frame was on the wire: nobody gets it
                 self._inner.send(msg, timeout)
                 delivered(msg)
@@ -246,8 +247,8 @@ class WireBus(can.BusABC):
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if self._inner_steps:
-            msg, filtered = self._inner._recv_internal(timeout)
-            if msg is not None and not filtered and not self._inner._matches_filters(msg):
+            msg = recv_step(self._inner, timeout)
+            if msg is None:
                 return None, False
         else:
             msg = self._inner.recv(timeout)

@@ -1,0 +1,59 @@
+"""Every use of python-can's private API in one place (python-can 4.6), checked by a canary.
+
+What the simulated wire and the CAN-over-UDP interface need that python-can does not offer
+publicly:
+
+* :func:`recv_step`: one receive step of a wrapped bus (``BusABC._recv_internal`` and
+  ``_matches_filters``), so a wrapper's ``recv`` is python-can's own loop around it, and the
+  hot receive path of every frame skips a second loop (``sim/gateway/bus.py``, ``wire_bus.py``);
+* :func:`steps_itself`: whether a bus receives through python-can's ``BusABC.recv`` (then
+  :func:`recv_step` is its step);
+* :func:`is_shut_down` / :func:`mark_shut_down`: ``BusABC._is_shutdown``;
+* the udp_multicast interface's internals ``GeneralPurposeUdpMulticastBus``,
+  ``SO_TIMESTAMPNS`` and ``unpack_message`` (``base/udp_bus.py`` builds on them).
+
+A wrapper that overrides ``BusABC._send_periodic_internal`` (the periodic-task hook,
+``sim/gateway/bus.py``) relies on its signature, which the canary also checks.
+``test/gateway/test_library_compat.py`` fails on a python-can whose private names changed.
+"""
+
+from __future__ import annotations
+
+import can
+from can.interfaces.udp_multicast.bus import (  # noqa: F401 - re-exported for base/udp_bus.py
+    SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus,
+)
+from can.interfaces.udp_multicast.utils import unpack_message  # noqa: F401 - re-exported
+
+
+def steps_itself(bus: can.BusABC) -> bool:
+    """True when ``bus`` receives through python-can's own ``BusABC.recv`` loop."""
+    return type(bus).recv is can.BusABC.recv
+
+
+def recv_step(bus: can.BusABC, timeout: float | None) -> can.Message | None:
+    """One receive step of ``bus`` (a frame, or None after ``timeout``), its filters applied."""
+    msg, filtered = bus._recv_internal(timeout)
+    if msg is not None and not filtered and not bus._matches_filters(msg):
+        return None
+    return msg
+
+
+def recv_step_unfiltered(bus: can.BusABC, timeout: float | None) -> can.Message | None:
+    """One receive step of ``bus`` that neither bus filters (the caller checked)."""
+    return bus._recv_internal(timeout)[0]
+
+
+def is_shut_down(bus: can.BusABC) -> bool:
+    """True once ``bus.shutdown()`` ran."""
+    return bool(bus._is_shutdown)
+
+
+def mark_shut_down(bus: can.BusABC) -> None:
+    """Say ``bus`` is shut down (a constructor that failed opened nothing to shut down)."""
+    bus._is_shutdown = True
+
+
+__all__ = ["GeneralPurposeUdpMulticastBus", "SO_TIMESTAMPNS", "UdpMulticastBus", "is_shut_down",
+           "mark_shut_down", "recv_step", "recv_step_unfiltered", "steps_itself",
+           "unpack_message"]
