@@ -41,6 +41,27 @@ from ssi_bridge.protocol.dictionary import (
 logger = logging.getLogger(__name__)
 
 HEARTBEAT_OBJECT = 0x1017
+#: while a gateway stays silent, one summary line at most this often (s)
+SILENT_SUMMARY_S = 10.0
+#: the SDO probe of a silent gateway runs with this flag set in its thread: canopen's own
+#: lines about its unanswered transfer are then dropped (the silence is said here, quietly)
+_PROBING = threading.local()
+
+
+class _QuietProbe(logging.Filter):
+    """Drops canopen's SDO client lines logged by a probe of a silent gateway."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not getattr(_PROBING, "active", False)
+
+
+def _install_quiet_probe() -> None:
+    sdo_log = logging.getLogger("canopen.sdo.client")
+    if not any(isinstance(f, _QuietProbe) for f in sdo_log.filters):
+        sdo_log.addFilter(_QuietProbe())
+
+
+_install_quiet_probe()
 #: heartbeat states in which the master starts its station again
 NOT_STARTED = (NMT_STATE_STOPPED, NMT_STATE_PRE_OPERATIONAL)
 
@@ -83,6 +104,10 @@ class Liveness:
         self._thread: threading.Thread | None = None
         self._was_alive = False
         self._log = RateLimitedLog(logger)
+        self._summary = RateLimitedLog(logger, SILENT_SUMMARY_S)
+        #: wire time the gateway went silent (0: it is not), probes unanswered since
+        self._silent_since = 0.0
+        self._unanswered = 0
         self._next_probe = 0.0
         #: the heartbeat state that asked for the pending re-configuration (None: other cause)
         self._restart_from: int | None = None
@@ -177,14 +202,28 @@ class Liveness:
         if self._was_alive and not alive:
             logger.warning("gateway node %d silent: no heartbeat for %.3f s",
                            client.node_id, client.heartbeat_timeout)
+            self._silent_since, self._unanswered = wire_now(), 0
+        elif alive and not self._was_alive and self._silent_since:
+            logger.info("gateway node %d heard again after %.1f s of silence",
+                        client.node_id, wire_now() - self._silent_since)
+            self._silent_since = 0.0
         self._was_alive = alive
         if not alive and wire_now() >= self._next_probe and not self._reconfigure.is_set():
             self._next_probe = wire_now() + 5 * period
+            _PROBING.active = True
             try:
                 client.read_object(HEARTBEAT_OBJECT)
                 self._reconfigure.set()  # it answers but sends no heartbeat: restarted
             except SsiBridgeError:
                 client.counters.timeouts += 1
+                self._unanswered += 1
+                if self._silent_since and wire_now() - self._silent_since >= SILENT_SUMMARY_S:
+                    self._summary.warning(
+                        "still_silent", "gateway node %d still silent after %.0f s (%d SDO "
+                        "probes unanswered)", client.node_id, wire_now() - self._silent_since,
+                        self._unanswered)
+            finally:
+                _PROBING.active = False
         if not self._reconfigure.is_set() or self._stop.is_set():
             return True
         self._reconfigure.clear()

@@ -1,0 +1,50 @@
+"""A silent gateway is said quietly: one line when it goes silent, one when it is heard again,
+and at most one summary per SILENT_SUMMARY_S between; the SDO probes that find it silent do
+not log each unanswered transfer. Before: canopen logged two lines (a missing response and
+the transfer aborted) for each probe, about eight a second, for as long as the silence lasted.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from ssi_bridge.client import liveness
+
+
+def _lines(caplog, text: str) -> int:
+    return sum(text in r.getMessage() for r in caplog.records)
+
+
+def test_a_silent_gateway_is_one_line_then_one_when_back(station, caplog, monkeypatch):
+    gateway, client, _ = station
+    monkeypatch.setattr(liveness, "SILENT_SUMMARY_S", 1.0)  # a summary within the test
+    caplog.set_level(logging.DEBUG)
+    gateway.silent = True
+    time.sleep(2.5)
+    assert not client.gateway_alive
+    assert client.counters.timeouts >= 3, "the gateway was probed while silent"
+    sdo = [r for r in caplog.records if r.name == "canopen.sdo.client"]
+    assert sdo == [], [r.getMessage() for r in sdo]
+    assert _lines(caplog, "silent: no heartbeat") == 1
+    assert 1 <= _lines(caplog, "still silent") <= 2  # at most one per summary period
+    gateway.silent = False
+    deadline = time.monotonic() + 5.0
+    while not client.gateway_alive and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    assert _lines(caplog, "heard again after") == 1
+
+
+def test_sdo_errors_outside_a_probe_are_still_logged(station, caplog):
+    """The filter drops only the probe's lines: a user's transfer that fails is logged."""
+    import pytest
+
+    from ssi_bridge.exceptions import SsiBridgeError
+
+    gateway, client, _ = station
+    caplog.set_level(logging.DEBUG)
+    gateway.silent = True
+    with pytest.raises(SsiBridgeError):
+        client.read_object(0x1000)
+    assert any(r.name == "canopen.sdo.client" for r in caplog.records)
