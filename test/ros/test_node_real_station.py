@@ -27,19 +27,17 @@ from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.registers import Reg
 
 from .conftest import REPO, NodeProcess, dds_env, installed_executable
+from .test_node_station_process import _ready
+from .test_node_station_process import _start_station as start_station_process
 
 #: REG_PARA1 of the default joint (25-bit binary frame, 250 kbit/s) with INVALID_BITS_LSB = 2
 PARA1_TWO_INVALID_LSB = 0x19020200
 
 
 def _start_station(tmp_path: Path, params: dict, *args: str) -> subprocess.Popen:
-    pfile = tmp_path / "station.yaml"
-    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    proc = subprocess.Popen([str(installed_executable("station")), "--params-file", str(pfile),
-                             *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
-    line = proc.stdout.readline().decode()
-    assert line.startswith("station ready"), (line, proc.stderr.read().decode()[-2000:])
+    """The ``station`` program on ``params``, once it said it is ready."""
+    proc = start_station_process(tmp_path, params, *args)
+    _ready(proc)
     return proc
 
 
@@ -172,8 +170,7 @@ def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
             [str(installed_executable("station")), "--params-file", str(config),
              "--interface", "udp_multicast", "--channel", channel],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
-        line = station.stdout.readline().decode()
-        assert line.startswith("station ready"), (line, station.stderr.read().decode()[-2000:])
+        _ready(station)
     try:
         node = start_node({"simulation": simulation, **(bus if not simulation else {})},
                           params_file=config)
