@@ -120,8 +120,11 @@ class NodeDiagnostics:
                      "frame_id": s.frame_id}
             st = channel_status(status_name(fqn, joint.name), hw, joint.counters, joint.health,
                                 joint.position, extra)
-            if joint.para1_note and st.level < WARN:
-                st.level, st.message = WARN, joint.para1_note
+            if joint.para1_note:
+                # the likely cause of what a worse level reports (a misread frame's error bits)
+                st.message = (joint.para1_note if st.level < WARN
+                              else f"{st.message}; {joint.para1_note}")
+                st.level = max(st.level, WARN)
             out.append(st)
         if len(self.station_clients) > 1:
             return out + self._station_statuses()
