@@ -73,6 +73,7 @@ class ParameterBridge:
         self._node = node
         self._prefix = node.get_fully_qualified_name() + SEPARATOR
         self._lock = threading.Lock()
+        self._set_lock = threading.Lock()
         #: names (live view spelling) some client subscribed to
         self.subscribed: set[str] = set()
         self.server: Any = None  # set once the server runs (status and value updates)
@@ -97,29 +98,33 @@ class ParameterBridge:
 
         A refusal (rclpy's or the node's) is sent to every client as a warning status.
         """
-        from rclpy.exceptions import ParameterException
-
         node, refusals, names = self._node, [], []
-        for param in params:
-            name = self._local(param.name)
-            if not node.has_parameter(name):
-                refusals.append(f"{param.name}: refused: not a parameter of "
-                                f"{node.get_fully_qualified_name()}")
-                continue
-            names.append(param.name)
-            declared = node.get_parameter(name).type_
-            try:
-                result = node.set_parameters(
-                    [to_rclpy(name, param.get_value(), declared)])[0]
-                ok, reason = result.successful, result.reason
-            except (ParameterException, TypeError, ValueError) as err:
-                ok, reason = False, f"{type(err).__name__}: {err}"
-            if not ok:
-                refusals.append(f"{self._view(name)}: refused: {reason}")
+        with self._set_lock:  # two clients' sets one after the other, as the ROS service's
+            for param in params:
+                self._set_one(node, param, refusals, names)
         for text in refusals:
             self._node.get_logger().warning(f"live view: set parameters: {text}")
             self._status(text)
         return self.get(names)
+
+    def _set_one(self, node: Any, param: Any, refusals: list[str], names: list[str]) -> None:
+        """Set one parameter; its refusal text appended to ``refusals``."""
+        from rclpy.exceptions import ParameterException
+
+        name = self._local(param.name)
+        if not node.has_parameter(name):
+            refusals.append(f"{param.name}: refused: not a parameter of "
+                            f"{node.get_fully_qualified_name()}")
+            return
+        names.append(param.name)
+        declared = node.get_parameter(name).type_
+        try:
+            result = node.set_parameters([to_rclpy(name, param.get_value(), declared)])[0]
+            ok, reason = result.successful, result.reason
+        except (ParameterException, TypeError, ValueError) as err:
+            ok, reason = False, f"{type(err).__name__}: {err}"
+        if not ok:
+            refusals.append(f"{self._view(name)}: refused: {reason}")
 
     def _status(self, text: str) -> None:
         import foxglove
@@ -128,6 +133,9 @@ class ParameterBridge:
             self.server.publish_status(text, foxglove.StatusLevel.Warning)
 
     def subscribe(self, names: list[str]) -> None:
+        """Remember what some client watches (no names: every declared parameter)."""
+        if not names:
+            names = [self._view(n) for n in self._node.list_parameters([], 0).names]
         with self._lock:
             self.subscribed.update(names)
 

@@ -122,7 +122,8 @@ def test_services_answer_as_the_ros_services_do(running, probe):
     srv = node.topic("~/read_register").rsplit("/", 1)[0]
 
     async def body(client: LiveViewClient) -> dict:
-        out = {"services": dict(client.services), "capabilities": client.info["capabilities"]}
+        out = {"services": dict(client.services), "capabilities": client.info["capabilities"],
+               "encodings": client.info.get("supportedEncodings")}
         out["read"] = await client.call(f"{srv}/read_register", {"joint": "", "address": 20})
         out["bad"] = await client.call(f"{srv}/read_register", {"joint": "", "address": 64})
         out["nobody"] = await client.call(f"{srv}/read_register",
@@ -132,6 +133,7 @@ def test_services_answer_as_the_ros_services_do(running, probe):
 
     fox = session(port, body)
     assert {"services", "parameters"} <= set(fox["capabilities"])
+    assert fox["encodings"] == ["cdr"], "Foxglove calls services only in an offered encoding"
     names = {f"{srv}/{n}" for n in ("read_register", "write_register", "set_preset",
                                     "reset_registers", "set_control", "inject_fault",
                                     "start_recording", "stop_recording")}
