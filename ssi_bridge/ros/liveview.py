@@ -112,10 +112,9 @@ class LiveView:
     def _start(self, address: str, port: int) -> None:
         import foxglove
 
-        from ssi_bridge.record.cdr import serialize
-
         from foxglove.websocket import Capability
 
+        from ssi_bridge.record.cdr import serialize
         from ssi_bridge.ros.liveview_params import ParameterBridge
         from ssi_bridge.ros.liveview_services import ServiceBridge
 

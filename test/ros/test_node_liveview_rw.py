@@ -74,6 +74,15 @@ class LiveViewClient:
         except (asyncio.TimeoutError, TimeoutError):
             pass
 
+    async def call_raw(self, name: str, payload: bytes) -> tuple[str, bytes]:
+        """Send ``payload`` (cdr) to service ``name``; ("ok", response) or ("failure", text)."""
+        self._next_call += 1
+        call_id = self._next_call
+        await self.ws.send(CALL_HEADER.pack(OP_SERVICE_CALL, self.services[name]["id"], call_id,
+                                            3) + b"cdr" + payload)
+        await self.pump(lambda: call_id in self.answers, 30.0)
+        return self.answers[call_id]
+
     async def call(self, name: str, request: dict) -> Any:
         """Call service ``name`` with ``request`` (field -> value); the decoded response."""
         from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
@@ -81,12 +90,7 @@ class LiveViewClient:
         svc = self.services[name]
         req, res = svc["request"], svc["response"]
         payload = serialize_dynamic(req["schemaName"], req["schema"])[req["schemaName"]](request)
-        self._next_call += 1
-        call_id = self._next_call
-        await self.ws.send(CALL_HEADER.pack(OP_SERVICE_CALL, svc["id"], call_id, 3) + b"cdr"
-                           + payload)
-        await self.pump(lambda: call_id in self.answers, 30.0)
-        kind, data = self.answers[call_id]
+        kind, data = await self.call_raw(name, payload)
         assert kind == "ok", data.decode()
         return generate_dynamic(res["schemaName"], res["schema"])[res["schemaName"]](data)
 
@@ -129,6 +133,9 @@ def test_services_answer_as_the_ros_services_do(running, probe):
         out["nobody"] = await client.call(f"{srv}/read_register",
                                           {"joint": "nobody", "address": 20})
         out["preset"] = await client.call(f"{srv}/set_preset", {"joint": "", "position": 1.0})
+        # a payload that is no ReadRegister request: a failure with the reason, nothing stops
+        out["garbage"] = await client.call_raw(f"{srv}/read_register", b"\x00\x01\xff")
+        out["after"] = await client.call(f"{srv}/read_register", {"joint": "", "address": 20})
         return out
 
     fox = session(port, body)
@@ -157,6 +164,10 @@ def test_services_answer_as_the_ros_services_do(running, probe):
         assert (got.success, got.message, got.value) == (want.success, want.message, want.value)
     assert fox["read"].success and not fox["bad"].success and not fox["nobody"].success
     assert "nobody" in fox["nobody"].message
+    kind, text = fox["garbage"]
+    assert kind == "failure" and "does not decode as ssi_bridge_msgs/srv/ReadRegister_Request" \
+        in text.decode(), (kind, text)
+    assert fox["after"].success and fox["after"].value == fox["read"].value
     p = fox["preset"]
     assert p.success, p.message
     assert (p.success, p.message, p.offset) == (ros_preset.success, ros_preset.message,
