@@ -177,7 +177,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self, self.bridge, self.recorder, self.publish_safe)
         self.handlers.register(self._service_group)
-        self.liveview = LiveView(self, s)
+        self.liveview = LiveView(self, s, self.handlers)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)

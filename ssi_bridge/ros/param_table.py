@@ -134,6 +134,14 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "foxglove.address": ("127.0.0.1", _describe(
         "Address the live view server binds to: 127.0.0.1 accepts clients of this host only; "
         "an interface address or 0.0.0.0 lets other hosts connect", read_only=True)),
+    "foxglove.services": (True, _describe(
+        "Live view: offer the node's services (Foxglove's Service Call panel; the same "
+        "handlers, checks and ~/events as the ROS services); false: not advertised",
+        read_only=True)),
+    "foxglove.parameters": (True, _describe(
+        "Live view: offer the node's parameters (get, set with the checks of 'ros2 param "
+        "set', subscribe); false: no Parameters capability. Both false: a view that only "
+        "watches", read_only=True)),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'

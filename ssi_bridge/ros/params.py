@@ -71,6 +71,9 @@ class NodeSettings:
     #: live view (ros/liveview.py): Foxglove WebSocket port, 0 = off; address it binds to
     foxglove_port: int = 0
     foxglove_address: str = "127.0.0.1"
+    #: the live view also offers the services / the parameters (ros/liveview_*.py)
+    foxglove_services: bool = True
+    foxglove_parameters: bool = True
 
     @property
     def station_ids(self) -> tuple[int, ...]:
@@ -223,4 +226,6 @@ def declare_parameters(node: Node) -> NodeSettings:
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
         replay_wait_for_subscribers=values["replay.wait_for_subscribers"],
-        foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip())
+        foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip(),
+        foxglove_services=values["foxglove.services"],
+        foxglove_parameters=values["foxglove.parameters"])

@@ -53,6 +53,9 @@ class BridgeServices:
         self.queue = RequestQueue(node)
         self.busy_refusals = 0
         self._busy_logged = 0.0
+        #: (type, resolved name, handler) of every service :meth:`register` created: the
+        #: live view offers the same list (ros/liveview_services.py)
+        self.offered: list[tuple[type, str, Callable[[Any, Any], Any]]] = []
 
     def register(self, group: Any = None) -> None:
         """Create every service of the contract; their requests go through :attr:`queue`
@@ -72,11 +75,17 @@ class BridgeServices:
                                           callback_group=self.queue.group,
                                           qos_profile=SERVICE_QOS)
             self.queue.add(service, handler, self._refuser(name[2:]))
+            self.offered.append((srv_type, service.service_name, handler))
         self.queue.start()
 
     def stop(self) -> None:
         """Stop serving (node shutdown)."""
         self.queue.stop()
+
+    def refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
+        """The busy answer of service ``kind`` (e.g. "read_register") for a request that
+        reaches :attr:`queue` another way (the live view)."""
+        return self._refuser(kind)
 
     def _refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
         """Fills the prompt answer to a request beyond the queue's limit."""
