@@ -155,7 +155,8 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
     "code": ("", _describe(
         "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
-        "SSI_CODE_G/D must match it", read_only=True)),
+        "SSI_CODE_G/D must match it; a code the family's manual does not offer is refused at "
+        "start-up (TR_CHECKSUM: binary only, 001 §5.2.4.2)", read_only=True)),
     "cable_length": (10.0, _describe(
         "Simulated SSI cable length in m (line delay; 004 §2.7 bit-rate recommendation)",
         read_only=True, float_range=(0.0, 1200.0))),
