@@ -113,7 +113,7 @@ class BridgeServices:
         self.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity
-        if success and kind == "read_register":
+        if success and kind in ("read_register", "sdo_read"):
             self.node.get_logger().debug(text)  # a read changes nothing: the event suffices
         elif success:
             self.node.get_logger().info(text)

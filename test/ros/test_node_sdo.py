@@ -11,7 +11,7 @@ REG_PARA1 paths in test_node_live.py.
 from __future__ import annotations
 
 import pytest
-from ssi_bridge_msgs.msg import Event
+from ssi_bridge_msgs.msg import Event, Status
 from ssi_bridge_msgs.srv import ReadRegister, SdoRead, SdoWrite
 
 WORK_AREA_LOW, REG_LOWER_LIMIT = 0x6C01, 48
@@ -84,6 +84,34 @@ def test_sdo_write_of_a_negative_integer32_reads_back_equal(running, probe):
     reg = probe.call(ReadRegister, node.topic("~/read_register"),
                      ReadRegister.Request(address=REG_LOWER_LIMIT))
     assert reg.success and reg.value == (-123456) & 0xFFFF_FFFF, reg.message
+
+
+def test_a_cam_object_write_moves_the_cam_state_at_once(running, probe):
+    # the node re-reads the CAM objects only every diagnostics_period (60 s here): the state
+    # in ~/status follows the write at once because the write reads them back (000 Table 42)
+    node = running({"joints": ["j"], "j.motion.kind": "still", "j.motion.start": 1.25,
+                    "diagnostics_period": 60.0})
+    status = probe.subscribe(Status, node.topic("~/status"))
+    for index, fields in ((0x6B10, {"signed_value": 10000}), (0x6B20, {"signed_value": 20000}),
+                          (0x6B01, {"unsigned_value": 1})):
+        res = _write(probe, node, index=index, subindex=1, **fields)
+        assert res.success, res.message
+    assert "CAM state follows" in res.message, res.message
+    count = len(status)
+    probe.wait_for(lambda: len(status) > count + 5, 10.0, "~/status after the writes", node)
+    latest = status[-1][1].channels[0]
+    assert latest.cam_enabled and latest.cam_state == 1, (latest.cam_enabled, latest.cam_state)
+
+
+def test_node_id_picks_the_station_and_0_the_joints(running, probe):
+    # 0x1014 COB-ID EMCY = 0x80 + the station's node id (CiA 301): it says who answered
+    node = running({"joints": ["a", "b"], "stations": [1, 3], "a.station": 1, "b.station": 3,
+                    "a.slot": 1, "b.slot": 1})
+    for fields, station in (({}, 1), ({"joint": "b"}, 3), ({"node_id": 3}, 3),
+                            ({"node_id": 1, "joint": "b"}, 1)):
+        res = _read(probe, node, index=0x1014, **fields)
+        assert res.success and res.unsigned_value == 0x80 + station, (fields, res.message)
+        assert f"of node {station}" in res.message, res.message
 
 
 def test_sdo_services_are_refused_listen_only(start_node, probe):
