@@ -26,6 +26,10 @@ POLICIES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH, QoSPolicyKind.RELIABILIT
             QoSPolicyKind.DURABILITY)
 
 
+#: the topics of the publishers that take overrides (``_create_ros_side`` of the node)
+TOPICS = ("joint_states", "~/status", "/diagnostics")
+PREFIX = "qos_overrides."
+
 #: the values a policy override may take (rclpy's enum names, lower case)
 ALLOWED = ("reliability: reliable | best_effort; durability: volatile | transient_local; "
            "history: keep_last | keep_all; depth: an integer")
@@ -46,4 +50,17 @@ def overridable_publisher(node: Node, msg_type: Any, topic: str, depth: int = 10
                           f"({ALLOWED})") from None
 
 
-__all__ = ["ALLOWED", "POLICIES", "overridable_publisher"]
+def stray_overrides(node: Node, given: list[str]) -> list[str]:
+    """One line per ``qos_overrides.*`` name in ``given`` that no publisher of the node takes
+    (a topic or policy misspelt, or a topic without overrides such as ``~/events``): rclpy
+    would ignore it without a word."""
+    topics = [node.resolve_topic_name(t) for t in TOPICS]
+    wanted = {f"{PREFIX}{t}.publisher.{p.name.lower()}" for t in topics for p in POLICIES}
+    usage = (f"{PREFIX}<{' | '.join(topics)}>.publisher."
+             f"<{' | '.join(p.name.lower() for p in POLICIES)}>")
+    return [f"parameter '{name[:120]}' is no QoS override of this node and is ignored; "
+            f"it takes {usage}" for name in sorted(given)
+            if name.startswith(PREFIX) and name not in wanted]
+
+
+__all__ = ["ALLOWED", "POLICIES", "TOPICS", "overridable_publisher", "stray_overrides"]

@@ -86,3 +86,18 @@ def test_an_unknown_policy_value_is_one_clear_start_error(start_node, tmp_path: 
     assert ("cannot start: qos_overrides of /joint_states: Unexpected QoS override for policy "
             "`reliability`: `bogus` (reliability: reliable | best_effort") in log, log[-3000:]
     assert "Traceback" not in log, log[-3000:]
+
+
+def test_a_misspelt_override_is_named_not_silently_ignored(start_node, probe, tmp_path: Path):
+    pfile = _params_file(tmp_path, {
+        "/joint_state": {"publisher": {"reliability": "best_effort"}},
+        "/joint_states": {"publisher": {"reliabilty": "best_effort"}},
+        "/ssi_bridge/events": {"publisher": {"depth": 3}}})
+    node = start_node(params_file=pfile)
+    for name in ("qos_overrides./joint_state.publisher.reliability",
+                 "qos_overrides./joint_states.publisher.reliabilty",
+                 "qos_overrides./ssi_bridge/events.publisher.depth"):
+        probe.wait_for(lambda: f"parameter '{name}' is no QoS override of this node" in node.log(),
+                       30.0, f"the warning about {name}", node)
+    assert "it takes qos_overrides.</joint_states | /ssi_bridge/status | /diagnostics>" \
+        ".publisher.<history | depth | reliability | durability>" in node.log()
