@@ -16,6 +16,7 @@ from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.ros.param_table import JOINT_PARAMETERS, NODE_PARAMETERS
+from ssi_bridge.ros.qos_overrides import stray_overrides
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.protocol.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
@@ -142,7 +143,7 @@ def unknown_overrides(node: Node) -> list[str]:
 
     declared = set(node.list_parameters([], 0).names)
     given = getattr(node, "_parameter_overrides", {})
-    out = []
+    out = stray_overrides(node, list(given))  # qos_overrides.* (ros/qos_overrides.py)
     for name in sorted(given):
         if name in declared or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
             continue

@@ -24,11 +24,14 @@ from ssi_bridge.core.bridge import Bridge, register_name
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
 from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
+from ssi_bridge.ros.sdo_services import SdoServices
+from ssi_bridge.core.sdo_access import ObjectAccess
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
     StopRecording, WriteRegister,
 )
+from ssi_bridge_msgs.srv import SdoRead, SdoWrite
 
 #: publishes a message on a publisher; False when the node is shutting down
 Publish = Callable[[Any, Any], bool]
@@ -51,6 +54,8 @@ class BridgeServices:
         self.events = node.create_publisher(Event, "~/events", 50)
         recorder.offer(self.events.topic_name, self.events.qos_profile)
         self.queue = RequestQueue(node)
+        #: ~/sdo_read, ~/sdo_write (ros/sdo_services.py)
+        self.sdo = SdoServices(ObjectAccess(bridge), self.log_event, node.get_logger().error)
         self.busy_refusals = 0
         self._busy_logged = 0.0
         #: (type, resolved name, handler) of every service :meth:`register` created: the
@@ -69,6 +74,8 @@ class BridgeServices:
                 (ResetRegisters, "~/reset_registers", self.reset_registers),
                 (SetControl, "~/set_control", self.set_control),
                 (InjectFault, "~/inject_fault", self.inject_fault),
+                (SdoRead, "~/sdo_read", self.sdo.read),
+                (SdoWrite, "~/sdo_write", self.sdo.write),
                 (StartRecording, "~/start_recording", rec.on_start),
                 (StopRecording, "~/stop_recording", rec.on_stop)):
             service = node.create_service(srv_type, name, handler,
@@ -115,7 +122,7 @@ class BridgeServices:
         self.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity
-        if success and kind == "read_register":
+        if success and kind in ("read_register", "sdo_read"):
             self.node.get_logger().debug(text)  # a read changes nothing: the event suffices
         elif success:
             self.node.get_logger().info(text)
