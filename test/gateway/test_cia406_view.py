@@ -91,18 +91,19 @@ def test_a_generic_cia406_tool_reads_position_preset_cam_and_area(generic) -> No
     position = sdo(POSITION_406)
     _until(lambda: position.raw, STILL_COUNTS, sync, "position of the standing shaft")
 
-    # preset: REG_OFFSET, subtracted from the encoder value (000 "Offset function"); the EDS
-    # types it INTEGER32, so a negative preset reads back negative
+    # preset: "added to the value of the SSI encoder" (000, object 6810hex; the gateway keeps
+    # REG_OFFSET = -preset); the EDS types it INTEGER32, so a negative preset reads back negative
     sdo(PRESET_406).raw = -1000
     assert sdo(PRESET_406).raw == -1000
-    _until(lambda: position.raw, STILL_COUNTS + 1000, sync, "position after the preset")
+    _until(lambda: position.raw, STILL_COUNTS - 1000, sync, "position after the preset")
 
     # CAM1: in the window [low, high] while enabled (000 Table 42)
-    sdo(CAM1_LOW_406).raw = STILL_COUNTS
-    sdo(CAM1_HIGH_406).raw = STILL_COUNTS + 2000
+    shifted = STILL_COUNTS - 1000
+    sdo(CAM1_LOW_406).raw = shifted - 1000
+    sdo(CAM1_HIGH_406).raw = shifted + 1000
     sdo(CAM_ENABLE_406).raw = 1
     _until(lambda: sdo(CAM_STATE_406).raw, 1, sync, "CAM state inside the window")
-    sdo(CAM1_HIGH_406).raw = STILL_COUNTS + 500
+    sdo(CAM1_HIGH_406).raw = shifted - 500
     _until(lambda: sdo(CAM_STATE_406).raw, 0, sync, "CAM state above the window")
 
     # work area: bit 0 out of range, bit 1 above the high limit, bit 2 below the low one
