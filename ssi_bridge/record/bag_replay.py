@@ -26,8 +26,6 @@ from ssi_bridge.record.reader import Bag
 
 logger = logging.getLogger(__name__)
 
-#: how long replay waits by default for a subscriber on every played topic (s)
-DEFAULT_WAIT_FOR_SUBSCRIBERS = 2.0
 #: a record sink: (recorded topic, MCAP message record)
 Sink = Callable[[str, Message], None]
 
@@ -128,10 +126,14 @@ class Player:
         Returns True when every topic has a subscriber; otherwise logs which ones have none
         and returns False (playback starts anyway).
         """
-        deadline = time.monotonic() + self.options.wait_for_subscribers
+        began = time.monotonic()
+        deadline = began + self.options.wait_for_subscribers
         while True:
             alone = [t for t, p in self.publishers.items() if p.get_subscription_count() == 0]
             if not alone or self.state.stopped:
+                if not alone:
+                    logger.info("every topic has a subscriber after %.2f s",
+                                time.monotonic() - began)
                 return not alone
             if time.monotonic() >= deadline:
                 logger.info("no subscriber on %s after %.1f s; playing anyway",

@@ -13,7 +13,7 @@ Examples:
 In a terminal: space pauses and resumes, → publishes the next message while paused, ↑/↓ change
 the rate by 10 %, and a progress line on stderr shows the time, the rate and the messages
 played. The replay's node offers ~/pause, ~/resume, ~/play_next, ~/set_rate and ~/seek.
-It waits up to 2 s (--wait-for-subscribers) for a subscriber on every played topic.
+It waits up to 5 s (--wait-for-subscribers) for a subscriber on every played topic.
 Exit status: 0 done, 1 interrupted, 2 the bag or an option is unusable (message says why).
 """
 
@@ -30,7 +30,10 @@ from typing import Any
 
 from ssi_bridge.exceptions import RecordingError
 
-DEFAULT_WAIT = 2.0
+#: how long replay waits by default for a subscriber on every played topic (s): Fast DDS
+#: announces a participant every 3 s after its first burst, so a discovery that missed the
+#: burst on a busy machine still ends within the wait
+DEFAULT_WAIT = 5.0
 
 
 def _seconds(text: str) -> Decimal:
@@ -131,12 +134,13 @@ def _options(args: argparse.Namespace) -> Any:
                          hold_at_end=bool(args.foxglove_port))
 
 
-def _spin(executor: Any) -> None:
-    """Serve the player services until the executor is shut down."""
+def _spin(executor: Any, stop: threading.Event) -> None:
+    """Serve the player services until ``stop`` is set or the context shuts down."""
     from rclpy.executors import ExternalShutdownException
 
     try:
-        executor.spin()
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
     except (ExternalShutdownException, KeyboardInterrupt):
         pass
 
@@ -146,7 +150,8 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
     from ssi_bridge.record.bag_replay import Player
     from ssi_bridge.record.replay_keys import Keyboard, ProgressLine
 
-    node = executor = view = None
+    node = executor = view = spinner = None
+    stop_spin = threading.Event()
     if not args.no_ros:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
@@ -170,8 +175,9 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
             keep.append(ReplayServices(node, player.state))  # the services live while kept
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            threading.Thread(target=_spin, args=(executor,), name="replay-services",
-                             daemon=True).start()
+            spinner = threading.Thread(target=_spin, args=(executor, stop_spin),
+                                       name="replay-services", daemon=True)
+            spinner.start()
         signal.signal(signal.SIGTERM, lambda *_: player.state.stop())
         if not args.disable_keyboard_controls:
             keyboard = Keyboard(player.state)
@@ -186,6 +192,9 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
             progress.close()
         if view is not None:
             view.stop()
+        stop_spin.set()
+        if spinner is not None:
+            spinner.join(timeout=5.0)
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
