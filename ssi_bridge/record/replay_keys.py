@@ -4,7 +4,8 @@ Keys, as in rosbag2's player: space pauses and resumes, → publishes the next m
 paused, ↑ and ↓ raise and lower the rate by 10 %. The keys are read from stdin in cbreak mode
 (no echo, no line buffering; Ctrl-C still interrupts) by a daemon thread, and the terminal's
 settings are restored on :meth:`Keyboard.stop`. Nothing happens when stdin is not a terminal
-(a pipe, a launch file, a test): the keys are off and the input is never read.
+(a pipe, a launch file, a test) or the replay runs in the background (``replay ... &``): the
+keys are off and the input is never read.
 
 The progress line (``[R] 12.345 / 60.000 s  t 1732630000.123456789  rate 1.00x  1234 msgs``)
 is redrawn in place on stderr about ten times a second, only when stderr is a terminal:
@@ -83,6 +84,16 @@ def split_keys(data: bytes) -> list[bytes]:
     return keys
 
 
+def _foreground(fd: int) -> bool:
+    """False when the replay runs in the background of its controlling terminal (changing
+    the terminal's mode would stop it with SIGTTOU); True for a terminal that is not the
+    controlling one (no job control there)."""
+    try:
+        return os.tcgetpgrp(fd) == os.getpgrp()
+    except OSError:
+        return True
+
+
 class Keyboard:
     """Reads control keys from a terminal on stdin in a thread (see the module doc)."""
 
@@ -99,7 +110,7 @@ class Keyboard:
             fd = self._stream.fileno()
         except (AttributeError, ValueError, OSError):
             return False
-        if not os.isatty(fd):
+        if not os.isatty(fd) or not _foreground(fd):
             return False
         import termios
         import tty

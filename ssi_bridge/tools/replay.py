@@ -36,7 +36,7 @@ from ssi_bridge.exceptions import RecordingError
 DEFAULT_WAIT = 5.0
 
 
-def _seconds(text: str) -> Decimal:
+def seconds(text: str) -> Decimal:
     """A time in seconds, kept exact (``sec.nsec`` of a ROS time has 19 digits)."""
     try:
         value = Decimal(text)
@@ -61,7 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--playback-duration", type=float, metavar="S",
                         help="play S seconds of the bag (from the start offset)")
     until = parser.add_mutually_exclusive_group()
-    until.add_argument("--playback-until", type=_seconds, metavar="T",
+    until.add_argument("--playback-until", type=seconds, metavar="T",
                        help="stop after T: a ROS time sec.nsec, or seconds from the bag start")
     until.add_argument("--playback-until-sec", type=float, metavar="SEC",
                        help="stop after this ROS time, seconds since the epoch")
@@ -131,7 +131,7 @@ def _options(args: argparse.Namespace) -> Any:
                          wait_for_subscribers=0.0 if args.no_ros else args.wait_for_subscribers,
                          playback_duration=args.playback_duration,
                          playback_until=_until(args), start_paused=args.start_paused,
-                         hold_at_end=bool(args.foxglove_port))
+                         hold_at_end=bool(args.foxglove_port) and not args.loop)
 
 
 def _spin(executor: Any, stop: threading.Event) -> None:

@@ -9,11 +9,13 @@ a pseudo-terminal (space, →, ↑, ↓) with the progress line read back from i
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
 import select
 import subprocess
 import sys
+import termios
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -193,7 +195,7 @@ def test_a_selection_of_nothing_or_an_unknown_topic_is_refused(two_topics: Path)
     for args, match in ((["--exclude-regex", "joint"], "leaves nothing to play"),
                         (["--exclude-topics", "/nope"], "no topic /nope"),
                         (["--regex", "("], "regular expression"),
-                        (["--playback-until", "soon"], "invalid _seconds value")):
+                        (["--playback-until", "soon"], "invalid seconds value")):
         out = subprocess.run(command(two_topics, *args), capture_output=True, text=True,
                              timeout=60, check=False)
         assert out.returncode == 2 and match in out.stderr, (args, out.stderr)
@@ -333,12 +335,21 @@ class Screen:
         return lambda: re.search(pattern, self.last_line()) is not None
 
 
+def _foreground(tty_fd: int) -> Callable[[], None]:
+    """A preexec_fn: the child (leader of a new session) takes ``tty_fd`` as its controlling
+    terminal and is its foreground process group, as a program started from a shell."""
+    def preexec() -> None:
+        fcntl.ioctl(tty_fd, termios.TIOCSCTTY, 0)
+    return preexec
+
+
 def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe) -> None:
     rx = probe.subscribe("/joint_states")
     master, slave = os.openpty()
+    settings = termios.tcgetattr(slave)
     proc = subprocess.Popen(command(four_s, "--start-paused", "--wait-for-subscribers", "20"),
-                            stdin=slave, stdout=slave, stderr=slave, close_fds=True)
-    os.close(slave)
+                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
+                            start_new_session=True, preexec_fn=_foreground(slave))
     screen = Screen(master)
     try:
         wait_for(screen.shows(r"^\[P\] +0\.000 / 3\.990 s  t 1700000000\.000000000  "
@@ -365,10 +376,12 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
         assert len(rx) == paused_at, "messages while paused"
         os.write(master, b" ")
         assert proc.wait(60) == 0, screen.text[-2000:]
+        assert termios.tcgetattr(slave) == settings, "the terminal gets its settings back"
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
+        os.close(slave)
         os.close(master)
     settle(rx)
     assert indices(rx) == list(range(400))
