@@ -48,7 +48,8 @@ class Snapshot:
     paused: bool
     #: messages published since the start (all passes)
     published: int
-    start_ns: int
+    #: the bag's first and last log times
+    first_ns: int
     end_ns: int
     ended: bool
 
@@ -164,7 +165,7 @@ class PlayerState:
         with self._cond:
             now = self._clock()
             bag = min(max(self._bag_now(now), self.first_ns), self.end_ns)
-            return Snapshot(bag, self._rate, self._paused, self._published, self.start_ns,
+            return Snapshot(bag, self._rate, self._paused, self._published, self.first_ns,
                             self.end_ns, self._ended)
 
     @property

@@ -35,8 +35,8 @@ def progress_text(snap: Snapshot) -> str:
     """One progress line (without the carriage return)."""
     mark = "E" if snap.ended else "P" if snap.paused else "R"
     sec, nsec = divmod(snap.bag_ns, NS)
-    return (f"[{mark}] {(snap.bag_ns - snap.start_ns) / NS:8.3f} / "
-            f"{(snap.end_ns - snap.start_ns) / NS:.3f} s  t {sec}.{nsec:09d}  "
+    return (f"[{mark}] {(snap.bag_ns - snap.first_ns) / NS:8.3f} / "
+            f"{(snap.end_ns - snap.first_ns) / NS:.3f} s  t {sec}.{nsec:09d}  "
             f"rate {snap.rate:.2f}x  {snap.published} msgs")
 
 
