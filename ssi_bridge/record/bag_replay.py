@@ -57,6 +57,8 @@ class ReplayOptions:
     playback_duration: float | None = None
     #: stop after this time: a ROS time in s, or seconds from the bag start (None: the end)
     playback_until: float | Decimal | None = None
+    #: ``playback_until`` is a ROS time whatever its value (not seconds from the start)
+    until_is_ros_time: bool = False
     #: start with the time line paused (space, ~/resume or Foxglove starts it)
     start_paused: bool = False
     #: at the end, wait for a seek instead of returning (the Foxglove view keeps serving)
@@ -92,7 +94,8 @@ class Player:
         self.state = PlayerState(bag.start_ns, bag.end_ns, start_ns=start, rate=options.rate,
                                  paused=options.start_paused,
                                  until_ns=until_time(start, bag.start_ns, options.playback_until,
-                                                     options.playback_duration))
+                                                     options.playback_duration,
+                                                     options.until_is_ros_time))
         self.sinks: list[Sink] = list(sinks or [])
         self.publishers: dict[str, Any] = {}
         self.clock_pub = None

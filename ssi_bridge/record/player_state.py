@@ -88,13 +88,14 @@ def select_topics(available: Iterable[str], topics: list[str] | None = None,
 
 
 def until_time(start_ns: int, bag_start_ns: int, until: float | Decimal | str | None = None,
-               duration: float | None = None) -> int | None:
+               duration: float | None = None, ros_time: bool = False) -> int | None:
     """The bag time after which playback stops (None: the end of the bag).
 
     ``until`` in seconds: a value at or after the bag's start (``bag_start_ns``) is a ROS time
     (``sec.nsec`` since the epoch), a smaller one seconds from the start of the bag;
     ``duration`` is bag seconds from ``start_ns`` (where playback starts). With both, the
-    later time counts (rosbag2's rule). ``until`` is read as a decimal (``str(float)`` for a
+    later time counts (rosbag2's rule). ``ros_time`` makes ``until`` a ROS time whatever its
+    value (rosbag2's ``--playback-until-sec``/``-nsec``). ``until`` is read as a decimal (``str(float)`` for a
     float), so ``sec.nsec`` keeps its nanoseconds. Raises ValueError for a negative or
     malformed value.
     """
@@ -107,7 +108,8 @@ def until_time(start_ns: int, bag_start_ns: int, until: float | Decimal | str | 
         if not exact >= 0:
             raise ValueError(f"playback until {until}: must be >= 0")
         until_ns = int(exact * NS)
-        ends.append(until_ns if until_ns >= bag_start_ns else bag_start_ns + until_ns)
+        ends.append(until_ns if ros_time or until_ns >= bag_start_ns
+                    else bag_start_ns + until_ns)
     if duration is not None:
         if duration < 0:
             raise ValueError(f"playback duration {duration}: must be >= 0")

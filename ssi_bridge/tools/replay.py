@@ -131,6 +131,7 @@ def _options(args: argparse.Namespace) -> Any:
                          wait_for_subscribers=0.0 if args.no_ros else args.wait_for_subscribers,
                          playback_duration=args.playback_duration,
                          playback_until=_until(args), start_paused=args.start_paused,
+                         until_is_ros_time=args.playback_until is None,
                          hold_at_end=bool(args.foxglove_port) and not args.loop)
 
 

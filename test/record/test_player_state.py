@@ -111,6 +111,7 @@ def test_until_time_reads_ros_times_offsets_and_durations() -> None:
     assert until_time(start, T0, until=1_700_000_003.25) == T0 + 3_250_000_000, "a ROS time"
     assert until_time(start, T0, duration=2.0) == start + 2 * NS, "from the start offset"
     assert until_time(start, T0, until=1.0, duration=3.0) == start + 3 * NS, "the later one"
+    assert until_time(start, T0, until=2.5, ros_time=True) == 2_500_000_000, "forced ROS time"
     with pytest.raises(ValueError):
         until_time(start, T0, duration=-1)
 

@@ -386,3 +386,25 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
     settle(rx)
     assert indices(rx) == list(range(400))
     assert "[E]" in screen.text and "replayed 400 messages" in screen.text, screen.text[-500:]
+
+
+def test_ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four_s: Path,
+                                                                            probe: Probe) -> None:
+    master, slave = os.openpty()
+    settings = termios.tcgetattr(slave)
+    proc = subprocess.Popen(command(four_s, "--wait-for-subscribers", "0"),
+                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
+                            start_new_session=True, preexec_fn=_foreground(slave))
+    screen = Screen(master)
+    try:
+        wait_for(screen.shows(r"^\[R\]"), 30, "the progress line, running")
+        os.write(master, b"\x03")              # Ctrl-C: the terminal sends SIGINT
+        assert proc.wait(30) == 1, screen.text[-2000:]
+        assert termios.tcgetattr(slave) == settings, "the terminal gets its settings back"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        os.close(slave)
+        os.close(master)
+    assert "Traceback" not in screen.text, screen.text[-2000:]
