@@ -44,14 +44,18 @@ class _Listener:
 class ReplayView:
     """The Foxglove server of one replay; :meth:`sink` is the Player's sink for its records.
 
-    Raises RecordingError when the server cannot listen (port in use, bad address).
+    Raises RecordingError when the server cannot listen (port in use, bad address) or the
+    Foxglove SDK is not installed.
     """
 
     def __init__(self, bag: Bag, topics: list[str], state: PlayerState, address: str,
                  port: int, name: str = "ssi_bridge replay") -> None:
-        import foxglove
-        from foxglove.websocket import Capability
-
+        try:
+            import foxglove
+            from foxglove.websocket import Capability
+        except ImportError as err:
+            raise RecordingError(f"--foxglove-port needs the Foxglove SDK ({err}): "
+                                 "pip install foxglove-sdk==0.30.3") from err
         self.state = state
         self._local = threading.local()
         self._last_time = 0.0

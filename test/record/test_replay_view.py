@@ -144,7 +144,8 @@ def test_foxglove_seeks_pauses_and_plays_at_twice_the_rate(session: Path) -> Non
     finally:
         proc.terminate()
         out, err = proc.communicate(timeout=30)
-    assert "Traceback" not in err, err
+    assert "Traceback" not in err and "refused" not in err, err
+    assert "Foxglove: play after a seek at 1.00x" in err and "Foxglove: pause" in err, err
 
 
 async def _scrub(port: int, proc: subprocess.Popen[str]) -> None:
@@ -208,3 +209,39 @@ def test_a_port_in_use_and_no_ros_without_foxglove_are_refused(session: Path) ->
     out = subprocess.run([sys.executable, "-m", "ssi_bridge.tools.replay", str(session),
                           "--no-ros"], capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 2 and "--no-ros needs --foxglove-port" in out.stderr, out.stderr
+
+
+def test_at_the_end_the_replay_waits_and_play_starts_it_again(session: Path) -> None:
+    port = free_port()
+    proc = start_replay(session, port, "--no-ros")
+    try:
+        asyncio.run(_replay_the_end(port, proc))
+        assert proc.poll() is None, "the replay keeps serving after the end"
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    assert "Traceback" not in err, err
+
+
+async def _replay_the_end(port: int, proc: subprocess.Popen[str]) -> None:
+    ws = await connect(port, proc)
+    client = Client(ws)
+    async with ws:
+        await client.subscribe()
+        near_end = T0 + (N - 20) * PERIOD_NS
+        await ws.send(control(PLAY, 1.0, near_end, "near-end"))
+        await client.until_state("near-end")
+        deadline = time.monotonic() + 10
+        while not any(s[0] == ENDED for s in client.states):
+            assert time.monotonic() < deadline, f"no Ended state: {client.states}"
+            await client.collect(0.1)
+        assert [m[1] for m in client.messages] == [near_end + k * PERIOD_NS for k in range(20)]
+        ended = next(s for s in client.states if s[0] == ENDED)
+        assert ended[1] == T0 + (N - 1) * PERIOD_NS and ended[4] == "", ended
+
+        client.messages.clear()
+        await ws.send(control(PLAY, 1.0, None, "again"))
+        status, _, _, did_seek, _ = await client.until_state("again")
+        assert (status, did_seek) == (PLAYING, True), "play at the end starts from the start"
+        await client.collect(0.5)
+        assert client.messages and client.messages[0][1] == T0
