@@ -408,3 +408,38 @@ def test_ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four
         os.close(slave)
         os.close(master)
     assert "Traceback" not in screen.text, screen.text[-2000:]
+
+
+def test_loop_plays_the_selection_again_from_the_start_offset(one_s: Path, probe: Probe) -> None:
+    rx = probe.subscribe("/joint_states")
+    proc = subprocess.Popen(command(one_s, "--quiet", "--loop", "--start-offset", "0.5",
+                                    "--playback-duration", "0.2", "--wait-for-subscribers", "20"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: len(rx) >= 63, 30, "three passes")
+    finally:
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    assert indices(rx)[:63] == [*range(50, 71)] * 3, err
+    assert proc.returncode == 1 and "stopped after" in err, err
+
+
+def test_disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None:
+    rx = probe.subscribe("/joint_states")
+    master, slave = os.openpty()
+    proc = subprocess.Popen(command(four_s, "--start-paused", "--disable-keyboard-controls",
+                                    "--wait-for-subscribers", "20"),
+                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
+                            start_new_session=True, preexec_fn=_foreground(slave))
+    screen = Screen(master)
+    try:
+        wait_for(screen.shows(r"^\[P\]"), 30, "the progress line, paused")
+        os.write(master, b" \x1b[C")
+        time.sleep(1.5)
+        assert not rx and screen.shows(r"^\[P\] .* 0 msgs")(), screen.last_line()
+        assert termios.tcgetattr(slave)[3] & termios.ICANON, "the terminal stays line-buffered"
+    finally:
+        proc.kill()
+        proc.wait(10)
+        os.close(slave)
+        os.close(master)
