@@ -176,8 +176,7 @@ class Player:
         seek) at the end of the bag. ``progress()`` is called about every 0.1 s.
         """
         state = self.state
-        clock_period = 1.0 / self.options.clock_hz if self.clock_pub is not None else None
-        next_clock = next_progress = time.monotonic()
+        ticks = _Ticks(self, progress)
         count = 0
         self.lateness = []
         state.restart(state.seek_ns)
@@ -190,17 +189,7 @@ class Player:
                     action, wait = state.decide(record.log_time, generation)
                     if action is not Action.WAIT:
                         break
-                    now = time.monotonic()
-                    if clock_period is not None and now >= next_clock:
-                        self._publish_clock(state.snapshot().bag_ns)
-                        next_clock = max(next_clock + clock_period, now)
-                    if progress is not None and now >= next_progress:
-                        progress()
-                        next_progress = now + 0.1
-                    ticks = [t - now for t in (next_progress if progress else None,
-                                               next_clock if clock_period else None)
-                             if t is not None]
-                    state.wait(max(0.0, min([0.25] + ticks + ([wait] if wait else []))))
+                    state.wait(ticks.run(wait))
                 if action is not Action.PUBLISH:
                     break
                 self._publish(topic, record)
@@ -208,6 +197,7 @@ class Player:
                     self.lateness.append(wait)
                 state.played()
                 count += 1
+                ticks.run(None)  # /clock and the progress line also when nothing waits
             else:
                 action = Action.STOP
             records.close()
@@ -234,3 +224,26 @@ class Player:
                     self.wait_for_delivery()
                 return self.published
             self.state.seek(self.state.start_ns)
+
+
+class _Ticks:
+    """The periodic work of the engine: /clock at its rate, the progress line every 0.1 s."""
+
+    def __init__(self, player: Player, progress: Callable[[], None] | None) -> None:
+        self.player, self.progress = player, progress
+        hz = player.options.clock_hz if player.clock_pub is not None else 0.0
+        self.clock_period = 1.0 / hz if hz > 0 else None
+        self.next_clock = self.next_progress = time.monotonic()
+
+    def run(self, wait: float | None) -> float:
+        """Do what is due; return how long the engine may sleep (at most ``wait``, 0.25 s)."""
+        now = time.monotonic()
+        if self.clock_period is not None and now >= self.next_clock:
+            self.player._publish_clock(self.player.state.snapshot().bag_ns)
+            self.next_clock = max(self.next_clock + self.clock_period, now)
+        if self.progress is not None and now >= self.next_progress:
+            self.progress()
+            self.next_progress = now + 0.1
+        due = [t - now for t, on in ((self.next_progress, self.progress is not None),
+                                     (self.next_clock, self.clock_period is not None)) if on]
+        return max(0.0, min([0.25, *due, *([wait] if wait else [])]))
