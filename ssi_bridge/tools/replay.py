@@ -182,7 +182,10 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
         signal.signal(signal.SIGTERM, lambda *_: player.state.stop())
         if not args.disable_keyboard_controls:
             keyboard = Keyboard(player.state)
-            keyboard.start()
+            if keyboard.start():
+                logging.getLogger("replay").info(
+                    "keys: space pause/resume, \u2192 next message (paused), "
+                    "\u2191/\u2193 rate +/-10 %")
         if sys.stderr.isatty() and not args.quiet:
             progress = ProgressLine(player.state, sys.stderr)
         count = player.play(progress)

@@ -356,6 +356,7 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
                               r"rate 1\.00x  0 msgs"), 30, "the progress line, paused")
         time.sleep(0.3)
         assert not rx, "started paused"
+        assert "keys: space pause/resume" in screen.text, "the keys are named"
         for k in range(2):
             os.write(master, b"\x1b[C")        # →
             wait_for(lambda: len(rx) > k, 10, f"message {k} after →")
@@ -437,6 +438,7 @@ def test_disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None
         os.write(master, b" \x1b[C")
         time.sleep(1.5)
         assert not rx and screen.shows(r"^\[P\] .* 0 msgs")(), screen.last_line()
+        assert "keys:" not in screen.text
         assert termios.tcgetattr(slave)[3] & termios.ICANON, "the terminal stays line-buffered"
     finally:
         proc.kill()
