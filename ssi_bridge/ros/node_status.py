@@ -153,6 +153,7 @@ class NodeDiagnostics:
             "cycle_scheduling": getattr(self.cycle, "scheduling", "")}
         if self.master is not None:
             counters["receive_scheduling"] = self.master.receive_scheduling
+            counters.update(self.master.link_figures())
         counters["diagnostics_period_s"] = f"{self.settings.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
         counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
@@ -196,11 +197,14 @@ class NodeDiagnostics:
     def _bus_problem(self) -> str:
         """An error beside the bus state: the recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
-        return "; ".join(p for p in (self.recorder.error, self.liveview.error, station) if p)
+        link = self.master.interface_problem() if self.master is not None else ""
+        return "; ".join(p for p in (link, self.recorder.error, self.liveview.error, station)
+                         if p)
 
     def _on_diag_timer(self) -> None:
         """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
-        if not self.settings.listen_only and self.context.ok():  # type: ignore[attr-defined]
+        lost = self.master is not None and self.master.interface_problem()
+        if not self.settings.listen_only and not lost and self.context.ok():  # type: ignore
             self.refresh_cams()  # type: ignore[attr-defined]
         self.publish_diagnostics()
 
