@@ -17,6 +17,7 @@ from typing import Protocol
 import can
 import canopen
 
+from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.link import ReopeningBus
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import FrameListener
@@ -71,6 +72,8 @@ class CanMaster:
         self.clients: list[Attached] = []
         #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
         self.gate = CycleGate()
+        #: the interface's error frames per class, bus-off and error passive
+        self.error_frames = ErrorFrameWatch()
 
     def connect(self) -> None:
         """Open the bus and start canopen's network (idempotent)."""
@@ -91,6 +94,7 @@ class CanMaster:
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self._listener.foreign.on_sync = self._on_foreign_sync
+        self._listener.error_frames = self.error_frames
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
@@ -134,6 +138,7 @@ class CanMaster:
 
     def _on_reopen(self) -> None:
         """The lost interface is open again (receive thread): configure every station."""
+        self.error_frames.recovered("the interface was reopened")
         for client in list(self.clients):
             client.request_configuration()
 

@@ -100,6 +100,11 @@ class ReopeningBus(can.BusABC):
         self.channel_info = str(getattr(inner, "channel_info", name))
 
     @property
+    def current(self) -> can.BusABC | None:
+        """The bus open now (the opener's), None while the interface is lost."""
+        return self._inner
+
+    @property
     def lost(self) -> bool:
         """True while the interface is lost (between a loss and the reopen)."""
         return self._inner is None and not self._closed

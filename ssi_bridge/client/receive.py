@@ -28,6 +28,7 @@ from ssi_bridge.client.sdo import position_pdos
 from ssi_bridge.base.canopen_compat import pdo_handler, subscribers
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import frame_wire_time
+from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.foreign import ForeignTraffic
 from ssi_bridge.protocol.dictionary import NMT_COB_ID, SYNC_COB_ID, tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
@@ -71,6 +72,8 @@ class FrameListener(GuardedListener):
         self.also: list[ClientCounters] = []
         #: SYNC and NMT frames of other nodes (``client/foreign.py``)
         self.foreign = ForeignTraffic(self.count)
+        #: the error frames of the interface, per class (``client/error_frames.py``)
+        self.error_frames = ErrorFrameWatch()
         self._load = load
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
@@ -90,13 +93,16 @@ class FrameListener(GuardedListener):
             setattr(counters, kind, getattr(counters, kind) + 1)
 
     def on_message_received(self, msg: can.Message) -> None:
-        """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
+        """Count ``msg`` (error frames per class too), then let canopen dispatch it."""
         if not self.scheduling:
             self._schedule_this_thread()
         counters = self._counters
         counters.frames += 1
         if msg.is_error_frame:
             counters.can_errors += 1
+            self.error_frames.observe(msg.arbitration_id, msg.data)
+        elif self.error_frames.bus_off:
+            self.error_frames.heard(msg.arbitration_id)
         if self._load is not None:
             self._load.add(msg)
         if msg.arbitration_id in _MASTER_IDS and not (msg.is_error_frame or msg.is_remote_frame

@@ -15,6 +15,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 
 from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.client.error_frames import error_frame_keys
 from ssi_bridge.core.health import ERROR, WARN
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
 
@@ -55,7 +56,7 @@ class NodeDiagnostics:
         Counters of :data:`BUS_WARN_COUNTS` that grew and other nodes' SYNC / NMT frames of the
         last two periods are a WARN; a failed supervisor round an ERROR.
         """
-        names = (*BUS_WARN_COUNTS, BUS_ERROR_COUNT)
+        names = (*BUS_WARN_COUNTS, *error_frame_keys(), BUS_ERROR_COUNT)
         last = self._last_bus_counts
         grown = {k: counters.get(k, 0) - last.get(k, 0) for k in names
                  if counters.get(k, 0) > last.get(k, 0)}
@@ -66,8 +67,8 @@ class NodeDiagnostics:
         parts = [f"{k} +{n}" for k, n in grown.items()]
         if self.master is not None:
             foreign = self.master.foreign_traffic(2 * self.settings.diagnostics_period)
-            if foreign:
-                parts.append(foreign)
+            passive = self.master.error_frames.warning()  # error passive / warning
+            parts += [p for p in (passive, foreign) if p]
         return (WARN, "; ".join(parts)) if parts else (None, "")
 
     def _with_bus_findings(self, status: Any, counters: dict[str, Any]) -> Any:
@@ -154,6 +155,7 @@ class NodeDiagnostics:
         if self.master is not None:
             counters["receive_scheduling"] = self.master.receive_scheduling
             counters.update(self.master.link_figures())
+            counters.update(self.master.error_frames.figures())
         counters["diagnostics_period_s"] = f"{self.settings.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
         counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
@@ -198,8 +200,9 @@ class NodeDiagnostics:
         """An error beside the bus state: the recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
         link = self.master.interface_problem() if self.master is not None else ""
-        return "; ".join(p for p in (link, self.recorder.error, self.liveview.error, station)
-                         if p)
+        bus_off = self.master.error_frames.problem() if self.master is not None else ""
+        return "; ".join(p for p in (link, bus_off, self.recorder.error, self.liveview.error,
+                                     station) if p)
 
     def _on_diag_timer(self) -> None:
         """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
