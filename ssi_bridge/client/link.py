@@ -12,9 +12,11 @@ master's bus and, on such an error of ``send`` or ``recv``:
   joints go STALE as under total frame loss) and diagnostics keep publishing;
 * from the receive thread, opens the bus again after :data:`BACKOFF_FIRST_S`, the wait
   doubling after each failed attempt up to :data:`BACKOFF_MAX_S`; a failed attempt is
-  logged at DEBUG, a summary at most every :data:`SUMMARY_S`;
-* once the bus is open again: one line, and :attr:`on_reopen` (the master asks each
-  station's supervisor to configure it again).
+  logged at DEBUG, a summary at most every :data:`SUMMARY_S`; a reopened bus that fails
+  before its first frame (socketcan: the device exists, its link is still down) is a failed
+  attempt too;
+* once a reopened bus has sent or received a frame: one line, and :attr:`on_reopen` (the
+  master asks each station's supervisor to configure it again).
 
 An error without an errno (an undecodable datagram, python-can's "Transmit buffer full"
 after its own send timeout) is not a lost interface and passes through unchanged.
@@ -93,8 +95,10 @@ class ReopeningBus(can.BusABC):
         self._delay = BACKOFF_FIRST_S
         self._next_try = 0.0
         self._tries = 0  # attempts since the last loss
+        #: a reopened bus that has neither sent nor received a frame yet
+        self._probation = False
         self._summary = RateLimitedLog(logger, SUMMARY_S)
-        #: called (receive thread) once the bus is open again
+        #: called once a reopened bus has sent or received a frame (the interface is back)
         self.on_reopen: Callable[[], None] | None = None
         super().__init__(channel=getattr(inner, "channel_info", name))
         self.channel_info = str(getattr(inner, "channel_info", name))
@@ -106,8 +110,8 @@ class ReopeningBus(can.BusABC):
 
     @property
     def lost(self) -> bool:
-        """True while the interface is lost (between a loss and the reopen)."""
-        return self._inner is None and not self._closed
+        """True from a loss until a reopened bus has sent or received a frame."""
+        return (self._inner is None or self._probation) and not self._closed
 
     def problem(self) -> str:
         """The loss in words for the bus diagnostics ("" while the interface works)."""
@@ -141,6 +145,8 @@ class ReopeningBus(can.BusABC):
                 raise
             self._lose(inner, reason)
             raise self._lost_error() from err
+        if self._probation:
+            self._confirm(inner)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """One frame, or None after ``timeout``; while the interface is lost, None after
@@ -150,30 +156,44 @@ class ReopeningBus(can.BusABC):
             self._wait_and_reopen(0.05 if timeout is None else timeout)
             return None
         try:
-            return inner.recv(timeout)
+            msg = inner.recv(timeout)
         except (can.CanError, OSError) as err:
             reason = lost_reason(err)
             if reason is None:
                 raise
             self._lose(inner, reason)
             return None
+        if msg is not None and self._probation:
+            self._confirm(inner)
+        return msg
 
     def _lose(self, inner: can.BusABC, reason: str) -> None:
-        """``inner`` failed with ``reason``: shut it down and plan the reopen (once)."""
+        """``inner`` failed with ``reason``: shut it down and plan the reopen (once).
+
+        A reopened bus that fails before it ever worked (socketcan's device exists but its
+        link is still down) is a failed reopen attempt, not a new loss: the back-off goes on.
+        """
         with self._lock:
             if self._inner is not inner or self._closed:
                 return  # another thread saw the same loss first
             self._inner = None
-            self.reason = reason
-            self.losses += 1
-            self.lost_at = time.monotonic()
-            self._delay = BACKOFF_FIRST_S
-            self._next_try = self.lost_at + self._delay
-            self.last_attempt_error = ""
-            self._tries = 0
-        logger.error("CAN interface %s lost: %s; reopening it after %g s, then with back-off "
-                     "up to every %g s (the joints go STALE meanwhile)", self.name, reason,
-                     BACKOFF_FIRST_S, BACKOFF_MAX_S)
+            retry = self._probation
+            self._probation = False
+            if retry:
+                self.last_attempt_error = reason
+                self._delay = min(2 * self._delay, BACKOFF_MAX_S)
+            else:
+                self.reason = reason
+                self.losses += 1
+                self.lost_at = time.monotonic()
+                self._delay = BACKOFF_FIRST_S
+                self.last_attempt_error = ""
+                self._tries = 0
+            self._next_try = time.monotonic() + self._delay
+        if not retry:
+            logger.error("CAN interface %s lost: %s; reopening it after %g s, then with "
+                         "back-off up to every %g s (the joints go STALE meanwhile)", self.name,
+                         reason, BACKOFF_FIRST_S, BACKOFF_MAX_S)
         try:
             inner.shutdown()
         except Exception as err:  # noqa: BLE001 - a broken interface may fail to close too
@@ -208,6 +228,14 @@ class ReopeningBus(can.BusABC):
                 bus.shutdown()
                 return
             self._inner = bus
+            self._probation = True  # until it sends or receives a frame
+
+    def _confirm(self, inner: can.BusABC) -> None:
+        """The reopened ``inner`` sent or received a frame: the interface is back."""
+        with self._lock:
+            if not self._probation or self._inner is not inner:
+                return
+            self._probation = False
             self.reopens += 1
         logger.warning("CAN interface %s open again after %.1f s (%d attempt(s)); configuring "
                        "the stations again", self.name, time.monotonic() - self.lost_at,

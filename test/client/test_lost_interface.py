@@ -9,6 +9,7 @@ and which cannot be opened while "unplugged" (ENODEV); the station a real simula
 from __future__ import annotations
 
 import errno
+import logging
 import time
 
 import can
@@ -46,21 +47,23 @@ def test_what_counts_as_a_lost_interface() -> None:
 
 
 class Cable:
-    """The test's hand on the interface."""
+    """The test's hand on the interface: unplugged (cannot be opened), or its link down (opens,
+    but every call fails: socketcan after ``ip link set can0 down``)."""
 
     unplugged = False
+    link_down = False
 
 
 class UnpluggableVirtual(VirtualBus):
     """python-can's virtual bus failing like a lost socketcan device while unplugged."""
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        if Cable.unplugged:
+        if Cable.unplugged or Cable.link_down:
             raise ENETDOWN
         super().send(msg, timeout)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if Cable.unplugged:
+        if Cable.unplugged or Cable.link_down:
             time.sleep(0.001)
             raise can.CanOperationError("Error receiving: Network is down", errno.ENETDOWN)
         return super()._recv_internal(timeout)
@@ -84,7 +87,7 @@ def _cycles(client: BridgeClient, n: int) -> int:
 def unplugged_later(channel: str):
     gateway = XnGateway(BusConfig(channel=channel, node_id=NODE), NODE,
                         [Xn1Ssi(ScriptedReader(77), slot=1)])
-    Cable.unplugged = False
+    Cable.unplugged = Cable.link_down = False
     client = BridgeClient(BusConfig(channel=channel, node_id=NODE), NODE, 1, sdo_timeout=0.3,
                           handshake_timeout=0.5, heartbeat_ms=20, opener=_open)
     gateway.start()
@@ -92,7 +95,7 @@ def unplugged_later(channel: str):
         client.connect()
         yield client
     finally:
-        Cable.unplugged = False
+        Cable.unplugged = Cable.link_down = False
         client.close()
         gateway.stop()
 
@@ -127,3 +130,33 @@ def test_the_lost_interface_is_reopened_and_the_station_configured_again(
     assert client.latest(1).position == 77
     assert client.master.link_figures() == {"interface_losses": 1, "interface_reopens": 1,
                                             "interface_reopen_attempts": link.attempts}
+
+
+def test_a_link_still_down_is_no_new_loss_and_the_log_stays_quiet(
+        unplugged_later: BridgeClient, caplog: pytest.LogCaptureFixture) -> None:
+    """socketcan after ``ip link set can0 down``: the device opens but every call fails. Each
+    such reopen is a failed attempt (the back-off goes on), not a loss and a return each
+    time: one line when lost, one when it works again."""
+    client = unplugged_later
+    link = client.master.link
+    caplog.set_level(logging.INFO, logger="ssi_bridge.client.link")
+    Cable.link_down = True
+    deadline = time.monotonic() + 2.0
+    while not link.lost and time.monotonic() < deadline:
+        client.sync()
+        time.sleep(0.01)
+    end = time.monotonic() + 1.6  # attempts at 0.1, 0.3, 0.7, 1.5 s open and fail again
+    while time.monotonic() < end:
+        client.sync()
+        time.sleep(0.01)
+    assert link.lost and link.losses == 1 and link.attempts >= 3, link.figures()
+    assert "Network is down" in link.problem()
+    Cable.link_down = False
+    deadline = time.monotonic() + BACKOFF_MAX_S + 3.0
+    while link.lost and time.monotonic() < deadline:
+        client.sync()
+        time.sleep(0.01)
+    assert not link.lost and link.losses == 1 and link.reopens == 1, link.figures()
+    lines = [r.getMessage() for r in caplog.records
+             if r.name == "ssi_bridge.client.link" and r.levelno >= logging.WARNING]
+    assert len(lines) == 2 and "lost" in lines[0] and "open again" in lines[1], lines
