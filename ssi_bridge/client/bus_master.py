@@ -111,6 +111,8 @@ class CanMaster:
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
             self.clients.append(client)
+        if self._listener is not None:
+            self._listener.foreign.watch(client.node_id)
         self._count_faults_for(client, True)
 
     def _count_faults_for(self, client: Attached, on: bool) -> None:

@@ -30,7 +30,7 @@ from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import frame_wire_time
 from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.foreign import ForeignTraffic
-from ssi_bridge.protocol.dictionary import NMT_COB_ID, SYNC_COB_ID, tpdo_cob_base
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
@@ -38,8 +38,6 @@ logger = logging.getLogger(__name__)
 #: kernel name of the master's receive thread (``top -H``)
 RX_THREAD_NAME = "ssi_can_rx"
 
-#: identifiers only the master sends (NMT, SYNC): received, they are another node's
-_MASTER_IDS = (NMT_COB_ID, SYNC_COB_ID)
 #: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
 #: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
@@ -105,9 +103,10 @@ class FrameListener(GuardedListener):
             self.error_frames.heard(msg.arbitration_id)
         if self._load is not None:
             self._load.add(msg)
-        if msg.arbitration_id in _MASTER_IDS and not (msg.is_error_frame or msg.is_remote_frame
-                                                      or msg.is_extended_id):
-            # the master hears none of its own frames: another node's SYNC or NMT command
+        if msg.arbitration_id in self.foreign.ids and not (
+                msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id):
+            # the master hears none of its own frames: another node's SYNC, NMT command, or
+            # SDO request to one of its stations
             self.foreign.observe(msg.arbitration_id, msg.data, frame_wire_time(msg))
         GuardedListener.on_message_received(self, msg)
 
