@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
+from typing import Protocol
 
 import can
 
@@ -52,13 +53,17 @@ def heard_masters(bus: can.BusABC, station_ids: Sequence[int], window: float) ->
 
 def ensure_alone(config: BusConfig, station_ids: Sequence[int],
                  opener: Callable[[BusConfig], can.BusABC] | None = None,
-                 window: float = MASTER_CHECK_S) -> None:
+                 window: float = MASTER_CHECK_S, *, listen_only: bool = False) -> None:
     """Listen ``window`` s on the bus of ``config`` (opened with ``opener``, default a plain
     python-can bus, and closed again); raise BusError naming another master's frames.
 
-    A bus that cannot be opened is not checked: whoever opens it next (the simulated
-    station's start, the master) reports that with its own words.
+    Nothing is checked for a ``listen_only`` observer (it observes another master by design)
+    nor on the in-process ``virtual`` bus (nobody else can be on it). A bus that cannot be
+    opened is not checked either: whoever opens it next (the simulated station's start, the
+    master) reports that with its own words.
     """
+    if listen_only or config.interface == "virtual":
+        return
     try:
         bus = (opener or open_bus)(config)
     except BusError:
@@ -75,4 +80,21 @@ def ensure_alone(config: BusConfig, station_ids: Sequence[int],
             "this bridge a bus of its own (bus.channel) or observe with bus.listen_only")
 
 
-__all__ = ["MASTER_CHECK_S", "ensure_alone", "heard_masters"]
+class MasterSettings(Protocol):
+    """What :func:`ensure_node_alone` reads of the node's settings (``NodeSettings``)."""
+
+    listen_only: bool
+
+    @property
+    def station_ids(self) -> tuple[int, ...]:
+        """The node ids of the node's stations."""
+
+
+def ensure_node_alone(config: BusConfig, settings: MasterSettings,
+                      opener: Callable[[BusConfig], can.BusABC] | None = None) -> None:
+    """:func:`ensure_alone` for a node: its stations, nothing when it only listens."""
+    ensure_alone(config, settings.station_ids, opener, listen_only=settings.listen_only)
+
+
+__all__ = ["MASTER_CHECK_S", "MasterSettings", "ensure_alone", "ensure_node_alone",
+           "heard_masters"]

@@ -30,7 +30,7 @@ from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
-from ssi_bridge.client.one_master import ensure_alone
+from ssi_bridge.client.one_master import ensure_node_alone
 from ssi_bridge.core.bridge import Bridge
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
@@ -115,8 +115,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
             self.joints[j.name] = core
         self.bridge.faults = None
         self.station = self._simulation(s) if self._simulation is not None else None
-        if not s.listen_only and s.bus_interface != "virtual":  # one master per bus (CiA 301)
-            ensure_alone(self.bus_config, s.station_ids, getattr(self.station, "open_bus", None))
+        ensure_node_alone(self.bus_config, s, getattr(self.station, "open_bus", None))
         if self.station is not None:
             self.station.start()
         self.player: CanLogPlayer | None = None

@@ -44,18 +44,28 @@ def test_another_master_is_heard_and_named_before_the_first_frame(channel: str) 
 
 
 def test_ensure_alone_refuses_a_bus_another_master_syncs(channel: str) -> None:
+    """On an interface another process can reach (here socketcan's name, opened on the test's
+    virtual channel): quiet, nothing happens; another master's SYNC is a BusError naming it."""
     other = can.Bus(interface="virtual", channel=channel)
-    config = BusConfig(interface="virtual", channel=channel)
+    config = BusConfig(interface="socketcan", channel=channel)
+
+    def quiet(cfg: BusConfig) -> can.BusABC:
+        return can.Bus(interface="virtual", channel=channel)
 
     def open_while_the_other_syncs(cfg: BusConfig) -> can.BusABC:
-        bus = can.Bus(interface="virtual", channel=cfg.channel)
+        bus = can.Bus(interface="virtual", channel=channel)
         other.send(_frame(0x080))  # the other master's SYNC, heard by the bus just opened
         return bus
     try:
-        ensure_alone(config, [1], window=0.1)  # nobody there: no error
-        with pytest.raises(BusError, match=r"another CANopen master drives virtual:.* 1 x "
+        ensure_alone(config, [1], opener=quiet, window=0.1)
+        with pytest.raises(BusError, match=r"another CANopen master drives socketcan:.* 1 x "
                                            r"SYNC on 0x080.*one master per bus"):
             ensure_alone(config, [1], opener=open_while_the_other_syncs, window=0.1)
+        # a listen-only observer, and the process's own virtual bus, are not checked
+        ensure_alone(config, [1], opener=open_while_the_other_syncs, window=0.1,
+                     listen_only=True)
+        ensure_alone(BusConfig(interface="virtual", channel=channel), [1],
+                     opener=open_while_the_other_syncs, window=0.1)
     finally:
         other.shutdown()
 
