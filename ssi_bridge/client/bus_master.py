@@ -154,8 +154,8 @@ class CanMaster:
         return self.link.figures() if self.link is not None else {}
 
     def foreign_traffic(self, window: float) -> str:
-        """SYNC / NMT frames of other nodes seen within ``window`` s, in words ("" if none):
-        for a WARN of the bus diagnostics."""
+        """SYNC / NMT / SDO request frames of other nodes seen within ``window`` s, in words
+        ("" if none), for a WARN of the bus diagnostics."""
         return self._listener.foreign.recent(window) if self._listener is not None else ""
 
     def sync(self) -> float:

@@ -85,7 +85,7 @@ def describe_frame(can_id: int, data: bytes, frames: dict[int, str]) -> str:
 
 
 class ForeignTraffic:
-    """SYNC and NMT frames of other nodes the master's receive path handed over.
+    """SYNC, NMT and SDO request frames of other nodes the master's receive path handed over.
 
     :param count: counts one event of a ClientCounters field in every counter set
     :param on_sync: called with the wire time of another producer's SYNC (the slot tables)

@@ -54,8 +54,9 @@ class NodeDiagnostics:
     def _bus_findings(self, counters: dict[str, Any]) -> tuple[bytes | None, str]:
         """What the bus did since the last diagnostics message: (level, message), or (None, "").
 
-        Counters of :data:`BUS_WARN_COUNTS` that grew and other nodes' SYNC / NMT frames of the
-        last two periods are a WARN; a failed supervisor round an ERROR.
+        Counters of :data:`BUS_WARN_COUNTS` and error frames of a class (``error_frames_*``)
+        that grew, a controller error passive or warning, and other nodes' SYNC / NMT / SDO
+        request frames of the last two periods are a WARN; a failed supervisor round an ERROR.
         """
         names = (*BUS_WARN_COUNTS, *error_frame_keys(), BUS_ERROR_COUNT)
         last = self._last_bus_counts
@@ -198,7 +199,8 @@ class NodeDiagnostics:
         return out
 
     def _bus_problem(self) -> str:
-        """An error beside the bus state: the recorder's, a simulated station that ended."""
+        """An error beside the bus state: a lost interface, a bus-off controller, the
+        recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
         link = self.master.interface_problem() if self.master is not None else ""
         bus_off = self.master.error_frames.problem() if self.master is not None else ""
