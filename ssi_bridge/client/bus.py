@@ -23,6 +23,7 @@ import canopen
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.base.buses import open_python_can, take_bus
+from ssi_bridge.client.link import ReopeningBus
 from ssi_bridge.protocol.settings import BusConfig
 
 logger = logging.getLogger(__name__)
@@ -61,8 +62,12 @@ class ReceiveWatch(can.BusABC):
 
     @property
     def inner(self) -> can.BusABC:
-        """The wrapped bus."""
-        return self._inner
+        """The wrapped bus: the one the opener opened (behind a ReopeningBus, the one open
+        now), or the bus handed over."""
+        inner = self._inner
+        if isinstance(inner, ReopeningBus) and inner.current is not None:
+            return inner.current
+        return inner
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Send ``msg`` on the wrapped bus."""

@@ -17,6 +17,8 @@ from typing import Protocol
 import can
 import canopen
 
+from ssi_bridge.client.error_frames import ErrorFrameWatch
+from ssi_bridge.client.link import ReopeningBus
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import FrameListener
 from ssi_bridge.client.samples import ClientCounters, CycleGate, SlotTable
@@ -36,6 +38,9 @@ class Attached(Protocol):
     node_id: int
     counters: ClientCounters
     table: SlotTable
+
+    def request_configuration(self) -> None:
+        """Have the station configured again by its supervisor thread (the bus came back)."""
 
 
 class CanMaster:
@@ -59,25 +64,37 @@ class CanMaster:
         #: bus load from frame timestamps (one bus, so one figure for every station)
         self.load = BusLoad(bus.bitrate if isinstance(bus, BusConfig) else 500_000)
         self.bus: ReceiveWatch | None = None
+        #: the opened bus, reopened after its interface is lost (None on a handed-over bus)
+        self.link: ReopeningBus | None = None
         self.network: canopen.Network | None = None
         #: one sender at a time on the network (SYNC, RPDOs of every station)
         self.send_lock = threading.Lock()
         self.clients: list[Attached] = []
         #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
         self.gate = CycleGate()
+        #: the interface's error frames per class, bus-off and error passive
+        self.error_frames = ErrorFrameWatch()
 
     def connect(self) -> None:
         """Open the bus and start canopen's network (idempotent)."""
         if self.network is not None:
             return
-        inner = take_bus(self._source, "this master", self._opener)
-        if not isinstance(self._source, BusConfig):
+        source, opener = self._source, self._opener
+        inner = take_bus(source, "this master", opener)
+        if isinstance(source, BusConfig):
+            # a lost interface is reopened with back-off (client/link.py)
+            self.link = ReopeningBus(inner, lambda: opener(source),
+                                     f"{source.interface}:{source.channel}")
+            self.link.on_reopen = self._on_reopen
+            inner = self.link
+        else:
             self._source = None  # a handed-over bus is taken once
         self.bus = ReceiveWatch(inner)
         self.network = MasterNetwork(self.bus)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self._listener.foreign.on_sync = self._on_foreign_sync
+        self._listener.error_frames = self.error_frames
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
@@ -94,6 +111,8 @@ class CanMaster:
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
             self.clients.append(client)
+        if self._listener is not None:
+            self._listener.foreign.watch(client.node_id)
         self._count_faults_for(client, True)
 
     def _count_faults_for(self, client: Attached, on: bool) -> None:
@@ -119,9 +138,24 @@ class CanMaster:
             for client in self.clients:
                 client.table.on_foreign_sync(at)
 
+    def _on_reopen(self) -> None:
+        """The lost interface is open again (receive thread): configure every station."""
+        self.error_frames.recovered("the interface was reopened")
+        for client in list(self.clients):
+            client.request_configuration()
+
+    def interface_problem(self) -> str:
+        """The lost interface in words for the bus diagnostics ("" while it works)."""
+        return self.link.problem() if self.link is not None else ""
+
+    def link_figures(self) -> dict[str, int]:
+        """Losses and reopens of the interface for the bus diagnostics ({} on a handed-over
+        bus)."""
+        return self.link.figures() if self.link is not None else {}
+
     def foreign_traffic(self, window: float) -> str:
-        """SYNC / NMT frames of other nodes seen within ``window`` s, in words ("" if none):
-        for a WARN of the bus diagnostics."""
+        """SYNC / NMT / SDO request frames of other nodes seen within ``window`` s, in words
+        ("" if none), for a WARN of the bus diagnostics."""
         return self._listener.foreign.recent(window) if self._listener is not None else ""
 
     def sync(self) -> float:
@@ -142,6 +176,10 @@ class CanMaster:
                 frame = self.network.send_message(SYNC_COB_ID, b"")
         except can.CanError as err:
             self.counters.can_errors += 1
+            if self.link is not None and self.link.lost:
+                # a cycle without SYNC: nothing answers, the joints go STALE as under frame
+                # loss, and the cycle thread keeps its period (client/link.py reopens)
+                return t
             raise BusError(f"could not send SYNC: {err}") from err
         self.counters.syncs += 1
         for client in self.clients:

@@ -159,6 +159,10 @@ class Liveness:
             self._thread.join(timeout=timeout)
         self._thread = None
 
+    def reconfigure(self) -> None:
+        """Ask the supervisor thread to configure the station again (e.g. the bus is back)."""
+        self._reconfigure.set()
+
     def on_heartbeat(self, state: int, at: float | None = None) -> None:
         """A heartbeat in NMT ``state`` arrived at wire time ``at`` (network thread)."""
         at = wire_now() if not at else at

@@ -35,16 +35,14 @@ from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
-from ssi_bridge.exceptions import (
-    BusError, GatewayUnavailable, HandshakeTimeout, RegisterError, SsiBridgeError,
-)
+from ssi_bridge.exceptions import (BusError, GatewayUnavailable, HandshakeTimeout,
+                                   RegisterError, SsiBridgeError)
 from ssi_bridge.client.bus import BusOpener, ReceiveWatch
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.dictionary import (
     MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
-    rpdo_cob_base,
-)
+    rpdo_cob_base)
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.protocol.images import CmpControl, CmpStatus, Control, ProcessInput
 
@@ -181,6 +179,10 @@ class BridgeClient:
             self._send_output(slot, bytes(self.table.slot(slot).output))
         logger.info("gateway node %d configured (%d slot(s), %s transport)", self.node_id,
                     self.slots, self.transport)
+
+    def request_configuration(self) -> None:
+        """Have the supervisor thread configure the station again (the bus came back)."""
+        self._liveness.reconfigure()
 
     def send_nmt(self, command: int) -> None:
         """Send NMT module control ``command`` (CiA 301 §7.2.8.3.1) to this station.

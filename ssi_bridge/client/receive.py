@@ -28,8 +28,9 @@ from ssi_bridge.client.sdo import position_pdos
 from ssi_bridge.base.canopen_compat import pdo_handler, subscribers
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import frame_wire_time
+from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.foreign import ForeignTraffic
-from ssi_bridge.protocol.dictionary import NMT_COB_ID, SYNC_COB_ID, tpdo_cob_base
+from ssi_bridge.protocol.dictionary import tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
 
 logger = logging.getLogger(__name__)
@@ -37,8 +38,6 @@ logger = logging.getLogger(__name__)
 #: kernel name of the master's receive thread (``top -H``)
 RX_THREAD_NAME = "ssi_can_rx"
 
-#: identifiers only the master sends (NMT, SYNC): received, they are another node's
-_MASTER_IDS = (NMT_COB_ID, SYNC_COB_ID)
 #: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
 #: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
@@ -71,6 +70,8 @@ class FrameListener(GuardedListener):
         self.also: list[ClientCounters] = []
         #: SYNC and NMT frames of other nodes (``client/foreign.py``)
         self.foreign = ForeignTraffic(self.count)
+        #: the error frames of the interface, per class (``client/error_frames.py``)
+        self.error_frames = ErrorFrameWatch()
         self._load = load
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
@@ -90,18 +91,22 @@ class FrameListener(GuardedListener):
             setattr(counters, kind, getattr(counters, kind) + 1)
 
     def on_message_received(self, msg: can.Message) -> None:
-        """Count ``msg`` (and error frames as CAN errors), then let canopen dispatch it."""
+        """Count ``msg`` (error frames per class too), then let canopen dispatch it."""
         if not self.scheduling:
             self._schedule_this_thread()
         counters = self._counters
         counters.frames += 1
         if msg.is_error_frame:
             counters.can_errors += 1
+            self.error_frames.observe(msg.arbitration_id, msg.data)
+        elif self.error_frames.bus_off:
+            self.error_frames.heard(msg.arbitration_id)
         if self._load is not None:
             self._load.add(msg)
-        if msg.arbitration_id in _MASTER_IDS and not (msg.is_error_frame or msg.is_remote_frame
-                                                      or msg.is_extended_id):
-            # the master hears none of its own frames: another node's SYNC or NMT command
+        if msg.arbitration_id in self.foreign.ids and not (
+                msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id):
+            # the master hears none of its own frames: another node's SYNC, NMT command, or
+            # SDO request to one of its stations
             self.foreign.observe(msg.arbitration_id, msg.data, frame_wire_time(msg))
         GuardedListener.on_message_received(self, msg)
 

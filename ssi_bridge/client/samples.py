@@ -80,6 +80,8 @@ class ClientCounters:
     foreign_sync_answers: int = 0
     #: NMT commands received that this master did not send
     foreign_nmt_commands: int = 0
+    #: SDO requests to this master's stations that it did not send
+    foreign_station_frames: int = 0
 
 
 @dataclass

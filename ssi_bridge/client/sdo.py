@@ -11,10 +11,11 @@ from __future__ import annotations
 import logging
 import threading
 
+import can
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
 
-from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
+from ssi_bridge.exceptions import BusError, GatewayUnavailable, SdoAbortError
 from ssi_bridge.protocol.dictionary import (
     PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base, tpdo_cob_base,
 )
@@ -63,6 +64,8 @@ class SdoAccess:
 
     def _fail(self, err: Exception, what: str, index: int, subindex: int) -> Exception:
         where = f"0x{index:04X}:{subindex:02X}"
+        if isinstance(err, can.CanError):  # the bus refused the request (interface lost)
+            return BusError(f"SDO {what} of {where} on node {self.node.id} not sent: {err}")
         if isinstance(err, SdoAbortedError):
             self.aborts += 1
             meaning = abort_meaning(err.code)
@@ -82,7 +85,7 @@ class SdoAccess:
                 var = self.node.sdo[index]
                 var = var[subindex] if not isinstance(var, SdoVariable) else var
                 return var.raw
-            except (SdoAbortedError, SdoCommunicationError) as err:
+            except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "upload", index, subindex) from err
 
     def write(self, index: int, subindex: int, value: int | bytes) -> None:
@@ -92,7 +95,7 @@ class SdoAccess:
                 var = self.node.sdo[index]
                 var = var[subindex] if not isinstance(var, SdoVariable) else var
                 var.raw = value
-            except (SdoAbortedError, SdoCommunicationError) as err:
+            except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "download", index, subindex) from err
 
     def upload(self, index: int, subindex: int) -> bytes:
@@ -133,7 +136,7 @@ class SdoAccess:
                                     TRANS_SYNC_EVERY, [(PROCESS_INPUT, slot)])
                         self._setup(self.node.rpdo[slot], rpdo_cob_base(slot) + node_id,
                                     TRANS_EVENT, [(PROCESS_OUTPUT, slot)])
-            except (SdoAbortedError, SdoCommunicationError) as err:
+            except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "PDO configuration", 0x1400, 0) from err
 
     @staticmethod

@@ -30,6 +30,7 @@ from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
+from ssi_bridge.client.one_master import ensure_node_alone
 from ssi_bridge.core.bridge import Bridge
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
@@ -114,8 +115,9 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
                 self.get_logger().warning(f"{j.name}: no frame checks: {core.layout_problem}")
             self.joints[j.name] = core
         self.bridge.faults = None
-        if self._simulation is not None:
-            self.station = self._simulation(s)
+        self.station = self._simulation(s) if self._simulation is not None else None
+        ensure_node_alone(self.bus_config, s, getattr(self.station, "open_bus", None))
+        if self.station is not None:
             self.station.start()
         self.player: CanLogPlayer | None = None
         self.client: BridgeClient | ListenOnlyClient

@@ -15,6 +15,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 
 from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.client.error_frames import error_frame_keys
 from ssi_bridge.core.health import ERROR, WARN
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
 
@@ -22,7 +23,8 @@ from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_statu
 #: bus counters whose growth since the last diagnostics message is a WARN: what the bus did
 #: that the receive path survived, another node's SYNC or NMT commands, stations restarted
 BUS_WARN_COUNTS = ("undecodable_frames", "malformed_pdos", "receive_errors", "callback_errors",
-                   "invalid_nmt_states", "nmt_restarts", "foreign_syncs", "foreign_nmt_commands")
+                   "invalid_nmt_states", "nmt_restarts", "foreign_syncs", "foreign_nmt_commands",
+                   "foreign_station_frames")
 #: and an ERROR: a round of a station's supervisor thread failed (it goes on; the log says why)
 BUS_ERROR_COUNT = "supervisor_errors"
 
@@ -52,10 +54,11 @@ class NodeDiagnostics:
     def _bus_findings(self, counters: dict[str, Any]) -> tuple[bytes | None, str]:
         """What the bus did since the last diagnostics message: (level, message), or (None, "").
 
-        Counters of :data:`BUS_WARN_COUNTS` that grew and other nodes' SYNC / NMT frames of the
-        last two periods are a WARN; a failed supervisor round an ERROR.
+        Counters of :data:`BUS_WARN_COUNTS` and error frames of a class (``error_frames_*``)
+        that grew, a controller error passive or warning, and other nodes' SYNC / NMT / SDO
+        request frames of the last two periods are a WARN; a failed supervisor round an ERROR.
         """
-        names = (*BUS_WARN_COUNTS, BUS_ERROR_COUNT)
+        names = (*BUS_WARN_COUNTS, *error_frame_keys(), BUS_ERROR_COUNT)
         last = self._last_bus_counts
         grown = {k: counters.get(k, 0) - last.get(k, 0) for k in names
                  if counters.get(k, 0) > last.get(k, 0)}
@@ -66,8 +69,8 @@ class NodeDiagnostics:
         parts = [f"{k} +{n}" for k, n in grown.items()]
         if self.master is not None:
             foreign = self.master.foreign_traffic(2 * self.settings.diagnostics_period)
-            if foreign:
-                parts.append(foreign)
+            passive = self.master.error_frames.warning()  # error passive / warning
+            parts += [p for p in (passive, foreign) if p]
         return (WARN, "; ".join(parts)) if parts else (None, "")
 
     def _with_bus_findings(self, status: Any, counters: dict[str, Any]) -> Any:
@@ -153,6 +156,8 @@ class NodeDiagnostics:
             "cycle_scheduling": getattr(self.cycle, "scheduling", "")}
         if self.master is not None:
             counters["receive_scheduling"] = self.master.receive_scheduling
+            counters.update(self.master.link_figures())
+            counters.update(self.master.error_frames.figures())
         counters["diagnostics_period_s"] = f"{self.settings.diagnostics_period:g}"
         counters["service_busy_refusals"] = self.handlers.busy_refusals
         counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
@@ -194,13 +199,18 @@ class NodeDiagnostics:
         return out
 
     def _bus_problem(self) -> str:
-        """An error beside the bus state: the recorder's, a simulated station that ended."""
+        """An error beside the bus state: a lost interface, a bus-off controller, the
+        recorder's, a simulated station that ended."""
         station = self.station.problem() if self.station is not None else None
-        return "; ".join(p for p in (self.recorder.error, self.liveview.error, station) if p)
+        link = self.master.interface_problem() if self.master is not None else ""
+        bus_off = self.master.error_frames.problem() if self.master is not None else ""
+        return "; ".join(p for p in (link, bus_off, self.recorder.error, self.liveview.error,
+                                     station) if p)
 
     def _on_diag_timer(self) -> None:
         """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
-        if not self.settings.listen_only and self.context.ok():  # type: ignore[attr-defined]
+        lost = self.master is not None and self.master.interface_problem()
+        if not self.settings.listen_only and not lost and self.context.ok():  # type: ignore
             self.refresh_cams()  # type: ignore[attr-defined]
         self.publish_diagnostics()
 

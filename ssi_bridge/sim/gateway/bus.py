@@ -87,6 +87,11 @@ class LossyBus(can.BusABC):
             return
         self._inner.send(msg, timeout)
 
+    def report(self, msg: can.Message) -> None:
+        """Put ``msg`` on the wire even while muted or lossy: an error frame the simulated
+        wire reports to the master (faults BUS_OFF / ERROR_PASSIVE, ``simulation.py``)."""
+        self._inner.send(msg)
+
     def _send_periodic_internal(self, msgs: can.Message | Sequence[can.Message], period: float,
                                 duration: float | None = None, autostart: bool = True,
                                 modifier_callback: Callable[[can.Message], None] | None = None,

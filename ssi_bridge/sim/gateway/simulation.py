@@ -5,7 +5,9 @@ A master injects a fault by writing 0x4000 (rate), 0x4001 (duration in ms) and t
 kinds in force as a bit mask. Each fault acts where a real one would: a broken wire or noise
 on a slot's SSI line, an error or power-failure bit in its encoder, an invalid REG_PARA1 set
 at its module's parameter interface (ERR_PARA), lost CAN frames or a silent gateway on the
-bus. Objects in ``docs/canopen.md`` and ``config/xn_gw_canopen.eds``.
+bus, the error frames of a master's controller gone bus-off (the station then silent, as a
+bus-off controller hears nothing) or error passive (``error_frames.py``). Objects in
+``docs/canopen.md`` and ``config/xn_gw_canopen.eds``.
 
 The station keeps the time itself: a fault with a duration is cleared on the station's clock,
 also while the gateway is silent, so nothing depends on a master reaching it. A clear
@@ -28,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.sim.gateway.error_frames import report_error_frames
 from ssi_bridge.protocol.dictionary import SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE
 
 if TYPE_CHECKING:
@@ -48,10 +51,15 @@ class FaultKind(IntEnum):
     CAN_FRAME_LOSS = 6
     GATEWAY_SILENT = 7
     INVALID_PARA1 = 8
+    BUS_OFF = 9
+    ERROR_PASSIVE = 10
 
 
 #: faults of the bus or gateway (slot 0 in the command)
-BUS_FAULTS = (FaultKind.CAN_FRAME_LOSS, FaultKind.GATEWAY_SILENT)
+BUS_FAULTS = (FaultKind.CAN_FRAME_LOSS, FaultKind.GATEWAY_SILENT, FaultKind.BUS_OFF,
+              FaultKind.ERROR_PASSIVE)
+#: faults under which the station sends nothing (only CLEAR_ALL reaches it)
+MUTING_FAULTS = (FaultKind.GATEWAY_SILENT, FaultKind.BUS_OFF)
 #: faults that need a rate in (0, 1]
 RATE_FAULTS = (FaultKind.BIT_NOISE, FaultKind.CAN_FRAME_LOSS)
 
@@ -226,9 +234,15 @@ class SimulationControl:
 
     def _apply(self, fault: StationFault, channel: Any, *, on: bool) -> None:
         kind, gateway = fault.kind, self._gateway
-        if kind is FaultKind.GATEWAY_SILENT:
+        if kind in MUTING_FAULTS:
             if gateway.bus is not None:
-                gateway.silent = on
+                # off only when no other muting fault is still in force
+                gateway.silent = on or any(f.kind in MUTING_FAULTS for f in self.active)
+                if kind is FaultKind.BUS_OFF:
+                    report_error_frames(gateway.bus, bus_off=True, on=on)
+        elif kind is FaultKind.ERROR_PASSIVE:
+            if gateway.bus is not None:
+                report_error_frames(gateway.bus, bus_off=False, on=on)
         elif kind is FaultKind.CAN_FRAME_LOSS:
             if gateway.bus is not None:
                 gateway.bus.loss_rate = fault.rate if on else 0.0

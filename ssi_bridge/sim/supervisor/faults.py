@@ -19,7 +19,9 @@ from ssi_bridge.protocol.encoder_config import ERROR_BITS, EncoderConfig, Specia
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.dictionary import SIM_COMMAND, SIM_DURATION, SIM_RATE
 from ssi_bridge.protocol.settings import JointSettings
-from ssi_bridge.sim.gateway.simulation import BUS_FAULTS, RATE_FAULTS, FaultKind, command_word
+from ssi_bridge.sim.gateway.simulation import (
+    BUS_FAULTS, MUTING_FAULTS, RATE_FAULTS, FaultKind, command_word,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -100,8 +102,9 @@ class FaultInjector:
                 raise ConfigError(f"unknown joint {joint!r}; joints: " + ", ".join(self._joints))
             slot = self._joints[joint].slot
         self.expire()
-        if any(f.kind is FaultKind.GATEWAY_SILENT for f in self.active):
-            raise ConfigError("the gateway is silent (GATEWAY_SILENT in force) and answers "
+        muted = [f.kind.name for f in self.active if f.kind in MUTING_FAULTS]
+        if muted:
+            raise ConfigError(f"the gateway is silent ({muted[0]} in force) and answers "
                               "nothing: only CLEAR_ALL reaches it")
         rate_value = float(rate) if fault in RATE_FAULTS else 0.0
         duration_ms = max(1, round(duration * 1000)) if duration > 0 else 0
