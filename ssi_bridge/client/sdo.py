@@ -100,20 +100,21 @@ class SdoAccess:
 
     def upload(self, index: int, subindex: int) -> bytes:
         """Upload the raw bytes of one object, whether or not the dictionary knows it (so a
-        station's own abort, e.g. 0x06020000, reaches the caller); raises SdoAbortError /
-        GatewayUnavailable."""
+        station's own abort, e.g. 0x06020000, reaches the caller); raises SdoAbortError,
+        GatewayUnavailable or BusError (the interface refused the request)."""
         with self.lock:
             try:
                 return bytes(self.node.sdo.upload(index, subindex))
-            except (SdoAbortedError, SdoCommunicationError) as err:
+            except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "upload", index, subindex) from err
 
     def download(self, index: int, subindex: int, data: bytes) -> None:
-        """Download raw bytes to one object (raises SdoAbortError / GatewayUnavailable)."""
+        """Download raw bytes to one object (raises SdoAbortError, GatewayUnavailable or
+        BusError)."""
         with self.lock:
             try:
                 self.node.sdo.download(index, subindex, data)
-            except (SdoAbortedError, SdoCommunicationError) as err:
+            except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "download", index, subindex) from err
 
     def configure_pdos(self, slots: int, *, images: bool = True) -> None:
