@@ -25,6 +25,7 @@ from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
 from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
 from ssi_bridge_msgs.msg import Event
+from std_srvs.srv import Trigger
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
     StopRecording, WriteRegister,
@@ -67,7 +68,11 @@ class BridgeServices:
                 (SetControl, "~/set_control", self.set_control),
                 (InjectFault, "~/inject_fault", self.inject_fault),
                 (StartRecording, "~/start_recording", rec.on_start),
-                (StopRecording, "~/stop_recording", rec.on_stop)):
+                (StopRecording, "~/stop_recording", rec.on_stop),
+                (Trigger, "~/pause_recording", rec.on_pause),
+                (Trigger, "~/resume_recording", rec.on_resume),
+                (Trigger, "~/split_recording", rec.on_split),
+                (Trigger, "~/snapshot", rec.on_snapshot)):
             service = node.create_service(srv_type, name, handler,
                                           callback_group=self.queue.group,
                                           qos_profile=SERVICE_QOS)
