@@ -15,6 +15,11 @@ and closed by a thread of its own, which takes the ring's copy and then the live
 from a queue. The ring and the queue are bounded by time (``duration_s``, ``after_s`` past
 the last trigger). ROS-free: the bag comes from an ``open_bag`` callable, a topic's type
 and QoS from ``topic_info``.
+
+With ``can_log`` a second ring of the same duration holds the raw CAN frames
+(:meth:`SnapshotKeeper.add_frame`, ``record/can_frames.py``; time = the frame's wire time, the
+same clock as the node's log time), written beside the bag as ``can_0.log`` (candump), as a
+session's ``record.can_log`` does.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from typing import Any
 
 from ssi_bridge.base.realtime import normal_this_thread
 from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.record.can_frames import FrameLog
 from ssi_bridge.record.metadata import METADATA_FILE
 from ssi_bridge.record.ring import MessageRing
 
@@ -43,6 +49,8 @@ PREFIX = "snapshot_"
 TIME_FORMAT = "%Y_%m_%d-%H_%M_%S"
 #: longest label in a directory name (a joint's name may be long)
 LABEL_MAX = 64
+#: the CAN log of a snapshot, as a session's (record.can_log)
+CAN_LOG = "can_0.log"
 
 #: opens a new bag at a path (BagRecorder.open with the session's settings)
 OpenBag = Callable[[Path], Any]
@@ -66,6 +74,8 @@ class SnapshotConfig:
     on_error: bool = True
     #: snapshot bags kept under root; the oldest beyond this is removed
     max_bags: int = 10
+    #: also keep the raw CAN frames (:meth:`SnapshotKeeper.add_frame`), written as can_0.log
+    can_log: bool = False
 
     def __post_init__(self) -> None:
         if not self.duration_s > 0:
@@ -89,6 +99,8 @@ class _Snapshot:
     until_ns: int
     triggers: list[str]
     queue: deque = field(default_factory=deque)
+    #: CAN frames (ring bytes) that arrived after the trigger
+    frame_queue: deque = field(default_factory=deque)
     #: no more messages go in (the time after the last trigger is over, or a stop)
     ended: bool = False
 
@@ -104,6 +116,8 @@ class SnapshotKeeper:
                  log: logging.Logger | Any = logger) -> None:
         self.config = config
         self.ring = MessageRing(config.duration_s)
+        #: the raw CAN frames (``can_log``), else None
+        self.frames = MessageRing(config.duration_s) if config.can_log else None
         self._open_bag = open_bag
         self._topic_info = topic_info
         self._clock_ns = clock_ns
@@ -132,6 +146,17 @@ class SnapshotKeeper:
                 snap.queue.append((topic, log_time_ns, publish_time_ns, data))
                 self._cond.notify_all()
 
+    def add_frame(self, wire_time_ns: int, data: bytes) -> None:
+        """One CAN frame (``record/can_frames.pack_frame``): into the frame ring, and into the
+        open snapshot while it runs (ignored without ``can_log``)."""
+        if self.frames is None:
+            return
+        with self._cond:
+            self.frames.append("can", wire_time_ns, wire_time_ns, data)
+            snap = self._active
+            if snap is not None and wire_time_ns <= snap.until_ns:
+                snap.frame_queue.append(data)
+
     def trigger(self, label: str, now_ns: int | None = None) -> tuple[Path, bool]:
         """Write a snapshot at ``now_ns`` (log time; default the clock), named after ``label``.
 
@@ -150,7 +175,8 @@ class SnapshotKeeper:
             snap = _Snapshot(self._new_path(label), until, [label])
             self._active = snap
             topics, entries = self.ring.raw()
-            worker = threading.Thread(target=self._write, args=(snap, topics, entries),
+            frames = [e[3] for e in self.frames.raw()[1]] if self.frames is not None else None
+            worker = threading.Thread(target=self._write, args=(snap, topics, entries, frames),
                                       name="snapshot-writer", daemon=True)
             self._threads = [t for t in self._threads if t.is_alive()] + [worker]
         worker.start()
@@ -163,7 +189,9 @@ class SnapshotKeeper:
                     "snapshot_ring_messages": len(self.ring),
                     "snapshot_ring_s": f"{self.ring.span_ns / 1e9:.1f}",
                     "snapshot_writing": int(self._active is not None and not self._active.ended),
-                    "snapshots_written": self.written}
+                    "snapshots_written": self.written,
+                    **({"snapshot_can_ring_bytes": self.frames.memory_bytes}
+                       if self.frames is not None else {})}
 
     def close(self, timeout: float = 30.0) -> None:
         """End the snapshot being written now (node shutdown) and wait for its bag to close."""
@@ -190,10 +218,11 @@ class SnapshotKeeper:
             path, n = self.config.root / f"{base}_{n}", n + 1
         return path
 
-    def _write(self, snap: _Snapshot, topics: list[str], entries: list) -> None:
-        """Open the bag, write the ring's copy, then the queued messages until the snapshot
-        ends; close it and keep at most ``max_bags``. Errors end up in the log and
-        :attr:`error`, never in the publishing threads."""
+    def _write(self, snap: _Snapshot, topics: list[str], entries: list,
+               frames: list[bytes] | None) -> None:
+        """Open the bag (and the CAN log), write the rings' copies, then the queued messages
+        and frames until the snapshot ends; close them and keep at most ``max_bags``. Errors
+        end up in the log and :attr:`error`, never in the publishing threads."""
         normal_this_thread()  # started by the cycle thread: not at its real-time priority
         try:
             self.config.root.mkdir(parents=True, exist_ok=True)
@@ -202,7 +231,12 @@ class SnapshotKeeper:
             self._failed(snap, f"snapshot {snap.path.name} not written: {err}")
             return
         added: set[str] = set()
+        can_log: FrameLog | None = None
         try:
+            if frames is not None:
+                can_log = FrameLog(snap.path / CAN_LOG)
+                can_log.write(frames)
+                del frames
             self._put(bag, added, [(topics[i], lt, pt, d) for i, lt, pt, d in entries])
             del entries
             while True:
@@ -212,24 +246,33 @@ class SnapshotKeeper:
                             self._end(snap)
                             break
                         self._cond.wait(0.2)
-                    batch = list(snap.queue)
+                    batch, more = list(snap.queue), list(snap.frame_queue)
                     snap.queue.clear()
+                    snap.frame_queue.clear()
+                if can_log is not None:
+                    can_log.write(more)
                 if batch:
                     self._put(bag, added, batch)
                 elif snap.ended:
                     break
+            if can_log is not None:
+                can_log.close()
             summary = bag.close()
-        except (RecordingError, OSError) as err:
+        except (RecordingError, OSError, ValueError) as err:
             self._failed(snap, f"snapshot {snap.path} stopped: {err}")
-            try:
-                bag.close()
-            except (RecordingError, OSError):
-                pass  # the failed bag: `replay --recover` rebuilds what was written
+            for done in (can_log, bag):
+                try:
+                    if done is not None:
+                        done.close()
+                except (RecordingError, OSError, ValueError):
+                    pass  # the failed bag: `replay --recover` rebuilds what was written
             return
         self.written += 1
         self.last_path = snap.path
         self._log.info(f"snapshot written: {snap.path} ({summary.message_count} messages, "
-                       f"{summary.duration:.1f} s; {len(snap.triggers)} trigger(s): "
+                       f"{summary.duration:.1f} s"
+                       + (f", {can_log.frames} CAN frames" if can_log is not None else "")
+                       + f"; {len(snap.triggers)} trigger(s): "
                        f"{', '.join(snap.triggers)})")
         self._prune(snap.path)
 

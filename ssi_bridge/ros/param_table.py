@@ -118,7 +118,8 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
                                              read_only=True)),
     "record.can_log": (False, _describe(
         "Also log the raw CAN traffic of each session beside the bag (can_0.log, candump "
-        "format, read by python-can's LogReader)", read_only=True)),
+        "format, read by python-can's LogReader), and of each fault snapshot "
+        "(record.snapshot.duration)", read_only=True)),
     "record.max_size": (0, _describe(
         "Split a session into its next file <name>_<k>.mcap once the open one holds this many "
         "bytes (rosbag2 --max-bag-size); 0: no split by size, else at least 65536",

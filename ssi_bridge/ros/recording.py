@@ -23,7 +23,8 @@ from ssi_bridge import __version__
 from ssi_bridge.exceptions import BusError, RecordingError
 from ssi_bridge.base.realtime import normal_this_thread
 from ssi_bridge.record import cdr
-from ssi_bridge.ros.snapshot import ErrorWatch, snapshot_config
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.ros.snapshot import ErrorWatch, FrameTap, snapshot_config
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -62,6 +63,7 @@ class SessionRecorder:
         self.paused = False
         #: the node ended (lifecycle shutdown): starts are refused (set by :meth:`finalize`)
         self.finalized = False
+        self._frame_tap: FrameTap | None = None
         self.snapshots: SnapshotKeeper | None = self._snapshot_keeper()
         self._errors = ErrorWatch()
 
@@ -216,18 +218,20 @@ class SessionRecorder:
     def _start_sniffer(self, bag_dir: Path) -> None:
         """Log the raw CAN traffic beside the bag (``can_0.log``, candump format)."""
         from ssi_bridge.client.sniffer import CanSniffer
-        from ssi_bridge.protocol.settings import BusConfig
 
-        s = self._settings
-        config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
-                           bitrate=s.bus_bitrate, node_id=s.node_id)
         try:
-            self._sniffer = CanSniffer(config, bag_dir / "can_0.log",
+            self._sniffer = CanSniffer(self._bus_config(), bag_dir / "can_0.log",
                                        on_error=self._on_can_log_error)
         except BusError as err:
             # the bag still records; the reason shows on the bus diagnostics
             self.error = f"CAN log not written: {err}"
             self._node.get_logger().error(self.error)
+
+    def _bus_config(self) -> BusConfig:
+        """The node's bus, for a listener of its own (the CAN log, the snapshot's frames)."""
+        s = self._settings
+        return BusConfig(interface=s.bus_interface, channel=s.bus_channel,
+                         bitrate=s.bus_bitrate, node_id=s.node_id)
 
     def _on_can_log_error(self, reason: str) -> None:
         """The CAN log hit a write error (sniffer thread): ERROR on the bus diagnostics at once
@@ -291,6 +295,9 @@ class SessionRecorder:
         try:
             return self.stop()
         finally:
+            tap, self._frame_tap = self._frame_tap, None
+            if tap is not None:
+                tap.close()
             if self.snapshots is not None:
                 self.snapshots.close()
 
@@ -334,19 +341,26 @@ class SessionRecorder:
         from ssi_bridge.record.bag import BagRecorder
         from ssi_bridge.record.snapshot import SnapshotKeeper
 
-        config = snapshot_config(self._node, self._settings.record_root)
+        s = self._settings
+        config = snapshot_config(self._node, s.record_root, s.record_can_log)
         if config is None:
             return None
-        compression = self._settings.record_compression
 
         def open_bag(path: Path) -> BagRecorder:
-            meta = {**self._metadata(), "snapshot": path.name, "can_log": ""}
-            return BagRecorder.open(path, compression=compression, metadata=meta)
+            meta = {**self._metadata(), "snapshot": path.name}
+            return BagRecorder.open(path, compression=s.record_compression, metadata=meta)
 
         clock = self._node.get_clock()
-        return SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
-                              clock_ns=lambda: clock.now().nanoseconds,
-                              log=self._node.get_logger())
+        keeper = SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
+                                clock_ns=lambda: clock.now().nanoseconds,
+                                log=self._node.get_logger())
+        if config.can_log:
+            try:
+                self._frame_tap = FrameTap(self._bus_config(), keeper)
+            except BusError as err:  # the messages' ring still runs; the reason is shown
+                self.error = f"snapshot CAN ring not kept: {err}"
+                self._node.get_logger().error(self.error)
+        return keeper
 
     def _type_of(self, topic: str) -> str:
         for suffix, type_name in TOPIC_TYPES.items():

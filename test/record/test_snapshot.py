@@ -7,6 +7,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import can
 import pytest
 import yaml
 from mcap.reader import make_reader
@@ -15,8 +16,9 @@ from rosbags.highlevel import AnyReader
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
 from ssi_bridge.record.bag import BagRecorder
+from ssi_bridge.record.can_frames import pack_frame, unpack_frame
 from ssi_bridge.record.ring import ENTRY_OVERHEAD, MessageRing
-from ssi_bridge.record.snapshot import PREFIX, SnapshotConfig, SnapshotKeeper
+from ssi_bridge.record.snapshot import CAN_LOG, PREFIX, SnapshotConfig, SnapshotKeeper
 
 from .conftest import T0, joint_state
 
@@ -166,3 +168,37 @@ def test_split_on_demand_starts_the_next_file_at_once(tmp_path: Path):
     assert [f["message_count"] for f in files] == [10, 15]
     with AnyReader([tmp_path / "bag"]) as r:
         assert Counter(c.topic for c, _, _ in r.messages()) == {TOPIC: 25}
+
+
+def test_frames_pack_to_counted_bytes_and_back():
+    msg = can.Message(arbitration_id=0x181, data=bytes(range(8)), is_extended_id=False)
+    raw = pack_frame(msg, 1700000000.25)
+    assert len(raw) == 24
+    back = unpack_frame(raw)
+    assert back.timestamp == 1700000000.25 and back.equals(msg, timestamp_delta=None)
+    ext = can.Message(arbitration_id=0x1ABCDEF, is_extended_id=True, is_remote_frame=True, dlc=4)
+    assert unpack_frame(pack_frame(ext, 1.0)).equals(ext, timestamp_delta=None)
+
+
+def test_a_snapshot_with_can_log_writes_the_frames_beside_the_bag(tmp_path: Path):
+    clock = FakeClock()
+    k = keeper(tmp_path, clock, duration_s=1.0, after_s=0.5, can_log=True)
+    for i in range(3000):
+        clock.now = T0 + i * MS
+        k.add(TOPIC, cdr.serialize(joint_state(i)), clock.now, clock.now)
+        k.add_frame(clock.now, pack_frame(can.Message(arbitration_id=0x80, data=b"",
+                                                      is_extended_id=False), clock.now / 1e9))
+    path, _ = k.trigger("joint1", clock.now)
+    for i in range(3000, 4000):
+        clock.now = T0 + i * MS
+        k.add_frame(clock.now, pack_frame(can.Message(arbitration_id=0x181, data=b"\x01",
+                                                      is_extended_id=False), clock.now / 1e9))
+        k.add(TOPIC, cdr.serialize(joint_state(i)), clock.now, clock.now)
+    wait_written(k, 1, clock)
+    frames = list(can.LogReader(str(path / CAN_LOG)))
+    ids = Counter(f.arbitration_id for f in frames)
+    assert 999 <= ids[0x80] <= 1001 and ids[0x181] == 500, ids
+    times = [f.timestamp for f in frames]
+    assert times == sorted(times)
+    assert abs(times[-1] - (T0 + 3499 * MS) / 1e9) < 1e-3
+    assert k.counters()["snapshot_can_ring_bytes"] > 0

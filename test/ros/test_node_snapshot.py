@@ -11,8 +11,8 @@ import os
 import time
 from pathlib import Path
 
+import can
 import pytest
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
@@ -28,6 +28,7 @@ AFTER = 2.0
 K = InjectFault.Request
 JOINT1 = "/ssi_bridge: joint1"
 BUS = "/ssi_bridge: bus"
+SYNC_COB_ID = 0x080
 
 
 def ns(stamp) -> int:
@@ -126,15 +127,22 @@ def test_three_faults_give_one_complete_snapshot_with_the_error(running, probe, 
 def test_snapshot_on_request_and_off_without_a_duration(running, start_node, probe, tmp_path):
     root = tmp_path / "rec"
     node = running({"record.root": str(root), "record.snapshot.duration": 1.0,
-                    "record.snapshot.after": 0.5, "record.snapshot.on_error": False})
+                    "record.snapshot.after": 0.5, "record.snapshot.on_error": False,
+                    "record.can_log": True})
     time.sleep(1.2)
     res = probe.call(Trigger, node.topic("~/snapshot"), Trigger.Request())
     assert res.success and "snapshot_" in res.message and res.message.endswith("_request"), \
         res.message
     probe.wait_for(lambda: len(snapshots(root)) == 1, 20.0, "the requested snapshot", node)
-    states, _ = read_bag(snapshots(root)[0])
+    bag = snapshots(root)[0]
+    states, _ = read_bag(bag)
     span = (states[-1][0] - states[0][0]) / 1e9
     assert 1.2 <= span <= 1.8, span
+    # record.can_log: the raw frames of the same time beside the bag, a SYNC per cycle
+    frames = list(can.LogReader(str(bag / "can_0.log")))
+    syncs = [f.timestamp for f in frames if f.arbitration_id == SYNC_COB_ID]
+    assert len(syncs) >= len(states) - 2, (len(syncs), len(states))
+    assert syncs[0] <= states[0][1] / 1e9 + 0.05 and syncs[-1] >= states[-1][1] / 1e9 - 0.05
 
     other = running({"record.root": str(tmp_path / "off")}, namespace="/off")
     res = probe.call(Trigger, other.topic("~/snapshot"), Trigger.Request())
