@@ -152,13 +152,11 @@ class SessionRecorder:
         now_ns = self._node.get_clock().now().nanoseconds
         data = cdr.serialize(msg)
         if snapshots is not None:
-            snapshots.add(topic, data, now_ns, stamp_ns)
-            if topic == "/diagnostics" and snapshots.config.on_error:
-                for item in self._errors.new_errors(msg):
-                    path, extended = snapshots.trigger(item, now_ns)
-                    self._node.get_logger().warning(
-                        f"{item} reached ERROR: snapshot {path.name} "
-                        + ("extended" if extended else "started"))
+            try:
+                self._keep(snapshots, topic, msg, data, now_ns, stamp_ns)
+            except Exception as err:  # noqa: BLE001 - a snapshot never stops the publishing
+                self._node.get_logger().error(f"fault snapshot: {type(err).__name__}: {err}",
+                                              throttle_duration_sec=1.0)
         if bag is None:
             return
         try:
@@ -177,6 +175,17 @@ class SessionRecorder:
                                       name="recording-salvage", daemon=True)
             self._salvage.append(worker)
             worker.start()
+
+    def _keep(self, snapshots: SnapshotKeeper, topic: str, msg: Any, data: bytes,
+              now_ns: int, stamp_ns: int) -> None:
+        """Into the snapshot ring; a status of /diagnostics newly at ERROR triggers one."""
+        snapshots.add(topic, data, now_ns, stamp_ns)
+        if topic == "/diagnostics" and snapshots.config.on_error:
+            for item in self._errors.new_errors(msg):
+                path, extended = snapshots.trigger(item, now_ns)
+                self._node.get_logger().warning(
+                    f"{item} reached ERROR: snapshot {path.name} "
+                    + ("extended" if extended else "started"))
 
     def _end_failed_session(self, bag: BagRecorder, sniffer: CanSniffer | None) -> None:
         """After a bag write error: close the CAN log, then give the bag its summary with
