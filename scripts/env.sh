@@ -13,4 +13,7 @@ if [ -f "$_ssi_root/install/setup.bash" ]; then
   [ "$_ssi_nounset" = 1 ] && set -u
 fi
 export RMW_IMPLEMENTATION="${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}"
+# what /opt/ros/jazzy/setup.bash sets: the venv holds Jazzy's wheels, and tools read these
+# (`ros2 doctor` fails its distribution checks without ROS_DISTRO)
+export ROS_DISTRO=jazzy ROS_VERSION=2 ROS_PYTHON_VERSION=3
 unset _ssi_root _ssi_nounset

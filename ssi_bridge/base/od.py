@@ -77,20 +77,29 @@ def _pdo_objects(d: od.ObjectDictionary, node_id: int) -> None:
             d.add_object(_record(mp + n, f"{kind}{pdo} mapping parameter", mapping))
 
 
+#: what each simulation-only object does; in the EDS's [Comments] (CiA 306 has no per-object
+#: description key: a ``Description=`` line in an object section fails lely's dcfchk)
+SIMULATION_OBJECTS: tuple[tuple[int, str, int, str, str], ...] = (
+    (SIM_RATE, "SIM fault rate", dt.REAL32, "rw",
+     "rate 0-1 of the next BIT_NOISE / CAN_FRAME_LOSS command"),
+    (SIM_DURATION, "SIM fault duration ms", dt.UNSIGNED32, "rw",
+     "duration of the next command in ms, 0 = until CLEAR_ALL; the station times it"),
+    (SIM_COMMAND, "SIM fault command", dt.UNSIGNED16, "rw",
+     "write kind (bits 0-7, InjectFault numbers, 0 = CLEAR_ALL) | slot << 8 (0 = bus faults) "
+     "to inject"),
+    (SIM_ACTIVE, "SIM faults active", dt.UNSIGNED32, "ro",
+     "bit k set while a fault of kind k is in force"),
+)
+
+
 def _simulation_objects(d: od.ObjectDictionary) -> None:
     """0x4000-0x4003: fault injection of the simulated station (simulation only)."""
-    for index, name, data_type, access, default, text in (
-            (SIM_RATE, "SIM fault rate", dt.REAL32, "rw", 0.0,
-             "rate 0-1 of the next BIT_NOISE / CAN_FRAME_LOSS command"),
-            (SIM_DURATION, "SIM fault duration ms", dt.UNSIGNED32, "rw", 0,
-             "duration of the next command in ms, 0 = until CLEAR_ALL; the station times it"),
-            (SIM_COMMAND, "SIM fault command", dt.UNSIGNED16, "rw", 0,
-             "write kind (bits 0-7, InjectFault numbers, 0 = CLEAR_ALL) | slot << 8 "
-             "(0 = bus faults) to inject"),
-            (SIM_ACTIVE, "SIM faults active", dt.UNSIGNED32, "ro", 0,
-             "bit k set while a fault of kind k is in force")):
-        var = _var(name, index, 0, data_type, access, default)
-        var.description = f"SIMULATION ONLY (no such object on a real gateway): {text}"
+    for index, name, data_type, access, _text in SIMULATION_OBJECTS:
+        var = _var(name, index, 0, data_type, access, 0.0 if data_type == dt.REAL32 else 0)
+        if data_type == dt.REAL32:
+            # CiA 306 writes a REAL32 value as an integer (its IEEE 754 bits): 0.0 is "0",
+            # which canopen's import also reads as 0.0
+            var.default_raw = "0"
         d.add_object(var)
 
 
@@ -146,9 +155,13 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
 def write_eds(path: str, slots: int = MAX_SLOTS) -> None:
     """Export the dictionary of a ``slots``-module station as an EDS file to ``path``."""
     d = build_dictionary(1, slots)
+    sim = "".join(f"0x{index:04X} {name} ({access}): {text}\n"
+                  for index, name, _t, access, text in SIMULATION_OBJECTS)
     d.comments = ("Objects 0x4000-0x4003 exist only in the simulated station (ssi_bridge): "
                   "fault injection.\nA real XN-GW-CANOPEN aborts access to them "
-                  "(0x06020000, object does not exist).\n" + IDENTITY_COMMENT)
+                  "(0x06020000, object does not exist).\n" + sim + IDENTITY_COMMENT +
+                  "\n0x6800-0x6FFF: the CiA 406 encoder profile as the gateway's second logical "
+                  "device (CiA 406 index + 0x800; 0x6FFF = 0x000A0196).")
     stamp = {"CreationDate": "01-01-2025", "CreationTime": "12:00AM",
              "ModificationDate": "01-01-2025", "ModificationTime": "12:00AM",
              "EdsVersion": "4.2", "Description": f"XN-GW-CANOPEN with {slots} XN-1SSI"}

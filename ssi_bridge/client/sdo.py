@@ -95,6 +95,24 @@ class SdoAccess:
             except (SdoAbortedError, SdoCommunicationError) as err:
                 raise self._fail(err, "download", index, subindex) from err
 
+    def upload(self, index: int, subindex: int) -> bytes:
+        """Upload the raw bytes of one object, whether or not the dictionary knows it (so a
+        station's own abort, e.g. 0x06020000, reaches the caller); raises SdoAbortError /
+        GatewayUnavailable."""
+        with self.lock:
+            try:
+                return bytes(self.node.sdo.upload(index, subindex))
+            except (SdoAbortedError, SdoCommunicationError) as err:
+                raise self._fail(err, "upload", index, subindex) from err
+
+    def download(self, index: int, subindex: int, data: bytes) -> None:
+        """Download raw bytes to one object (raises SdoAbortError / GatewayUnavailable)."""
+        with self.lock:
+            try:
+                self.node.sdo.download(index, subindex, data)
+            except (SdoAbortedError, SdoCommunicationError) as err:
+                raise self._fail(err, "download", index, subindex) from err
+
     def configure_pdos(self, slots: int, *, images: bool = True) -> None:
         """Map and enable what the bridge consumes; every PDO is invalid by default.
 

@@ -29,7 +29,7 @@ from ssi_bridge.core.joint_scale import JointScale
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
-from ssi_bridge.protocol.families import family_config
+from ssi_bridge.protocol.families import family_max_speed
 from ssi_bridge.protocol.images import ModuleStatus
 from ssi_bridge.protocol.joint_encoder import count_factor, joint_config, para1_mismatch
 from ssi_bridge.protocol.settings import JointSettings
@@ -40,16 +40,15 @@ NOT_MEASURING = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA | ModuleStatus.
 ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 
 
-def spec_max_speed(family: str) -> float:
-    """The highest speed (rad/s) a family's manual specifies, 0 where it states none.
+def spec_max_speed(family: str, linear: bool | None = None) -> float:
+    """The physical speed limit (rad/s or m/s) of a family, what ``max_speed: -1`` means.
 
-    Only the TR encoders give one in these manuals: the overspeed limit, at most 6000 1/min
-    (001 §5.4.2); SICK's 004 states no speeds for its families.
+    Never off: the TR encoders' overspeed limit, at most 6000 1/min (001 §5.4.2); every other
+    family, whose manual states no speed, the documented default (12000 1/min rotary, 10 m/s
+    linear; :func:`~ssi_bridge.protocol.families.family_max_speed`, docs/node.md).
+    ``linear``: the joint's kind where it differs from the family's.
     """
-    if not family.upper().startswith("TR"):
-        return 0.0
-    cfg = family_config(family)
-    return 0.0 if cfg.linear else cfg.overspeed_rpm / 60.0 * 2.0 * math.pi
+    return family_max_speed(family, linear).limit
 
 
 def encoder_layout(joint: JointSettings) -> tuple[EncoderConfig | None, str]:
@@ -100,8 +99,8 @@ class Joint:
 
     :param settings: the joint's parameters
     :param velocity_window: samples the velocity fit spans
-    :param max_speed: ``<joint>.max_speed`` (joint units/s; -1: the family's specification;
-        0: off)
+    :param max_speed: ``<joint>.max_speed`` (joint units/s; -1: the family's physical limit,
+        :func:`spec_max_speed`, on for every family; 0: off)
     :param stale_cycles: cycles without a fresh sample before the joint is STALE
     """
 
@@ -132,7 +131,12 @@ class Joint:
 
     # -- settings that change at run time ---------------------------------------------------
     def _limit(self, max_speed: float) -> float:
-        return spec_max_speed(self.settings.family) if max_speed < 0 else max_speed
+        """``max_speed`` itself, or for -1 the family's limit in the joint's units."""
+        if max_speed >= 0:
+            return max_speed
+        linear = (self.config.linear if self.config is not None
+                  else self.settings.measuring_step > 0)  # as joint_scale decides
+        return spec_max_speed(self.settings.family, linear)
 
     def set_max_speed(self, max_speed: float) -> None:
         """``<joint>.max_speed``: -1 = the family's limit, 0 = off (ConfigError otherwise < 0)."""

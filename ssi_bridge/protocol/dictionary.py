@@ -127,7 +127,12 @@ def rpdo_cob_base(pdo: int) -> int:
 
 @dataclass(frozen=True)
 class EncoderObject:
-    """One Table 16 object: index, name, CANopen data type, access, PDO-mappable, ARRAY?"""
+    """One Table 16 object: index, name, CANopen data type, access, PDO-mappable, ARRAY?
+
+    ``profile`` is the CiA 406 (DS406) object it is in the gateway's second logical device
+    (index - 0x800, 000 "Overview of Encoders Device Profile Range"; 0 for the manufacturer
+    objects 0x58xx), and then ``name`` is CiA 406's name of that object.
+    """
 
     index: int
     name: str
@@ -136,10 +141,25 @@ class EncoderObject:
     pdo: bool
     array: bool = True
     default: int = 0
+    profile: int = 0
+
+
+#: offset of the gateway's second logical device (CiA 406) from the profile's own indices
+ENCODER_PROFILE_OFFSET = 0x800
+
+
+def _p(index: int, name: str, data_type: int, access: str, pdo: bool, array: bool = True,
+       default: int = 0) -> EncoderObject:
+    """A CiA 406 object of the second logical device: index 0x68xx-0x6FFF = CiA 406's + 0x800."""
+    return EncoderObject(index, name, data_type, access, pdo, array, default,
+                         profile=index - ENCODER_PROFILE_OFFSET)
 
 
 #: Table 16 with the description tables 17-49 (types/access/mapping); "no function" objects
-#: keep the type DS406 gives them. 0x5803/0x5805 are "rwr" (rw, mappable for reading).
+#: keep the type DS406 gives them. 0x5803/0x5805 are "rwr" (rw, mappable for reading). The
+#: 0x58xx names are 000's (manufacturer objects); the 0x68xx-0x6FFF names are CiA 406's (for
+#: 0x6810/0x6820 as 000 Table 16 spells them; 0x6FFF says which "Device type" it is, so that
+#: a lookup by name still finds 0x1000).
 ENCODER_OBJECTS: tuple[EncoderObject, ...] = (
     EncoderObject(0x5800, "Encoder Basic Mode", dt.UNSIGNED8, "rw", False),
     EncoderObject(0x5801, "Encoder Config", dt.UNSIGNED32, "rw", False),
@@ -156,22 +176,22 @@ ENCODER_OBJECTS: tuple[EncoderObject, ...] = (
     EncoderObject(0x5822, "Measuring High Limit", dt.INTEGER32, "rw", False),
     EncoderObject(0x5823, "Measuring Units per Revolution", dt.UNSIGNED32, "rw", False),
     EncoderObject(0x5840, "SSI Diag Mapping", dt.UNSIGNED32, "rw", False),
-    EncoderObject(0x6800, "Operating parameters", dt.UNSIGNED16, "rw", False, array=False),
-    EncoderObject(0x6810, "Preset value for multi-sensor devices", dt.INTEGER32, "rw", True),
-    EncoderObject(0x6820, "Position value for multi-sensor devices", dt.INTEGER32, "ro", True),
-    EncoderObject(0x6B00, "Cam state register", dt.UNSIGNED8, "ro", True),
-    EncoderObject(0x6B01, "Cam enable register", dt.UNSIGNED8, "rw", False),
-    EncoderObject(0x6B02, "Cam polarity register", dt.UNSIGNED8, "rw", False),
-    EncoderObject(0x6B10, "Cam 1 low limit", dt.INTEGER32, "rw", False),
-    EncoderObject(0x6B20, "Cam 1 high limit", dt.INTEGER32, "rw", False),
-    EncoderObject(0x6B30, "Cam 1 hysteresis", dt.UNSIGNED16, "rw", False),
-    EncoderObject(0x6C00, "Area State Register", dt.UNSIGNED8, "ro", True),
-    EncoderObject(0x6C01, "Work Area Low Limit", dt.INTEGER32, "rw", False),
-    EncoderObject(0x6C02, "Work Area High Limit", dt.INTEGER32, "rw", False),
-    EncoderObject(0x6D00, "Operating Status", dt.UNSIGNED16, "ro", False, array=False),
-    EncoderObject(0x6D01, "SingleTurn Resolution", dt.UNSIGNED32, "ro", False, array=False),
-    EncoderObject(0x6D02, "Number of distinguishable revolutions", dt.UNSIGNED16, "ro",
-                  False, array=False),
-    EncoderObject(0x6FFF, "Device Type", dt.UNSIGNED32, "const", False, array=False,
-                  default=ENCODER_DEVICE_TYPE),
+    _p(0x6800, "Operating parameters", dt.UNSIGNED16, "rw", False, array=False),
+    _p(0x6810, "Preset value for multi-sensor devices", dt.INTEGER32, "rw", True),
+    _p(0x6820, "Position value for multi-sensor devices", dt.INTEGER32, "ro", True),
+    _p(0x6B00, "Cam state register", dt.UNSIGNED8, "ro", True),
+    _p(0x6B01, "Cam enable register", dt.UNSIGNED8, "rw", False),
+    _p(0x6B02, "Cam polarity register", dt.UNSIGNED8, "rw", False),
+    _p(0x6B10, "Cam1 low limit", dt.INTEGER32, "rw", False),
+    _p(0x6B20, "Cam1 high limit", dt.INTEGER32, "rw", False),
+    _p(0x6B30, "Cam1 hysteresis", dt.UNSIGNED16, "rw", False),
+    _p(0x6C00, "Area state register", dt.UNSIGNED8, "ro", True),
+    _p(0x6C01, "Work area low limit", dt.INTEGER32, "rw", False),
+    _p(0x6C02, "Work area high limit", dt.INTEGER32, "rw", False),
+    _p(0x6D00, "Operating status", dt.UNSIGNED16, "ro", False, array=False),
+    _p(0x6D01, "Singleturn resolution", dt.UNSIGNED32, "ro", False, array=False),
+    _p(0x6D02, "Number of distinguishable revolutions", dt.UNSIGNED16, "ro", False,
+       array=False),
+    _p(0x6FFF, "Device type (second logical device)", dt.UNSIGNED32, "const", False, array=False,
+       default=ENCODER_DEVICE_TYPE),
 )

@@ -23,6 +23,9 @@ from enum import Enum
 from functools import cached_property
 
 from ssi_bridge.protocol.codes import Code, bcd_encode
+from ssi_bridge.protocol.family_rules import (TR_DATA_BITS, TR_DATA_BITS_WORDS, TR_FAMILIES,
+                                              TR_PLAIN_FRAME_BITS, TR_PLAIN_FRAME_WORDS,
+                                              code_refusal)
 from ssi_bridge.exceptions import ConfigError
 
 
@@ -131,9 +134,15 @@ def round_half_up(x: float) -> int:
 
 @dataclass(frozen=True)
 class EncoderConfig:
-    """Everything that fixes the bits an encoder sends; validated on construction."""
+    """Everything that fixes the bits an encoder sends; validated on construction.
 
-    #: preset name (families.py) or "GENERIC"
+    A config named after a family (``families.py``) follows that family's manual
+    (``family_rules.py``): only the transmit codes it offers, and for the TR encoders (and
+    any TR frame format) 6..63 data bits (001 §5.2.1) and plain frames of 8..36 bits
+    (001 §5.2.4.1). Raises ConfigError with the manual's words and section otherwise.
+    """
+
+    #: preset name (families.py) or "GENERIC"; any other name is a hand-made layout
     name: str = "GENERIC"
     #: linear measuring system (metres) instead of rotary (revolutions)
     linear: bool = False
@@ -192,6 +201,10 @@ class EncoderConfig:
     standstill_s: float = 0.05
     #: movement hysteresis in output steps (001 §5.5.3: one step)
     hysteresis_steps: int = 1
+    #: accept a transmit code the family's manual does not name, for the families whose
+    #: section names no code at all (004 §3.2, §3.3, §3.5-§3.7; family_rules.py); never
+    #: against a list a manual gives
+    code_outside_manual: bool = False
     extra: dict[str, str] = field(default_factory=dict, compare=False, hash=False)
 
     def __post_init__(self) -> None:
@@ -210,6 +223,12 @@ class EncoderConfig:
             bad("revolutions numerator/divisor must be >= 0.5 (001 §5.1.2.2)")
         if not 1 <= self.data_bits <= 64:
             bad(f"data_bits {self.data_bits} outside 1..64")
+        if self.tr_rules and not TR_DATA_BITS[0] <= self.data_bits <= TR_DATA_BITS[1]:
+            bad(f"data_bits {self.data_bits} outside {TR_DATA_BITS[0]}..{TR_DATA_BITS[1]}: "
+                f"{TR_DATA_BITS_WORDS}")
+        refusal = code_refusal(self.name, self.code, code_outside_manual=self.code_outside_manual)
+        if refusal:
+            bad(refusal)
         if self.range_steps < 2:
             bad(f"total number of steps {self.range_steps} must be >= 2 (001 §5.1.2.1)")
         if self.value_bits > self.data_bits:
@@ -249,6 +268,12 @@ class EncoderConfig:
             self._check_checksum_format(bad)
         if self.frame_bits > 64:
             bad(f"frame of {self.frame_bits} bits exceeds 64")
+        low, high = TR_PLAIN_FRAME_BITS
+        if self.tr_rules and self.frame_format is FrameFormat.PLAIN \
+                and not low <= self.frame_bits <= high:
+            bad(f"a frame of {self.frame_bits} bits ({self.position_bits} data + "
+                f"{len(self.special_bits)} special bits) outside {low}..{high}: "
+                f"{TR_PLAIN_FRAME_WORDS}")
         if self.formation_period_s < 0 or self.min_pause_s < 0 or self.sync_delay_s < 0:
             bad("timing values must be >= 0")
 
@@ -268,6 +293,11 @@ class EncoderConfig:
             bad("check sum format: no trailing zeros, shift or negative values (001 §5.2.4.2)")
 
     # -- derived figures -------------------------------------------------------------
+    @property
+    def tr_rules(self) -> bool:
+        """The TR limits of 001 §5.2 apply: a TR family, or a TR-only frame format."""
+        return self.name.upper() in TR_FAMILIES or self.frame_format is not FrameFormat.PLAIN
+
     @cached_property
     def range_steps(self) -> int:
         """Total number of steps before the count restarts (001 §5.1.2.1)."""

@@ -15,6 +15,7 @@ like the other non-programmable SICK encoders; the measuring steps of TTK70 (1 �
 from __future__ import annotations
 
 import dataclasses
+import math
 from types import SimpleNamespace
 from collections.abc import Callable
 from typing import Any
@@ -168,6 +169,55 @@ FAMILIES: dict[str, Family] = {
 FAMILIES["ATM90"] = FAMILIES["ATM60"]
 
 
+#: the fastest shaft (1/min) assumed where a rotary family's manual states no speed: 004 and
+#: 003 give none. 12000 1/min is about the mechanical limit of the fastest industrial SSI
+#: encoders (common ones are built for 6000-12000 1/min; the TR overspeed monitor stops at
+#: 6000, 001 §5.4.2), so no real motion is flagged while a misread frame's jump is. A limit
+#: from the SSI frame itself would mean nothing: the counts of one frame at the highest
+#: REG_PARA1 bit rate can represent a change of the whole range per frame (docs/node.md)
+DEFAULT_MAX_RPM = 12000.0
+#: the fastest travel (m/s) assumed for a linear family: 004 §3.6/§3.7 state none (§3.7 only
+#: names KH53's "max. traversing speed"); about the fastest linear axes and tape/linear
+#: measuring systems run, so a faster decoded step is a bit error, not motion
+DEFAULT_MAX_LINEAR_SPEED = 10.0
+
+
+@dataclasses.dataclass(frozen=True)
+class SpeedSpec:
+    """The physical speed limit of a family: joint units/s, and where it comes from."""
+
+    #: rad/s (rotary) or m/s (linear)
+    limit: float
+    linear: bool
+    #: the manual's figure, or the documented default
+    source: str
+
+
+def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
+    """The speed a joint of ``family`` cannot exceed (``<joint>.max_speed: -1``).
+
+    The TR encoders: their overspeed limit, at most 6000 1/min (001 §5.4.2). Every other
+    rotary family (GENERIC included) :data:`DEFAULT_MAX_RPM`, linear ones
+    :data:`DEFAULT_MAX_LINEAR_SPEED`. ``linear`` overrides the family's own kind (a joint
+    whose layout is unknown is linear when it has a measuring step); an unknown family is
+    taken as GENERIC.
+    """
+    key = family.upper()
+    base = FAMILIES.get(key)
+    cfg = family_config(key) if base is not None else None
+    is_linear = linear if linear is not None else bool(cfg is not None and cfg.linear)
+    if is_linear:
+        return SpeedSpec(DEFAULT_MAX_LINEAR_SPEED, True,
+                         f"{DEFAULT_MAX_LINEAR_SPEED:g} m/s: no speed in the family's manual, "
+                         "the default for linear encoders (docs/node.md)")
+    if cfg is not None and key.startswith("TR_"):
+        return SpeedSpec(cfg.overspeed_rpm / 60.0 * 2.0 * math.pi, False,
+                         f"overspeed {cfg.overspeed_rpm:g} 1/min (001 §5.4.2)")
+    return SpeedSpec(DEFAULT_MAX_RPM / 60.0 * 2.0 * math.pi, False,
+                     f"{DEFAULT_MAX_RPM:g} 1/min: no speed in the family's manual, the "
+                     "default for rotary encoders (docs/node.md)")
+
+
 def family_config(family: str, **overrides: Any) -> EncoderConfig:
     """The :class:`EncoderConfig` of a preset with ``overrides`` applied and fixed up."""
     key = family.upper()
@@ -189,4 +239,5 @@ def family_config(family: str, **overrides: Any) -> EncoderConfig:
     return EncoderConfig(**fields)
 
 
-__all__ = ["FAMILIES", "Family", "family_config", "Code"]
+__all__ = ["DEFAULT_MAX_LINEAR_SPEED", "DEFAULT_MAX_RPM", "FAMILIES", "Family", "SpeedSpec",
+           "family_config", "family_max_speed", "Code"]

@@ -15,6 +15,8 @@ from typing import IO, Any
 import yaml
 
 from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.protocol.codes import Code
+from ssi_bridge.protocol.family_rules import code_refusal
 
 #: REG_PARA1 the node writes unless told otherwise: 25-bit binary frame, ZERO test on (the
 #: module's factory values, 000 Table 19) at 250 kbit/s instead of the factory 500 kbit/s:
@@ -115,6 +117,9 @@ def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
         raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
     if jv["code"] not in CODES:
         raise ConfigError(f"{joint}.code {jv['code']!r}: one of {CODES}")
+    refusal = code_refusal(str(jv["family"]), Code(jv["code"])) if jv["code"] else None
+    if refusal:  # the family's manual does not offer it (family_rules.py)
+        raise ConfigError(f"{joint}.code: {refusal}")
     if jv["direction"] not in (1, -1):
         raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
     return JointSettings(

@@ -38,6 +38,9 @@ class RecordedTopic:
     #: ``offered_qos_profiles`` text of the channel ("" when absent)
     qos_text: str
     message_count: int
+    #: the schema stored in the bag (``ros2msg`` text with its dependencies), for viewers
+    schema_data: bytes = b""
+    schema_encoding: str = ""
 
 
 def find_mcaps(path: Path) -> list[Path]:
@@ -160,7 +163,8 @@ class Bag:
             count = counts.get(cid, 0) + (known.message_count if known else 0)
             self.topics[ch.topic] = RecordedTopic(
                 ch.topic, schema.name,
-                known.qos_text if known else ch.metadata.get("offered_qos_profiles", ""), count)
+                known.qos_text if known else ch.metadata.get("offered_qos_profiles", ""), count,
+                schema.data, schema.encoding)
         if stats.message_count:
             self._parts.append(_Part(file, stats.message_start_time, stats.message_end_time))
 

@@ -14,6 +14,13 @@ says otherwise. The SDK and record/'s schema and CDR code are imported only when
 starts, as the recorder imports record/ only when a session starts. A server that cannot
 start (port in use, bad address) is logged and shown on the bus diagnostics; the bridge keeps
 publishing.
+
+Besides the topics the server offers the node's services (``ros/liveview_services.py``: the
+same handlers and request queue as the ROS services) and its parameters
+(``ros/liveview_params.py``: get, set through the node's own checks, subscribe), so
+Foxglove's Service Call and Parameters panels work as with foxglove_bridge;
+``foxglove.services`` / ``foxglove.parameters`` false leave either out (a view that only
+watches).
 """
 
 from __future__ import annotations
@@ -56,12 +63,36 @@ class _Subscriptions:
             self.count = max(0, self.count - 1)
         self._node.get_logger().info(f"live view: client {client.id} left {channel.topic}")
 
+    # the parameter requests (Capability.Parameters only): ros/liveview_params.py
+    params: Any = None
+
+    def on_get_parameters(self, client: Any, param_names: list[str],
+                          request_id: str | None = None) -> list[Any]:
+        return self.params.get(param_names) if self.params is not None else []
+
+    def on_set_parameters(self, client: Any, parameters: list[Any],
+                          request_id: str | None = None) -> list[Any]:
+        return self.params.set(parameters) if self.params is not None else []
+
+    def on_parameters_subscribe(self, param_names: list[str]) -> None:
+        if self.params is not None:
+            self.params.subscribe(param_names)
+
+    def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
+        if self.params is not None:
+            self.params.unsubscribe(param_names)
+
 
 class LiveView:
     """The Foxglove WebSocket server of one node and a channel per offered publisher."""
 
-    def __init__(self, node: Node, settings: NodeSettings) -> None:
+    def __init__(self, node: Node, settings: NodeSettings, handlers: Any = None) -> None:
+        """``handlers``: the node's BridgeServices, whose services are offered (None: none)."""
         self._node = node
+        self._handlers = handlers if settings.foxglove_services else None
+        self._with_parameters = settings.foxglove_parameters
+        #: resolved names of the services the server offers
+        self.services: list[str] = []
         self._channels: dict[Any, Any] = {}
         self._server: Any = None
         self._context: Any = None
@@ -81,26 +112,53 @@ class LiveView:
     def _start(self, address: str, port: int) -> None:
         import foxglove
 
+        from foxglove.websocket import Capability
+
         from ssi_bridge.record.cdr import serialize
+        from ssi_bridge.ros.liveview_params import ParameterBridge
+        from ssi_bridge.ros.liveview_services import ServiceBridge
 
         self._serialize = serialize
         where = f"{address}:{port}"
+        capabilities, services = [], []
+        if self._handlers is not None:
+            bridge = ServiceBridge(self._handlers, self._node.get_logger())
+            services = bridge.services()
+            self.services = bridge.names
+            capabilities.append(Capability.Services)
+        if self._with_parameters:
+            self._listener.params = ParameterBridge(self._node)
+            capabilities.append(Capability.Parameters)
         try:
             self._context = foxglove.Context()
             self._server = foxglove.start_server(
                 name=self._node.get_fully_qualified_name(), host=address, port=port,
-                context=self._context, server_listener=self._listener)
+                context=self._context, server_listener=self._listener,
+                capabilities=capabilities, supported_encodings=["cdr"], services=services)
         except (RuntimeError, ValueError, OSError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")
             self.error = f"live view off: cannot listen on {where}: {reason}"
             self._node.get_logger().error(f"foxglove.port/foxglove.address: {self.error}")
+            self._stop_parameters()
             return
+        if self._listener.params is not None:
+            self._listener.params.server = self._server
         self.port = int(self._server.port)
         url_host = "localhost" if address in LOOPBACK else address
+        can = ["read every topic"] + (["call every service"] if services else []) + (
+            ["set parameters"] if self._with_parameters else [])
         scope = ("this host only" if address in LOOPBACK else
-                 "reachable from other hosts: anyone who can reach it can read every topic")
+                 f"reachable from other hosts: anyone who can reach it can {', '.join(can)}")
+        offered = (f"{len(services)} services" if services else "no services") + (
+            ", parameters" if self._with_parameters else ", no parameters")
         self._node.get_logger().info(
-            f"live view: Foxglove WebSocket server on ws://{url_host}:{self.port} ({scope})")
+            f"live view: Foxglove WebSocket server on ws://{url_host}:{self.port} ({scope}); "
+            f"topics, {offered}")
+
+    def _stop_parameters(self) -> None:
+        params, self._listener.params = self._listener.params, None
+        if params is not None:
+            params.stop()
 
     def offer(self, publisher: Any) -> None:
         """Advertise ``publisher``'s topic with its ros2msg schema (no-op while off)."""
@@ -146,6 +204,7 @@ class LiveView:
         channels, self._channels = self._channels, {}
         for channel in channels.values():
             channel.close()
+        self._stop_parameters()
         if server is not None:
             server.stop()
 

@@ -43,6 +43,7 @@ from ssi_bridge.ros.node_params import RuntimeParameters
 from ssi_bridge.ros.node_status import NodeDiagnostics
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import NodeSettings, declare_parameters
+from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
 from ssi_bridge.ros.rclpy_compat import RCLError
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
@@ -164,9 +165,9 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
 
     def _create_ros_side(self, s: NodeSettings) -> None:
         """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
-        self.joint_pub = self.create_publisher(JointState, "joint_states", 10)
-        self.status_pub = self.create_publisher(Status, "~/status", 10)
-        self.diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.joint_pub = publisher(self, JointState, "joint_states")
+        self.status_pub = publisher(self, Status, "~/status")
+        self.diag_pub = publisher(self, DiagnosticArray, "/diagnostics")
         self.recorder = SessionRecorder(self, s)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub):
             self.recorder.offer(pub.topic_name, pub.qos_profile)
@@ -177,7 +178,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
                                             callback_group=self._diag_group)
         self.handlers = BridgeServices(self, self.bridge, self.recorder, self.publish_safe)
         self.handlers.register(self._service_group)
-        self.liveview = LiveView(self, s)
+        self.liveview = LiveView(self, s, self.handlers)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
         self.add_on_set_parameters_callback(self._on_set_parameters)

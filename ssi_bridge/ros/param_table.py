@@ -149,6 +149,14 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "foxglove.address": ("127.0.0.1", _describe(
         "Address the live view server binds to: 127.0.0.1 accepts clients of this host only; "
         "an interface address or 0.0.0.0 lets other hosts connect", read_only=True)),
+    "foxglove.services": (True, _describe(
+        "Live view: offer the node's services (Foxglove's Service Call panel; the same "
+        "handlers, checks and ~/events as the ROS services); false: not advertised",
+        read_only=True)),
+    "foxglove.parameters": (True, _describe(
+        "Live view: offer the node's parameters (get, set with the checks of 'ros2 param "
+        "set', subscribe); false: no Parameters capability. Both false: a view that only "
+        "watches", read_only=True)),
 }
 
 #: name -> (default, descriptor); per-joint parameters, declared as '<joint>.<name>'
@@ -162,7 +170,8 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
     "code": ("", _describe(
         "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
-        "SSI_CODE_G/D must match it", read_only=True)),
+        "SSI_CODE_G/D must match it; a code the family's manual does not offer is refused at "
+        "start-up (TR_CHECKSUM: binary only, 001 §5.2.4.2)", read_only=True)),
     "cable_length": (10.0, _describe(
         "Simulated SSI cable length in m (line delay; 004 §2.7 bit-rate recommendation)",
         read_only=True, float_range=(0.0, 1200.0))),
@@ -188,8 +197,10 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "max_speed": (-1.0, _describe(
         "Plausibility limit in rad/s (rotary) or m/s (linear): a sample whose step from the "
         "previous one is faster is flagged in diagnostics and its velocity is NaN; 0: off; "
-        "-1: from the encoder family's specification (TR: overspeed 6000 1/min, 001 §5.4.2; "
-        "off where the family states none). Changes at run time",
+        "-1 (default, on for every family): the family's physical limit (TR: overspeed "
+        "6000 1/min = 628 rad/s, 001 §5.4.2; families whose manual states none, GENERIC "
+        "included: 12000 1/min = 1257 rad/s, a typical mechanical limit of fast SSI encoders, "
+        "or 10 m/s for linear ones; docs/node.md). Changes at run time",
         float_range=(-1.0, 1e6))),
     "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
                                           read_only=True)),

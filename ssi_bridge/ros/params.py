@@ -16,6 +16,7 @@ from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.ros.param_table import JOINT_PARAMETERS, NODE_PARAMETERS
+from ssi_bridge.ros.qos_overrides import stray_overrides
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.protocol.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
@@ -71,6 +72,9 @@ class NodeSettings:
     #: live view (ros/liveview.py): Foxglove WebSocket port, 0 = off; address it binds to
     foxglove_port: int = 0
     foxglove_address: str = "127.0.0.1"
+    #: the live view also offers the services / the parameters (ros/liveview_*.py)
+    foxglove_services: bool = True
+    foxglove_parameters: bool = True
 
     @property
     def station_ids(self) -> tuple[int, ...]:
@@ -139,7 +143,7 @@ def unknown_overrides(node: Node) -> list[str]:
 
     declared = set(node.list_parameters([], 0).names)
     given = getattr(node, "_parameter_overrides", {})
-    out = []
+    out = stray_overrides(node, list(given))  # qos_overrides.* (ros/qos_overrides.py)
     for name in sorted(given):
         if name in declared or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
             continue
@@ -223,4 +227,6 @@ def declare_parameters(node: Node) -> NodeSettings:
         replay_can_log=values["replay.can_log"], replay_rate=values["replay.rate"],
         replay_exit_at_end=values["replay.exit_at_end"],
         replay_wait_for_subscribers=values["replay.wait_for_subscribers"],
-        foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip())
+        foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip(),
+        foxglove_services=values["foxglove.services"],
+        foxglove_parameters=values["foxglove.parameters"])

@@ -53,6 +53,19 @@ class _Job:
         self.header = header
 
 
+class _Reply:
+    """Stands in for a service in a :class:`_Job` of :meth:`RequestQueue.call`: "sending"
+    the response tells the waiting caller it is filled."""
+
+    __slots__ = ("done",)
+
+    def __init__(self, done: threading.Event) -> None:
+        self.done = done
+
+    def send_response(self, response: Any, header: Any) -> None:
+        self.done.set()
+
+
 class _Detached(CallbackGroup):
     """A callback group no executor runs: :class:`RequestQueue` takes these requests itself."""
 
@@ -102,6 +115,34 @@ class RequestQueue:
             refuse: Callable[[Any, Any, int], None]) -> None:
         """Serve ``service`` (created in :attr:`group`); ``refuse`` fills a busy answer."""
         self._services.append((service, handler, refuse))
+
+    def call(self, handler: Callable[[Any, Any], Any], request: Any, response: Any,
+             refuse: Callable[[Any, Any, int], None], timeout: float) -> bool:
+        """Serve a request that came another way (the live view) in the same order.
+
+        It waits behind the requests taken from DDS and counts toward :attr:`limit` like
+        them; beyond it ``refuse`` fills the busy answer at once. Blocks the calling thread
+        until ``response`` is filled; False if it was not (the queue stopped, or ``timeout``
+        s passed).
+        """
+        done = threading.Event()
+        with self._lock:
+            if self._stopped:
+                return False
+            waiting = len(self._jobs)
+            queued = waiting < self.limit
+            if queued:
+                self._jobs.append(_Job(lambda: handler(request, response), _Reply(done),
+                                       response, None))
+                self._lock.notify()
+        if not queued:
+            refuse(request, response, waiting)
+            return True
+        deadline = time.monotonic() + timeout
+        while not done.wait(0.2):
+            if self._stopped or time.monotonic() > deadline:
+                return False
+        return True
 
     def start(self) -> None:
         """Start taking requests (after every service was added)."""

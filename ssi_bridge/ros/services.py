@@ -24,12 +24,15 @@ from ssi_bridge.core.bridge import Bridge, register_name
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
 from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
+from ssi_bridge.ros.sdo_services import SdoServices
+from ssi_bridge.core.sdo_access import ObjectAccess
 from ssi_bridge_msgs.msg import Event
 from std_srvs.srv import Trigger
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
     StopRecording, WriteRegister,
 )
+from ssi_bridge_msgs.srv import SdoRead, SdoWrite
 
 #: publishes a message on a publisher; False when the node is shutting down
 Publish = Callable[[Any, Any], bool]
@@ -52,8 +55,13 @@ class BridgeServices:
         self.events = node.create_publisher(Event, "~/events", 50)
         recorder.offer(self.events.topic_name, self.events.qos_profile)
         self.queue = RequestQueue(node)
+        #: ~/sdo_read, ~/sdo_write (ros/sdo_services.py)
+        self.sdo = SdoServices(ObjectAccess(bridge), self.log_event, node.get_logger().error)
         self.busy_refusals = 0
         self._busy_logged = 0.0
+        #: (type, resolved name, handler) of every service :meth:`register` created: the
+        #: live view offers the same list (ros/liveview_services.py)
+        self.offered: list[tuple[type, str, Callable[[Any, Any], Any]]] = []
 
     def register(self, group: Any = None) -> None:
         """Create every service of the contract; their requests go through :attr:`queue`
@@ -67,6 +75,8 @@ class BridgeServices:
                 (ResetRegisters, "~/reset_registers", self.reset_registers),
                 (SetControl, "~/set_control", self.set_control),
                 (InjectFault, "~/inject_fault", self.inject_fault),
+                (SdoRead, "~/sdo_read", self.sdo.read),
+                (SdoWrite, "~/sdo_write", self.sdo.write),
                 (StartRecording, "~/start_recording", rec.on_start),
                 (StopRecording, "~/stop_recording", rec.on_stop),
                 (Trigger, "~/pause_recording", rec.on_pause),
@@ -77,11 +87,17 @@ class BridgeServices:
                                           callback_group=self.queue.group,
                                           qos_profile=SERVICE_QOS)
             self.queue.add(service, handler, self._refuser(name[2:]))
+            self.offered.append((srv_type, service.service_name, handler))
         self.queue.start()
 
     def stop(self) -> None:
         """Stop serving (node shutdown)."""
         self.queue.stop()
+
+    def refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
+        """The busy answer of service ``kind`` (e.g. "read_register") for a request that
+        reaches :attr:`queue` another way (the live view)."""
+        return self._refuser(kind)
 
     def _refuser(self, kind: str) -> Callable[[Any, Any, int], None]:
         """Fills the prompt answer to a request beyond the queue's limit."""
@@ -111,7 +127,7 @@ class BridgeServices:
         self.recorder.record(self.events.topic_name, ev, now.nanoseconds)
         text = f"{kind} {joint} {request}: {message}"
         # rclpy ties a severity to each call site, so one call per severity
-        if success and kind == "read_register":
+        if success and kind in ("read_register", "sdo_read"):
             self.node.get_logger().debug(text)  # a read changes nothing: the event suffices
         elif success:
             self.node.get_logger().info(text)

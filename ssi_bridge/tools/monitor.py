@@ -21,12 +21,16 @@ from typing import Any
 
 #: DiagnosticStatus levels (diagnostic_msgs/DiagnosticStatus)
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+#: seconds after the monitor starts during which a node not (yet) in the graph is "waiting for
+#: discovery", not "not found": DDS discovery of a running node takes ~1-3 s
+DISCOVERY_S = 5.0
 
 DESCRIPTION = """\
 Print what a running ssi_bridge node publishes, once a second: every joint's position and
 velocity (rad and rad/s, or m and m/s for linear encoders), the level of its diagnostics,
 and the bus status with the achieved cycle rate and the bus load when the bridge reports it.
-Stop it with Ctrl-C.
+For its first 5 s it says "waiting for discovery" while the node is not seen yet; after that,
+a node that is still not seen is reported as not found. Stop it with Ctrl-C.
 
 examples:
   monitor                                   the node /ssi_bridge
@@ -42,7 +46,7 @@ def level_name(level: Any) -> str:
 
 
 def _fmt(value: float) -> str:
-    return "       nan" if math.isnan(value) else f"{value:10.4f}"
+    return f"{'nan':>12}" if math.isnan(value) else f"{value:12.4f}"
 
 
 @dataclass
@@ -73,19 +77,27 @@ class MonitorState:
             return None
         return bus
 
-    def report(self, node: str, topic: str, elapsed: float, node_seen: bool = True
-               ) -> list[str]:
-        """The lines of one report about ``node``; resets the message count."""
+    def report(self, node: str, topic: str, elapsed: float, node_seen: bool = True,
+               waited: float = DISCOVERY_S) -> list[str]:
+        """The lines of one report about ``node``; resets the message count.
+
+        ``waited``: seconds since the monitor started; before :data:`DISCOVERY_S` a node not
+        seen yet is still being discovered.
+        """
         rate = self.received / elapsed if elapsed > 0 else 0.0
         self.received = 0
         js = self.joint_states
         if js is None:
             why = ("it is up, no message yet" if node_seen else
-                   f"node {node} not found: is it running, in this ROS_DOMAIN_ID?")
+                   f"waiting for discovery, {waited:.0f} of {DISCOVERY_S:g} s"
+                   if waited < DISCOVERY_S else
+                   f"node {node} not found after {waited:.0f} s: is it running, in this "
+                   "ROS_DOMAIN_ID?")
             return [f"waiting for {topic} ({why})"]
         joints = list(js.name)
         lines = [f"{time.strftime('%H:%M:%S')} {node}: {topic} {rate:.1f} msg/s",
-                 f"  {'joint':<16} {'position':>10} {'velocity':>10}  diagnostics"]
+                 f"  {'joint':<16} {'position':>12} {'velocity':>12}  diagnostics",
+                 f"  {'':<16} {'rad (m)':>12} {'rad/s (m/s)':>12}"]
         for i, name in enumerate(joints):
             pos = js.position[i] if i < len(js.position) else math.nan
             vel = js.velocity[i] if i < len(js.velocity) else math.nan
@@ -162,11 +174,13 @@ def _run(args: argparse.Namespace, ros_args: list[str]) -> int:
     node.create_subscription(DiagnosticArray, "/diagnostics", state.on_diagnostics, 10)
     reports = [0]
     last = [time.monotonic()]
+    started = last[0]
 
     def tick() -> None:
         now = time.monotonic()
         seen = state.joint_states is not None or node_seen(node, args.node, args.namespace)
-        print("\n".join(state.report(fqn, topic, now - last[0], seen)), flush=True)
+        print("\n".join(state.report(fqn, topic, now - last[0], seen, now - started)),
+              flush=True)
         last[0] = now
         reports[0] += 1
         if args.count and reports[0] >= args.count:

@@ -1,4 +1,7 @@
-"""Filler bits and justification in every code, for every family (004 §2.4, §3; 001 §5.2).
+"""Filler bits and justification in every code a family offers, for every family (004 §2.4,
+§3; 001 §5.2). A code a family's manual does not offer is refused (test_family_rules.py); the
+families whose 004 section names no code are also checked in Gray-excess and BCD, which they
+take only under ``code_outside_manual``.
 
 The expected frames are built here, as bit strings, from the layout rules the manuals state,
 without the project's layout code:
@@ -132,6 +135,10 @@ def expected_frame(case: Case, value: int) -> str:
 
 
 B, G, GX, BCD = Code.BINARY, Code.GRAY, Code.GRAY_EXCESS, Code.BCD
+#: a family whose 004 section names no code takes Gray-excess / BCD only under this
+#: explicit parameter (protocol/family_rules.py); the codes a family's manual does not
+#: offer are refused (test_family_rules.py), so they have no row here
+OUTSIDE = {"code_outside_manual": True}
 ST = dict(revolutions_numerator=1)
 AHS36 = Layout("msb", 14, error_bits=1)                     # 004 §3.1 clocks 1-14, 15
 AHM36_BIN = Layout("tannenbaum", 26, turn_bits=12, error_bits=1)  # 004 §3.1 clocks 1-12, 13-26
@@ -144,44 +151,45 @@ CASES = [
     # GENERIC: the XN-1SSI default frame, 25 clocks right-justified
     Case("GENERIC", B, {"steps_per_rev": 4096}, 4096, 4096, Layout("right", 25)),
     Case("GENERIC", G, {"steps_per_rev": 4096}, 4096, 4096, Layout("right", 25)),
-    Case("GENERIC", GX, {"steps_per_rev": 3600}, 3600, 4096, Layout("right", 25)),
-    Case("GENERIC", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 100}, 1000, 100,
-         Layout("right", 25)),
     # AHS36 (004 §3.1): the example of a 12-bit resolution in 14 clocks
     Case("AHS36", B, {"steps_per_rev": 4096}, 4096, 1, AHS36),
     Case("AHS36", G, {"steps_per_rev": 4096}, 4096, 1, AHS36),
-    Case("AHS36", GX, {"steps_per_rev": 3600}, 3600, 1, AHS36),
-    Case("AHS36", BCD, {"steps_per_rev": 1000}, 1000, 1, AHS36),
     # AHM36 multiturn (004 §3.1): binary = Tannenbaum, non-binary = MSB-justified in 26
     Case("AHM36_MULTI", B, {"steps_per_rev": 4096}, 4096, 4096, AHM36_BIN),
     Case("AHM36_MULTI", G, {"steps_per_rev": 4096}, 4096, 4096, AHM36_BIN),
-    Case("AHM36_MULTI", GX, {"steps_per_rev": 3600}, 3600, 4096, AHM36_MSB),
-    Case("AHM36_MULTI", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 16}, 1000, 16,
+    Case("AHM36_MULTI", B, {"steps_per_rev": 3600}, 3600, 4096, AHM36_MSB),
+    Case("AHM36_MULTI", G, {"steps_per_rev": 3000, "revolutions_numerator": 16}, 3000, 16,
          AHM36_MSB),
     # AFS60 (004 §3.2): position bits directly followed by 3 error bits
     Case("AFS60", B, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
     Case("AFS60", G, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60", GX, {"steps_per_rev": 3600}, 3600, 1, Layout("msb", 12, error_bits=3)),
-    Case("AFS60", BCD, {"steps_per_rev": 1000}, 1000, 1, Layout("msb", 12, error_bits=3)),
+    Case("AFS60", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1,
+         Layout("msb", 12, error_bits=3)),
+    Case("AFS60", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1,
+         Layout("msb", 12, error_bits=3)),
     # AFM60 (004 §3.2): 12 multiturn + singleturn bits + 3 error bits
     Case("AFM60_MULTI", B, {"steps_per_rev": 8192}, 8192, 4096,
          Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
     Case("AFM60_MULTI", G, {"steps_per_rev": 8192}, 8192, 4096,
          Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60_MULTI", GX, {"steps_per_rev": 3600}, 3600, 4096, Layout("msb", 24, error_bits=3)),
-    Case("AFM60_MULTI", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 10,
+    Case("AFM60_MULTI", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 4096,
+         Layout("msb", 24, error_bits=3)),
+    Case("AFM60_MULTI", BCD, {**OUTSIDE, "steps_per_rev": 1000, "revolutions_numerator": 10,
                               "data_bits": 24}, 1000, 10, Layout("msb", 24, error_bits=3)),
     # AFS/AFM60S Pro (004 §3.3): as AFS/AFM60 while healthy
     Case("AFS60S_PRO", B, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
     Case("AFS60S_PRO", G, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60S_PRO", GX, {"steps_per_rev": 3600}, 3600, 1, Layout("msb", 12, error_bits=3)),
-    Case("AFS60S_PRO", BCD, {"steps_per_rev": 1000}, 1000, 1, Layout("msb", 12, error_bits=3)),
+    Case("AFS60S_PRO", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1,
+         Layout("msb", 12, error_bits=3)),
+    Case("AFS60S_PRO", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1,
+         Layout("msb", 12, error_bits=3)),
     Case("AFM60S_PRO", B, {"steps_per_rev": 8192}, 8192, 4096,
          Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
     Case("AFM60S_PRO", G, {"steps_per_rev": 8192}, 8192, 4096,
          Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60S_PRO", GX, {"steps_per_rev": 3600}, 3600, 4096, Layout("msb", 24, error_bits=3)),
-    Case("AFM60S_PRO", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 10,
+    Case("AFM60S_PRO", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 4096,
+         Layout("msb", 24, error_bits=3)),
+    Case("AFM60S_PRO", BCD, {**OUTSIDE, "steps_per_rev": 1000, "revolutions_numerator": 10,
                              "data_bits": 24}, 1000, 10, Layout("msb", 24, error_bits=3)),
     # ATM60 (004 §3.4): Tannenbaum with a lower resolution, or right aligned on the 24th bit
     Case("ATM60", B, {"steps_per_rev": 4096, "revolutions_numerator": 1024}, 4096, 1024,
@@ -190,40 +198,36 @@ CASES = [
          ATM60_BIN),
     Case("ATM60", GX, {"steps_per_rev": 3600, "revolutions_numerator": 1024}, 3600, 1024,
          ATM60_RA),
-    Case("ATM60", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 10}, 1000, 10,
-         ATM60_RA),
     Case("ATM60_13_12", B, {"steps_per_rev": 2048, "revolutions_numerator": 4096}, 2048, 4096,
          ATM60_1312),
     Case("ATM60_13_12", G, {"steps_per_rev": 2048, "revolutions_numerator": 4096}, 2048, 4096,
          ATM60_1312),
     Case("ATM60_13_12", GX, {"steps_per_rev": 3000, "revolutions_numerator": 4096}, 3000, 4096,
          ATM60_RA),
-    Case("ATM60_13_12", BCD, {"steps_per_rev": 1000, "revolutions_numerator": 10}, 1000, 10,
-         ATM60_RA),
     # ARS60 (004 §3.5): 13 bits up to 8192 steps (MSB-justified, docs/encoder_line.md)
     Case("ARS60", B, {"steps_per_rev": 4096}, 4096, 1, Layout("msb", 13)),
     Case("ARS60", G, {"steps_per_rev": 4096}, 4096, 1, Layout("msb", 13)),
-    Case("ARS60", GX, {"steps_per_rev": 3600}, 3600, 1, Layout("msb", 13)),
-    Case("ARS60", BCD, {"steps_per_rev": 1000}, 1000, 1, Layout("msb", 13)),
+    Case("ARS60", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1, Layout("msb", 13)),
+    Case("ARS60", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1, Layout("msb", 13)),
     Case("ARS60", G, {"steps_per_rev": 16384}, 16384, 1, Layout("msb", 15, error_bits=2)),
     # TTK70 (004 §3.6): 24 position bits + 2 error bits; KH53 (§3.7): 24 bits
     Case("TTK70", B, {"total_steps": 1 << 20}, 0, 1, Layout("right", 24, error_bits=2),
          total=1 << 20),
     Case("TTK70", G, {"total_steps": 1 << 20}, 0, 1, Layout("right", 24, error_bits=2),
          total=1 << 20),
-    Case("TTK70", GX, {"total_steps": 1_000_000}, 0, 1, Layout("right", 24, error_bits=2),
+    Case("TTK70", GX, {**OUTSIDE, "total_steps": 1_000_000}, 0, 1,
+         Layout("right", 24, error_bits=2),
          total=1_000_000),
-    Case("TTK70", BCD, {"total_steps": 10_000}, 0, 1, Layout("right", 24, error_bits=2),
+    Case("TTK70", BCD, {**OUTSIDE, "total_steps": 10_000}, 0, 1, Layout("right", 24, error_bits=2),
          total=10_000),
     Case("KH53", B, {"total_steps": 1 << 20}, 0, 1, Layout("right", 24), total=1 << 20),
     Case("KH53", G, {"total_steps": 1 << 20}, 0, 1, Layout("right", 24), total=1 << 20),
-    Case("KH53", GX, {"total_steps": 1_000_000}, 0, 1, Layout("right", 24), total=1_000_000),
-    Case("KH53", BCD, {"total_steps": 10_000}, 0, 1, Layout("right", 24), total=10_000),
+    Case("KH53", GX, {**OUTSIDE, "total_steps": 1_000_000}, 0, 1,
+         Layout("right", 24), total=1_000_000),
+    Case("KH53", BCD, {**OUTSIDE, "total_steps": 10_000}, 0, 1, Layout("right", 24), total=10_000),
     # TR (001 §5.2.4.1): Number of data bits larger than needed -> leading zeros
     Case("TR_PROGRAMMABLE", B, {"data_bits": 26}, 4096, 4096, Layout("right", 26)),
     Case("TR_PROGRAMMABLE", G, {"data_bits": 26}, 4096, 4096, Layout("right", 26)),
-    Case("TR_PROGRAMMABLE", GX, {"data_bits": 26, "steps_per_rev": 3600}, 3600, 4096,
-         Layout("right", 26)),
     Case("TR_PROGRAMMABLE", BCD, {"data_bits": 26, "steps_per_rev": 1000,
                                   "revolutions_numerator": 100}, 1000, 100,
          Layout("right", 26)),
@@ -269,11 +273,14 @@ def test_issue_example_ahs36_gray_12_bits() -> None:
     assert format(enc.frame_at(0).bits, "015b") == "000000000001000"
 
 
-def test_gray_excess_is_msb_justified_on_ahs36() -> None:
-    """004 §3.1 l.166 "always output the SSI position MSB-justified", also in Gray-excess."""
-    enc = make_encoder("AHS36", Still(0.5 / 3600), steps_per_rev=3600, code=Code.GRAY_EXCESS)
+def test_gray_excess_is_msb_justified_on_ars60() -> None:
+    """004 §3.5 (MSB-justified, docs/encoder_line.md), also in Gray-excess: a code 004 §3.5
+    does not name, so only under ``code_outside_manual`` (AHS36 refuses it: 004 §3.1 offers
+    Gray and binary, test_family_rules.py)."""
+    enc = make_encoder("ARS60", Still(0.5 / 3600), steps_per_rev=3600, code=Code.GRAY_EXCESS,
+                       code_outside_manual=True)
     e = (4096 - 3600) // 2   # 248: 3600 codes from the middle of the 12-bit Gray code
-    assert format(enc.frame_at(0).bits, "015b") == ref_gray(e, 12) + "00" + "0"
+    assert format(enc.frame_at(0).bits, "013b") == ref_gray(e, 12) + "0"
 
 
 @pytest.mark.parametrize("family, overrides, steps, revs", [

@@ -52,11 +52,13 @@ def test_registers_behind_objects(station) -> None:
     station.sync()
     assert sdo[0x6820][1].raw == modules[0].ssi_pos == 1000
     assert sdo[0x6820][2].raw == 2000
-    sdo[0x6810][1].raw = 10
+    # 0x6810 is added to the encoder value (000 object 6810hex); the module subtracts
+    # REG_OFFSET (000 ch. 1), so REG_OFFSET holds the preset negated (test_preset_6810.py)
+    sdo[0x6810][1].raw = -10
     assert modules[0].read_register(Reg.REG_OFFSET) == 10
     station.sync()
     assert sdo[0x6820][1].raw == 990
-    sdo[0x6810][1].raw = -10  # Integer32: REG_OFFSET = 0xFFFFFFF6
+    sdo[0x6810][1].raw = 10  # Integer32: REG_OFFSET = -10 = 0xFFFFFFF6
     assert modules[0].read_register(Reg.REG_OFFSET) == 0xFFFFFFF6
     sdo[0x5840][2].raw = 0x00000081
     assert modules[1].read_register(Reg.REG_SSI_MASK) == 0x81

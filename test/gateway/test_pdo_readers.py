@@ -46,7 +46,7 @@ def _sdo_bytes(st, entries: list[tuple[int, int]]) -> bytes:
 
 def test_direct_and_generic_readers_send_the_sdo_bytes(station) -> None:
     st = station
-    st.node.sdo[0x6810][1].raw = 5000  # REG_OFFSET above the value: negative Integer32
+    st.node.sdo[0x6810][1].raw = -5000  # REG_OFFSET 5000 above the value: negative Integer32
     layouts = [
         [(0x2000, 1)],
         [(0x6820, 1), (0x6820, 2)],

@@ -17,7 +17,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import InjectFault
 
-from ssi_bridge.tools.monitor import MonitorState, build_parser, joint_states_topic
+from ssi_bridge.tools.monitor import (
+    DISCOVERY_S, MonitorState, build_parser, joint_states_topic,
+)
 
 from .conftest import installed_executable
 
@@ -65,6 +67,20 @@ def test_report_ignores_the_bus_status_of_another_bridge_and_says_what_it_waits_
                 "virtual:b node 1 XN-GW-CANOPEN")]))
     assert "bus: (no diagnostics yet)" in "\n".join(
         state.report("/ssi_bridge", "/joint_states", 1.0))
+
+
+def test_first_seconds_wait_for_discovery_and_the_columns_carry_units():
+    state = MonitorState()
+    early = state.report("/ssi_bridge", "/joint_states", 1.0, node_seen=False, waited=1.2)[0]
+    assert "waiting for discovery, 1 of 5 s" in early and "not found" not in early, early
+    late = state.report("/ssi_bridge", "/joint_states", 1.0, node_seen=False,
+                        waited=DISCOVERY_S + 1.0)[0]
+    assert "node /ssi_bridge not found after 6 s" in late and "discovery" not in late, late
+    assert DISCOVERY_S == 5.0 and "first 5 s" in build_parser().format_help()
+    state.on_joint_states(JointState(name=["lift"], position=[1.5], velocity=[0.5]))
+    lines = state.report("/ssi_bridge", "/joint_states", 1.0)
+    assert lines[2].split() == ["rad", "(m)", "rad/s", "(m/s)"], lines[:3]
+    assert "msg/s" in lines[0]
 
 
 def test_help_is_plain_text():

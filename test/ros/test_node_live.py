@@ -2,7 +2,8 @@
 
 REG_PARA1 (000 Table 18/19) sets how the XN-1SSI reads the frame: INVALID_BITS_LSB = 1 shifts
 one bit out, so REG_SSI_POS counts half as fine (docs/node.md, Units). Whichever path changes
-it — the ``<joint>.para1`` parameter, ``~/write_register`` to address 20, or REG_SF "LD20"
+it — the ``<joint>.para1`` parameter, ``~/write_register`` to address 20, ``~/sdo_write`` of
+object 0x5801 (Encoder Config = REG_PARA1, 000 Table 17), or REG_SF "LD20"
 which restores the defaults including REG_PARA1 (000 "Resetting the register bank") — the
 published position must stay the shaft's and the velocity the profile's.
 """
@@ -18,7 +19,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Event
-from ssi_bridge_msgs.srv import ReadRegister, ResetRegisters, WriteRegister
+from ssi_bridge_msgs.srv import ReadRegister, ResetRegisters, SdoWrite, WriteRegister
 
 SPEED = 2 * math.pi * 0.25  # the default simulated shaft: 0.25 rev/s = 1.571 rad/s
 PARA1_DEFAULT = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary
@@ -60,6 +61,14 @@ def _change(probe, node, path, joint):
         assert res.success, res.message
         assert f"{joint}.para1" in res.message, res.message
         return PARA1_LSB1
+    if path == "sdo_write":  # object 0x5801 Encoder Config, sub = slot (000 Table 17)
+        res = probe.call(SdoWrite, node.topic("~/sdo_write"),
+                         SdoWrite.Request(joint=joint, index=0x5801,
+                                          subindex={"still": 1, "moving": 2}[joint],
+                                          unsigned_value=PARA1_LSB1))
+        assert res.success, res.message
+        assert f"{joint}.para1" in res.message, res.message
+        return PARA1_LSB1
     res = probe.call(ResetRegisters, node.topic("~/reset_registers"),
                      ResetRegisters.Request(joint=joint, include_parameters=True))
     assert res.success, res.message
@@ -70,7 +79,7 @@ def _change(probe, node, path, joint):
 STILL_REV = 1.3  # "still": the shaft stands at 1.3 rev = 8.168 rad, whatever the stamps say
 
 
-@pytest.mark.parametrize("path", ["parameter", "write_register", "reset_ld20"])
+@pytest.mark.parametrize("path", ["parameter", "write_register", "sdo_write", "reset_ld20"])
 def test_every_reg_para1_path_keeps_position_and_velocity_true(running, probe, path):
     # two joints: a standing shaft (its true position is exact, independent of stamps) and
     # one turning at the profile speed; both take the same REG_PARA1 path

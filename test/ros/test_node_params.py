@@ -98,6 +98,16 @@ def test_duplicate_slots_are_refused_at_start(start_node):
     assert "share a module slot" in node.log(), node.log()
 
 
+def test_a_code_the_family_does_not_offer_is_refused_at_start_with_the_offered_list(start_node):
+    """001 §5.2.4.2: the TR check-sum encoder sends binary only; a Gray joint of that family
+    is refused in one line that names what the family does offer."""
+    node = start_node({"joints": ["a"], "a.family": "TR_CHECKSUM", "a.code": "gray"})
+    assert node.proc.wait(30) == 1, node.log()
+    lines = [line for line in node.log().splitlines() if line.strip()]
+    assert len(lines) == 1 and "cannot start" in lines[0] and "binary" in lines[0], node.log()
+    assert "Traceback" not in node.log()
+
+
 @pytest.mark.parametrize("name", ["bus", "station 3"])
 def test_a_joint_named_like_another_diagnostics_status_is_refused_at_start(start_node, name):
     """/diagnostics names a status '<node>: <joint>', '<node>: bus' and '<node>: station <id>':

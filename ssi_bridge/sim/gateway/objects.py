@@ -36,6 +36,12 @@ REGISTER_OBJECTS: dict[int, Reg] = {
 }
 #: Integer32 objects: the 32-bit register is read as two's complement (Tables 39-40, 47-48)
 SIGNED_OBJECTS = frozenset({0x6810, 0x6820, 0x6B10, 0x6B20, 0x6C01, 0x6C02})
+#: 0x6810 "Preset value for multi-sensor devices": "The content of this object is added to the
+#: value of the SSI encoder. The resulting value is stored in object 6820" (000, object
+#: 6810hex). The module subtracts REG_OFFSET (000 ch. 1 "Offset function": REG_SSI_POS = SSI
+#: encoder - REG_OFFSET), so the gateway keeps REG_OFFSET = -(0x6810) and reads 0x6810 back as
+#: -REG_OFFSET: both sentences of 000 hold (docs/canopen.md "Preset: object 0x6810")
+PRESET = 0x6810
 #: a write of any value resets FLAG_CMP1/2 unless still matching (000 on 5803 and 5805)
 FLAG_RESET_OBJECTS = frozenset({0x5803, 0x5805})
 CAM_ENABLE, CAM_POLARITY = 0x6B01, 0x6B02
@@ -95,6 +101,8 @@ class EncoderObjects:
             return int.from_bytes(self.outputs[slot], "little")
         if index in REGISTER_OBJECTS:
             value = module.read_register(REGISTER_OBJECTS[index])
+            if index == PRESET:  # added, not subtracted (000 object 6810hex)
+                value = -value & 0xFFFFFFFF
             return to_int32(value) if index in SIGNED_OBJECTS else value
         if index == 0x5804:  # Table 27
             return int(module.diag)
@@ -186,6 +194,8 @@ class EncoderObjects:
     @staticmethod
     def _write_register(module: Xn1Ssi, index: int, value: int) -> None:
         reg = REGISTER_OBJECTS[index]
+        if index == PRESET:  # the preset is added: REG_OFFSET = -preset (000 object 6810hex)
+            value = -value
         try:
             if reg is Reg.REG_PARA1:
                 module.write_para1(value & 0xFFFFFFFF)
