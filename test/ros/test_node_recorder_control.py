@@ -109,3 +109,29 @@ def test_a_finalized_managed_node_refuses_to_record(tmp_path, domain_id, child_p
     finally:
         code = node.stop()
     assert code == 0, node.log()[-3000:]
+
+
+def test_recorder_control_and_snapshot_reach_the_live_view(running, probe, tmp_path):
+    """The four Trigger services are offered by the live view (Foxglove's Service Call panel)
+    and answer as over DDS."""
+    from .test_node_liveview import free_port
+    from .test_node_liveview_rw import LiveViewClient, session
+
+    port = free_port()
+    node = running({"foxglove.port": port, "record.root": str(tmp_path / "rec"),
+                    "record.snapshot.duration": 1.0})
+    srv = node.topic("~/pause_recording").rsplit("/", 1)[0]
+    names = ("pause_recording", "resume_recording", "split_recording", "snapshot")
+
+    async def body(client: LiveViewClient) -> dict:
+        out = {"types": {n: client.services[f"{srv}/{n}"]["type"] for n in names}}
+        out["pause"] = await client.call(f"{srv}/pause_recording", {})
+        out["snapshot"] = await client.call(f"{srv}/snapshot", {})
+        return out
+
+    fox = session(port, body)
+    assert set(fox["types"].values()) == {"std_srvs/srv/Trigger"}, fox["types"]
+    ros_pause = probe.call(Trigger, node.topic("~/pause_recording"), Trigger.Request())
+    assert (fox["pause"].success, fox["pause"].message) == (ros_pause.success, ros_pause.message)
+    assert not ros_pause.success and "no recording is running" in ros_pause.message
+    assert fox["snapshot"].success and "snapshot_" in fox["snapshot"].message, fox["snapshot"]
