@@ -181,6 +181,8 @@ SLOW = {
     "test/ros/test_node_services.py::"
     "test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
         "stress: 1000 service calls at once",
+    "test/ros/test_node_snapshot.py::test_memory_stays_bounded_with_snapshots_over_ten_minutes":
+        "soak: 10 minutes at 500 Hz with fault snapshots, RSS watched",
 }
 #: node tests that check the install path (the installed executables start and answer), not
 #: the logic again: .ci/run's workspace step runs only these (``-m smoke``)

@@ -197,7 +197,11 @@ class BagRecorder:
     def write(self, topic: str, msg: Any, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
         """Serialize ``msg`` to CDR and append it (log time = receive, publish = send time)."""
-        data = cdr.serialize(msg)
+        self.write_serialized(topic, cdr.serialize(msg), log_time_ns, publish_time_ns)
+
+    def write_serialized(self, topic: str, data: bytes, log_time_ns: int,
+                         publish_time_ns: int | None = None) -> None:
+        """Append a message already serialized to CDR (a snapshot's ring holds such)."""
         with self._lock:
             self._check()
             entry = self._topics.get(topic)
@@ -220,6 +224,21 @@ class BagRecorder:
                 info.start_ns = log_time_ns
             info.end_ns = max(info.end_ns, log_time_ns)
             self._dirty = True
+
+    def split(self) -> str:
+        """Finish the open file now and start the next ``<name>_<k+1>.mcap`` (rosbag2's
+        ``~/split_bagfile``); returns the new file's name. Raises RecordingError when the open
+        file holds no message yet (every file of a bag holds at least one)."""
+        with self._lock:
+            self._check()
+            assert self._file is not None
+            if self._file.info.message_count == 0:
+                raise RecordingError(f"{self._file.info.path} holds no message yet; "
+                                     "nothing to split")
+            try:
+                return self._next_file().info.path
+            except OSError as err:
+                raise self._fail(err) from err
 
     def flush(self) -> None:
         """Close the open chunk and hand everything to the OS (survives a kill -9)."""

@@ -103,6 +103,8 @@ class ManagedBridgeNode(SsiBridgeNode, LifecycleNode):
         """From any state: stop what runs and close what is open."""
         self._stop_cycle()
         self._close_bus_side()
+        if hasattr(self, "recorder"):
+            self.recorder.finalize()  # ~/start_recording is refused from now on (#24 item 7)
         self.get_logger().info("shut down: bus closed")
         return TransitionCallbackReturn.SUCCESS
 
@@ -152,6 +154,7 @@ class ManagedBridgeNode(SsiBridgeNode, LifecycleNode):
         self._stop_cycle()
         if hasattr(self, "handlers"):
             self._run_steps([("services", self.handlers.stop),
+                             ("recording", self.recorder.finalize),
                              ("live view", self.liveview.stop)])
         self._close_bus_side()
         logbridge.uninstall()

@@ -313,7 +313,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         js.header.stamp = time_msg(stamp_ns)
         js.header.frame_id = self.settings.frame_id
         # ~/status costs as much as the rest of the cycle: build it only for a listener
-        want_status = (self.recorder.active or self.status_pub.get_subscription_count() > 0
+        want_status = (self.recorder.capturing or self.status_pub.get_subscription_count() > 0
                        or self.liveview.wants(self.status_pub))
         status = Status(header=js.header) if want_status else None
         # a joint without a sample latched at this SYNC holds an older latch than this stamp:
@@ -381,7 +381,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
             ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
         if self.player is not None:
             steps.append(("log replay", self.player.stop))
-        steps += [("recording", self.recorder.stop), ("live view", self.liveview.stop)]
+        steps += [("recording", self.recorder.finalize), ("live view", self.liveview.stop)]
         steps += [(f"station {sid} client", c.close) for sid, c in self.station_clients.items()]
         steps += [("bus", self.client.close)]
         if self.master is not None:

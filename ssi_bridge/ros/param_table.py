@@ -118,7 +118,8 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
                                              read_only=True)),
     "record.can_log": (False, _describe(
         "Also log the raw CAN traffic of each session beside the bag (can_0.log, candump "
-        "format, read by python-can's LogReader)", read_only=True)),
+        "format, read by python-can's LogReader), and of each fault snapshot "
+        "(record.snapshot.duration)", read_only=True)),
     "record.max_size": (0, _describe(
         "Split a session into its next file <name>_<k>.mcap once the open one holds this many "
         "bytes (rosbag2 --max-bag-size); 0: no split by size, else at least 65536",
@@ -127,6 +128,20 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "Split a session into its next file once a message is more than this many seconds "
         "after the open file's first one (rosbag2 --max-bag-duration); 0: no split by time",
         read_only=True, int_range=(0, 7 * 86400))),
+    "record.snapshot.duration": (0.0, _describe(
+        "Fault snapshot: seconds of every recorded topic kept in memory (a ring of serialized "
+        "messages, its bytes in the bus diagnostics); written as a bag snapshot_<time>_<joint> "
+        "under record.root on ERROR or ~/snapshot. 0: off", read_only=True,
+        float_range=(0.0, 600.0))),
+    "record.snapshot.after": (5.0, _describe(
+        "Fault snapshot: seconds recorded into the snapshot after its last trigger (a fault "
+        "within them extends the same bag)", read_only=True, float_range=(0.0, 600.0))),
+    "record.snapshot.on_error": (True, _describe(
+        "Fault snapshot: write one when a joint or the bus reaches ERROR (with "
+        "record.snapshot.duration > 0); false: only on ~/snapshot", read_only=True)),
+    "record.snapshot.max_bags": (10, _describe(
+        "Fault snapshot: snapshot bags kept under record.root; the oldest beyond this is "
+        "removed (said in the log)", read_only=True, int_range=(1, 10000))),
     "foxglove.port": (0, _describe(
         "Live view: TCP port of a Foxglove WebSocket server streaming every topic of the node "
         "(ros2msg schemas, CDR); open Foxglove and connect to ws://localhost:<port>. 0: off",

@@ -4,6 +4,13 @@ Every message the node publishes is handed to :meth:`SessionRecorder.record` rig
 ``publish``; while a session runs it is written to the bag with log time = publish time.
 A write error (disk full, file removed) ends the session, keeps the error for the bus
 diagnostics (ERROR) and never stops the publishing.
+
+A session can be paused (messages are not written until resumed: a gap in the bag, the CAN
+log goes on) and split at once into its next file (``~/pause_recording``,
+``~/resume_recording``, ``~/split_recording``, as rosbag2's recorder names them). With
+``record.snapshot.duration`` every message also goes into the fault snapshot's ring
+(``ros/snapshot.py``), session or not. Once the node is finalized (lifecycle shutdown, or the
+process ending) every start is refused: there is no cycle left to record.
 """
 
 from __future__ import annotations
@@ -15,12 +22,16 @@ from typing import TYPE_CHECKING, Any
 from ssi_bridge import __version__
 from ssi_bridge.exceptions import BusError, RecordingError
 from ssi_bridge.base.realtime import normal_this_thread
+from ssi_bridge.record import cdr
+from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.ros.snapshot import ErrorWatch, FrameTap, snapshot_config
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
     from ssi_bridge.client.sniffer import CanSniffer
     from ssi_bridge.record.bag import BagRecorder
+    from ssi_bridge.record.snapshot import SnapshotKeeper
     from ssi_bridge.ros.params import NodeSettings
 
 #: type of every topic the node records, by the suffix of its resolved name
@@ -48,6 +59,13 @@ class SessionRecorder:
         #: the last write error, shown as ERROR on the bus diagnostics until a new session
         self.error = ""
         self.sessions = 0
+        #: the session's bag takes no message until resumed
+        self.paused = False
+        #: the node ended (lifecycle shutdown): starts are refused (set by :meth:`finalize`)
+        self.finalized = False
+        self._frame_tap: FrameTap | None = None
+        self.snapshots: SnapshotKeeper | None = self._snapshot_keeper()
+        self._errors = ErrorWatch()
 
     def offer(self, topic: str, qos: Any) -> None:
         """Record ``topic`` with the QoS its publisher offers (rosbag2 stores it per channel)."""
@@ -64,6 +82,10 @@ class SessionRecorder:
         from ssi_bridge.record.session import resolve_bag_path
 
         with self._lock:
+            if self.finalized:
+                raise RecordingError(
+                    "the node is finalized (lifecycle shutdown): its bus and cycle are closed, "
+                    "a bag would stay empty; start a new node to record")
             if self._bag is not None:
                 raise RecordingError(
                     f"a recording is already running in {self._bag.directory}; stop it first")
@@ -82,6 +104,7 @@ class SessionRecorder:
             if self._settings.record_can_log:
                 self._start_sniffer(path)
             self.error = ""
+            self.paused = False
             self.sessions += 1
         self._node.get_logger().info(f"recording to {path}")
         return path
@@ -114,17 +137,33 @@ class SessionRecorder:
             f"recording closed: {summary.directory} ({summary.message_count} messages)")
         return Path(summary.directory), summary.message_count
 
+    @property
+    def capturing(self) -> bool:
+        """True while :meth:`record` keeps messages (a session, or the snapshot ring)."""
+        return self._bag is not None or self.snapshots is not None
+
     def record(self, topic: str, msg: Any, stamp_ns: int) -> None:
-        """Write one published message if a session runs; a write error ends the session."""
-        bag = self._bag
+        """Keep one published message: in the snapshot ring (if on) and in the session's bag
+        if one runs and is not paused; a write error ends the session."""
+        bag = None if self.paused else self._bag
+        snapshots = self.snapshots
+        if bag is None and snapshots is None:
+            return
+        now_ns = self._node.get_clock().now().nanoseconds
+        data = cdr.serialize(msg)
+        if snapshots is not None:
+            try:
+                self._keep(snapshots, topic, msg, data, now_ns, stamp_ns)
+            except Exception as err:  # noqa: BLE001 - a snapshot never stops the publishing
+                self._node.get_logger().error(f"fault snapshot: {type(err).__name__}: {err}",
+                                              throttle_duration_sec=1.0)
         if bag is None:
             return
         try:
             if topic not in self._topics:
                 bag.add_topic(topic, self._type_of(topic), self._qos.get(topic))
                 self._topics.add(topic)
-            now_ns = self._node.get_clock().now().nanoseconds
-            bag.write(topic, msg, log_time_ns=now_ns, publish_time_ns=stamp_ns)
+            bag.write_serialized(topic, data, log_time_ns=now_ns, publish_time_ns=stamp_ns)
         except (RecordingError, OSError) as err:
             self.error = f"recording stopped: {err}"
             self._node.get_logger().error(self.error)
@@ -136,6 +175,17 @@ class SessionRecorder:
                                       name="recording-salvage", daemon=True)
             self._salvage.append(worker)
             worker.start()
+
+    def _keep(self, snapshots: SnapshotKeeper, topic: str, msg: Any, data: bytes,
+              now_ns: int, stamp_ns: int) -> None:
+        """Into the snapshot ring; a status of /diagnostics newly at ERROR triggers one."""
+        snapshots.add(topic, data, now_ns, stamp_ns)
+        if topic == "/diagnostics" and snapshots.config.on_error:
+            for item in self._errors.new_errors(msg):
+                path, extended = snapshots.trigger(item, now_ns)
+                self._node.get_logger().warning(
+                    f"{item} reached ERROR: snapshot {path.name} "
+                    + ("extended" if extended else "started"))
 
     def _end_failed_session(self, bag: BagRecorder, sniffer: CanSniffer | None) -> None:
         """After a bag write error: close the CAN log, then give the bag its summary with
@@ -165,26 +215,32 @@ class SessionRecorder:
     def counters(self) -> dict[str, int]:
         """Recording figures for the bus diagnostics."""
         bag, sniffer = self._bag, self._sniffer
-        return {"recording": int(bag is not None),
-                "recorded_messages": bag.message_count if bag is not None else 0,
-                "recorded_files": len(bag.files) if bag is not None else 0,
-                "can_frames_logged": sniffer.frames if sniffer is not None else 0}
+        out: dict[str, Any] = {
+            "recording": int(bag is not None), "is_paused": bag is not None and self.paused,
+            "recorded_messages": bag.message_count if bag is not None else 0,
+            "recorded_files": len(bag.files) if bag is not None else 0,
+            "can_frames_logged": sniffer.frames if sniffer is not None else 0}
+        if self.snapshots is not None:
+            out.update(self.snapshots.counters())
+        return out
 
     def _start_sniffer(self, bag_dir: Path) -> None:
         """Log the raw CAN traffic beside the bag (``can_0.log``, candump format)."""
         from ssi_bridge.client.sniffer import CanSniffer
-        from ssi_bridge.protocol.settings import BusConfig
 
-        s = self._settings
-        config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
-                           bitrate=s.bus_bitrate, node_id=s.node_id)
         try:
-            self._sniffer = CanSniffer(config, bag_dir / "can_0.log",
+            self._sniffer = CanSniffer(self._bus_config(), bag_dir / "can_0.log",
                                        on_error=self._on_can_log_error)
         except BusError as err:
             # the bag still records; the reason shows on the bus diagnostics
             self.error = f"CAN log not written: {err}"
             self._node.get_logger().error(self.error)
+
+    def _bus_config(self) -> BusConfig:
+        """The node's bus, for a listener of its own (the CAN log, the snapshot's frames)."""
+        s = self._settings
+        return BusConfig(interface=s.bus_interface, channel=s.bus_channel,
+                         bitrate=s.bus_bitrate, node_id=s.node_id)
 
     def _on_can_log_error(self, reason: str) -> None:
         """The CAN log hit a write error (sniffer thread): ERROR on the bus diagnostics at once
@@ -214,6 +270,106 @@ class SessionRecorder:
         response.success = True
         response.message = f"closed {done[0]} with {done[1]} messages"
         return response
+
+    # -- recorder control (rosbag2's pause / resume / split_bagfile) and snapshots ----------
+    def set_paused(self, paused: bool) -> str:
+        """Pause or resume the running session; returns what was done (RecordingError: no
+        session). Pausing a paused session (or resuming a running one) changes nothing."""
+        with self._lock:
+            bag = self._bag
+            if bag is None:
+                raise RecordingError("no recording is running")
+            was, self.paused = self.paused, paused
+        if was == paused:
+            return f"{bag.directory} already {'paused' if paused else 'recording'}"
+        text = (f"recording to {bag.directory} paused: messages are not written until "
+                "~/resume_recording" if paused else f"recording to {bag.directory} resumed")
+        self._node.get_logger().info(text)
+        return text
+
+    def split(self) -> Path:
+        """Close the session's open file and go on in the next ``<bag>_<k>.mcap`` at once;
+        returns its path (RecordingError: no session, or nothing written to the open file)."""
+        bag = self._bag
+        if bag is None:
+            raise RecordingError("no recording is running")
+        path = bag.directory / bag.split()
+        self._node.get_logger().info(f"recording split: now writing {path}")
+        return path
+
+    def finalize(self) -> tuple[Path, int] | None:
+        """The node ends (lifecycle shutdown, process exit): stop the session, finish the
+        snapshot being written, and refuse every later start."""
+        self.finalized = True
+        try:
+            return self.stop()
+        finally:
+            tap, self._frame_tap = self._frame_tap, None
+            if tap is not None:
+                tap.close()
+            if self.snapshots is not None:
+                self.snapshots.close()
+
+    def on_pause(self, request: Any, response: Any) -> Any:
+        """~/pause_recording (std_srvs/Trigger)."""
+        return self._answer(response, "pause_recording", lambda: self.set_paused(True))
+
+    def on_resume(self, request: Any, response: Any) -> Any:
+        """~/resume_recording (std_srvs/Trigger)."""
+        return self._answer(response, "resume_recording", lambda: self.set_paused(False))
+
+    def on_split(self, request: Any, response: Any) -> Any:
+        """~/split_recording (std_srvs/Trigger): the message names the new file."""
+        return self._answer(response, "split_recording", lambda: f"writing {self.split()}")
+
+    def on_snapshot(self, request: Any, response: Any) -> Any:
+        """~/snapshot (std_srvs/Trigger): write the ring now (or extend the one running)."""
+        def snapshot() -> str:
+            if self.finalized:
+                raise RecordingError("the node is finalized (lifecycle shutdown)")
+            if self.snapshots is None:
+                raise RecordingError("record.snapshot.duration is 0: no ring is kept; set it "
+                                     "(seconds before a snapshot) to take snapshots")
+            path, extended = self.snapshots.trigger("request")
+            self._node.get_logger().info(f"snapshot on request: {path}"
+                                         + (" (extended)" if extended else ""))
+            return f"{'extended' if extended else 'writing'} {path}"
+        return self._answer(response, "snapshot", snapshot)
+
+    @staticmethod
+    def _answer(response: Any, kind: str, action: Any) -> Any:
+        """Fill a Trigger response from ``action()`` (its text) or the refusal."""
+        try:
+            response.success, response.message = True, action()
+        except (RecordingError, OSError, ValueError) as err:
+            response.success, response.message = False, f"{kind}: {err}"
+        return response
+
+    def _snapshot_keeper(self) -> SnapshotKeeper | None:
+        """The fault snapshot's ring and writer when ``record.snapshot.duration`` > 0."""
+        from ssi_bridge.record.bag import BagRecorder
+        from ssi_bridge.record.snapshot import SnapshotKeeper
+
+        s = self._settings
+        config = snapshot_config(self._node, s.record_root, s.record_can_log)
+        if config is None:
+            return None
+
+        def open_bag(path: Path) -> BagRecorder:
+            meta = {**self._metadata(), "snapshot": path.name}
+            return BagRecorder.open(path, compression=s.record_compression, metadata=meta)
+
+        clock = self._node.get_clock()
+        keeper = SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
+                                clock_ns=lambda: clock.now().nanoseconds,
+                                log=self._node.get_logger())
+        if config.can_log:
+            try:
+                self._frame_tap = FrameTap(self._bus_config(), keeper)
+            except BusError as err:  # the messages' ring still runs; the reason is shown
+                self.error = f"snapshot CAN ring not kept: {err}"
+                self._node.get_logger().error(self.error)
+        return keeper
 
     def _type_of(self, topic: str) -> str:
         for suffix, type_name in TOPIC_TYPES.items():

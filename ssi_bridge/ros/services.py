@@ -27,6 +27,7 @@ from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
 from ssi_bridge.ros.sdo_services import SdoServices
 from ssi_bridge.core.sdo_access import ObjectAccess
 from ssi_bridge_msgs.msg import Event
+from std_srvs.srv import Trigger
 from ssi_bridge_msgs.srv import (
     InjectFault, ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording,
     StopRecording, WriteRegister,
@@ -77,7 +78,11 @@ class BridgeServices:
                 (SdoRead, "~/sdo_read", self.sdo.read),
                 (SdoWrite, "~/sdo_write", self.sdo.write),
                 (StartRecording, "~/start_recording", rec.on_start),
-                (StopRecording, "~/stop_recording", rec.on_stop)):
+                (StopRecording, "~/stop_recording", rec.on_stop),
+                (Trigger, "~/pause_recording", rec.on_pause),
+                (Trigger, "~/resume_recording", rec.on_resume),
+                (Trigger, "~/split_recording", rec.on_split),
+                (Trigger, "~/snapshot", rec.on_snapshot)):
             service = node.create_service(srv_type, name, handler,
                                           callback_group=self.queue.group,
                                           qos_profile=SERVICE_QOS)
