@@ -90,20 +90,13 @@ class NodeDiagnostics:
 
     def _levels(self) -> tuple:
         """The diagnostic levels without building the statuses (checked every cycle)."""
-        joints = self.joints.values()
-        levels: list[Any] = [j.level for j in joints]
+        levels: list[Any] = [j.level for j in self.joints.values()]
         # PowerFail / error bits change a joint's level too (a failed check under noise would
         # flip it every few cycles: that one waits for the periodic message)
-        for j in joints:
-            f = j.counters.frame
-            levels.append((f.power_failure, f.encoder_error) if f else None)
-        for c in self.station_clients.values():
-            levels.append(int(c.gateway_alive))
-        # any problem, without building its text (this runs every cycle)
-        station = self.station
-        problem = (self.recorder.error or self.liveview.error
-                   or (station is not None and station.problem()))
-        levels.append(int(self.client.gateway_alive) * 2 + int(bool(problem)))
+        levels += [(f.power_failure, f.encoder_error) if (f := j.counters.frame) else None
+                   for j in self.joints.values()]
+        levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
+        levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)
 
     def _publish_on_change(self) -> None:
