@@ -151,8 +151,11 @@ class ChannelHealth:
         self._sampled = False
         #: (since, lowest raw level) while the raw level is above ``_confirmed``
         self._up: tuple[float, int] | None = None
-        #: (time, raw level) of the cycles of the last RAISE_AFTER_S (the flap rule)
-        self._recent: deque[tuple[float, int]] = deque()
+        #: the flap rule's window, the last RAISE_AFTER_S: the times of all its cycles, and of
+        #: those whose raw level was ERROR / WARN or ERROR (running, so a cycle costs O(1))
+        self._recent: deque[float] = deque()
+        self._recent_error: deque[float] = deque()
+        self._recent_warn: deque[float] = deque()
         #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
         self._history: deque[tuple[float, int]] = deque()
         self.level = STALE
@@ -223,20 +226,29 @@ class ChannelHealth:
 
     def _flapping(self, now: float, raw: int) -> int | None:
         """The worst WARN/ERROR that flaps in the last RAISE_AFTER_S (:data:`FLAP_SHARE` of its
-        cycles, spanning half of it), or None. Its message says in how many cycles."""
-        recent = self._recent
-        recent.append((now, raw))
+        cycles, spanning half of it), or None. Its message says in how many cycles.
+
+        Runs every cycle for every joint: the window keeps the times of its ERROR and of its
+        WARN-or-worse cycles apart, so no cycle scans the window.
+        """
+        recent, errors, warns = self._recent, self._recent_error, self._recent_warn
+        recent.append(now)
+        if WARN <= raw < STALE:
+            warns.append(now)
+            if raw >= ERROR:
+                errors.append(now)
         horizon = now - self.raise_after_s
-        while recent and recent[0][0] < horizon:
-            recent.popleft()
+        for times in (recent, warns, errors):
+            while times and times[0] < horizon:
+                times.popleft()
         n = len(recent)
-        if n < FLAP_MIN_CYCLES or self.raise_after_s <= 0:
+        if n < FLAP_MIN_CYCLES or self.raise_after_s <= 0 or not warns:
             return None
-        for level in (ERROR, WARN):
-            times = [t for t, r in recent if level <= r < STALE]
+        for level, times in ((ERROR, errors), (WARN, warns)):
             if (times and len(times) >= FLAP_SHARE * n
                     and times[-1] - times[0] >= 0.5 * self.raise_after_s):
-                worst = max(r for t, r in recent if level <= r < STALE)
+                # the worst raw level of the window at or above ``level`` (below STALE)
+                worst = ERROR if errors else level
                 text = self._messages.get(worst, "").split(" (in ")[0]
                 self._messages[worst] = f"{text} (in {len(times)} of the last {n} cycles)"
                 return worst

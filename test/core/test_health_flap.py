@@ -13,10 +13,12 @@ import random
 
 import pytest
 
-from ssi_bridge.core.health import ERROR, OK, ChannelHealth
+from ssi_bridge.core.health import (ERROR, FLAP_MIN_CYCLES, FLAP_SHARE, OK, STALE, WARN,
+                                     ChannelHealth)
 from ssi_bridge.protocol.images import ModuleStatus
 
 ERR_SSI = int(ModuleStatus.ERR_SSI)
+OFLW = int(ModuleStatus.STS_OFLW)
 
 
 def _observe(h: ChannelHealth, t: float, sts: int, period: float) -> tuple[float, bytes]:
@@ -71,3 +73,49 @@ def test_a_flapping_error_clears_after_the_clear_time():
     for _ in range(200):
         t, level = _observe(h, t, 0, period)
     assert level == OK
+
+
+class _ScanningHealth(ChannelHealth):
+    """The flap rule as stated, scanning the whole window every cycle (the reference)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._window: list[tuple[float, bytes]] = []
+
+    def _flapping(self, now, raw):
+        self._window = [(t, r) for t, r in self._window if t >= now - self.raise_after_s]
+        self._window.append((now, raw))
+        n = len(self._window)
+        if n < FLAP_MIN_CYCLES:
+            return None
+        for level in (ERROR, WARN):
+            times = [t for t, r in self._window if level <= r < STALE]
+            if (times and len(times) >= FLAP_SHARE * n
+                    and times[-1] - times[0] >= 0.5 * self.raise_after_s):
+                worst = max(r for _t, r in self._window if level <= r < STALE)
+                text = self._messages.get(worst, "").split(" (in ")[0]
+                self._messages[worst] = f"{text} (in {len(times)} of the last {n} cycles)"
+                return worst
+        return None
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_running_flap_window_decides_as_a_scan_of_the_window_would(seed):
+    """The flap rule keeps running windows (it runs every cycle for every joint): level and
+    message equal the rule applied to the whole window, with WARN and ERROR cycles mixed,
+    uneven periods and stale cycles."""
+    rng = random.Random(seed)
+    fast, reference = ChannelHealth(), _ScanningHealth()
+    t, stale_run, flapped = 0.0, 0, 0
+    p_bad = rng.choice([0.1, 0.3, 0.5])
+    for seq in range(3000):
+        t += rng.choice([0.001, 0.001, 0.001, 0.0005, 0.002, 0.03])
+        stale = rng.random() < 0.05
+        stale_run = stale_run + 1 if stale else 0
+        sts = rng.choice([ERR_SSI, OFLW, OFLW | ERR_SSI]) if rng.random() < p_bad else 0
+        kwargs = {"stale": stale, "implausible": rng.random() < 0.01, "sts": sts,
+                  "consecutive_stale": stale_run, "stale_limit": 5, "seq": seq}
+        got, want = fast.observe(t, **kwargs), reference.observe(t, **kwargs)
+        assert (got, fast.message) == (want, reference.message), f"cycle {seq}"
+        flapped += "of the last" in fast.message
+    assert flapped, "the sequence never exercised the flap rule"
