@@ -15,6 +15,7 @@ import dataclasses
 import os
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -135,7 +136,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         if not s.listen_only:
             self.refresh_cams()
         self._cycle_times: deque[float] = deque()
-        self._cycle_started = wire_now()
+        self._cycle_started = time.monotonic()
         self._last_levels: tuple = ()
         self._last_bus_counts: dict = {}
 
@@ -211,7 +212,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         # Python hands the GIL to a waiting thread only every switch interval (5 ms by
         # default): a service burst's CPU-bound handlers would hold the cycle that long
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
-        self._cycle_started = wire_now()
+        self._cycle_started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -268,14 +269,14 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         # wakes once every station's cycle is complete.
         assert self.master is not None
         self.master.wait_cycle(*cycle_waits(1.0 / self.settings.publish_rate, self.cycle_wire_s))
-        self._cycle_times.append(t_sync)
+        self._cycle_times.append(time.monotonic())  # the achieved rate: an interval
         self._publish_cycle(t_sync, self.client.table.sync_seq)
 
     def _on_observed(self, cycle: ObservedCycle) -> None:
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
         if not self.context.ok():
             return
-        self._cycle_times.append(wire_now())  # the achieved rate is the observed one
+        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
         try:
             self._publish_cycle(cycle.sync_time, cycle.seq)
         except RCLError:
