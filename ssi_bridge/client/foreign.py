@@ -30,10 +30,10 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 from ssi_bridge.base.rate_log import RateLimitedLog
-from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.dictionary import (
     NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_RESET_COMMUNICATION, NMT_RESET_NODE, NMT_START,
     NMT_STOP, SYNC_COB_ID,
@@ -89,15 +89,18 @@ class ForeignTraffic:
 
     :param count: counts one event of a ClientCounters field in every counter set
     :param on_sync: called with the wire time of another producer's SYNC (the slot tables)
+    :param clock: the clock of :meth:`recent`'s window (monotonic: an interval, not a stamp)
     """
 
     def __init__(self, count: Callable[[str], None],
-                 on_sync: Callable[[float], None] | None = None) -> None:
+                 on_sync: Callable[[float], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._count = count
         self.on_sync = on_sync
+        self._clock = clock
         self._log = RateLimitedLog(logger)
         self._lock = threading.Lock()
-        #: what was seen last of each kind: (wire time, words)
+        #: what was seen last of each kind: (``clock`` time it was handled, words)
         self.last: dict[str, tuple[float, str]] = {}
         #: the COB-IDs only this master sends (its stations' added by :meth:`watch`)
         self.frames = master_frames()
@@ -128,12 +131,13 @@ class ForeignTraffic:
         else:
             return
         with self._lock:
-            self.last[kind] = (wire_t or wire_now(), words)
+            self.last[kind] = (self._clock(), words)
         self._log.warning(kind, "%s", words)
 
     def recent(self, window: float, now: float | None = None) -> str:
-        """What was seen within the last ``window`` s ("" if nothing), for a bus WARN."""
-        now = wire_now() if now is None else now
+        """What was seen within the last ``window`` s ("" if nothing), for a bus WARN;
+        ``now`` on the ``clock`` (default: now)."""
+        now = self._clock() if now is None else now
         with self._lock:
             seen = [words for t, words in self.last.values() if now - t <= window]
         return "; ".join(sorted(seen))

@@ -94,7 +94,8 @@ class ListenOnlyClient(can.Listener):
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
-        self._last_seen = -float("inf")
+        self._last_seen = -float("inf")  # wire time of the gateway's last frame (a stamp)
+        self._last_seen_at = -float("inf")  # monotonic time it was handled (the interval)
         self._newest = -float("inf")  # newest frame timestamp handled
         self._open: tuple[int, float] | None = None  # (seq, time) of a cycle not yet reported
         self._cycles: deque[ObservedCycle] = deque(maxlen=KEEP_CYCLES)
@@ -162,11 +163,17 @@ class ListenOnlyClient(can.Listener):
 
     @property
     def gateway_alive(self) -> bool:
-        """True while a heartbeat or TPDO of the gateway was seen within the timeout."""
+        """True while a heartbeat or TPDO of the gateway was seen within the timeout.
+
+        The age is monotonic time since the frame was handled (a wall-clock step changes
+        nothing); while newer frames handled are not a timeout later on the wire than the
+        gateway's last one (frame stamps, one clock), the receive path is behind: alive.
+        """
         if self._bus is None:
             return False
-        last, timeout = self._last_seen, self.heartbeat_timeout
-        return wire_now() - last <= timeout or self._newest - last <= timeout
+        timeout = self.heartbeat_timeout
+        return (time.monotonic() - self._last_seen_at <= timeout
+                or self._newest - self._last_seen <= timeout)
 
     # -- refused: a listener never sends -----------------------------------------------------
     def _refuse(self, what: str) -> BusError:
@@ -224,13 +231,13 @@ class ListenOnlyClient(can.Listener):
             return
         handler = self._routes.get(can_id)
         if handler is not None:
-            self._last_seen = stamp
+            self._last_seen, self._last_seen_at = stamp, time.monotonic()
             handler(can_id, msg.data, wire_t)
             if self._open is not None and self.table.cycle_complete():
                 self._report(*self._open, True)
             return
         if can_id == self._heartbeat_id and msg.dlc >= 1:
-            self._last_seen = stamp
+            self._last_seen, self._last_seen_at = stamp, time.monotonic()
             self.nmt_state = msg.data[0] & 0x7F
         elif can_id == self._emcy_id:
             counters.emergencies += 1

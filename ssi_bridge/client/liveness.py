@@ -20,12 +20,23 @@ PRE-OPERATIONAL" first (a STOPPED node serves no SDO), configures and starts the
 (``invalid_nmt_states``), logged at most once per second, and changes nothing. No exception
 of one supervisor round ends the thread: it is counted (``supervisor_errors``), logged at most
 once per second, and the next round runs.
+
+Clocks: every interval here (heartbeat age, the time since the NMT start, probe times, how
+long a gateway has been silent) runs on the monotonic clock (``clock``, ``time.monotonic``):
+a heartbeat's arrival is noted on it when the frame is handled, so a step of the wall clock
+(NTP, an operator) neither silences a live gateway nor keeps a silent one alive. Wire time
+(``base/timebase.py``, CLOCK_REALTIME) stays what it is, the stamp of frames:
+:attr:`Liveness.last_heartbeat` is the last heartbeat's frame time, and the receive path's
+lag is measured in it (``wire_clock`` against ``ReceiveWatch.seen_until``), one clock in
+one difference.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
+from collections.abc import Callable
 from typing import Any, Protocol
 
 from ssi_bridge.base.rate_log import RateLimitedLog
@@ -87,47 +98,67 @@ class Supervised(Protocol):
 
 
 class Liveness:
-    """Heartbeat state of one station's client and its supervisor thread."""
+    """Heartbeat state of one station's client and its supervisor thread.
 
-    def __init__(self, client: Supervised) -> None:
+    ``clock`` measures every interval (monotonic seconds); ``wire_clock`` is the wire time
+    the bus stamps frames in (``ReceiveWatch.seen_until``), used only to measure how far the
+    receive path lags. Both are injectable for tests.
+    """
+
+    def __init__(self, client: Supervised, clock: Callable[[], float] = time.monotonic,
+                 wire_clock: Callable[[], float] = wire_now) -> None:
         self._client = client
-        #: wire time of the last heartbeat frame (its receive timestamp) or configuration
+        self._clock = clock
+        self._wire_clock = wire_clock
+        #: wire time of the last heartbeat frame (its timestamp): a stamp, for the record
         self.last_heartbeat = 0.0
+        #: monotonic time the last heartbeat was handled, or the gateway started (configure)
+        self.heard_at = float("-inf")
         #: NMT state of the last heartbeat, None before the first
         self.state: int | None = None
         #: True while configure() runs (its own NMT commands must not re-trigger it)
         self.configuring = False
-        #: wire time at which the last configure() started the gateway (NMT OPERATIONAL)
-        self.started_at = 0.0
+        #: monotonic time at which the last configure() started the gateway (NMT OPERATIONAL)
+        self.started_at = float("-inf")
         self._reconfigure = threading.Event()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._was_alive = False
         self._log = RateLimitedLog(logger)
         self._summary = RateLimitedLog(logger, SILENT_SUMMARY_S)
-        #: wire time the gateway went silent (0: it is not), probes unanswered since
-        self._silent_since = 0.0
+        #: monotonic time the gateway went silent (None: it is not), probes unanswered since
+        self._silent_since: float | None = None
         self._unanswered = 0
-        self._next_probe = 0.0
+        self._next_probe = float("-inf")
         #: the heartbeat state that asked for the pending re-configuration (None: other cause)
         self._restart_from: int | None = None
+
+    def started(self) -> None:
+        """``configure()`` started the gateway (NMT OPERATIONAL) now: it counts as heard."""
+        self.heard_at = self.started_at = self._clock()
 
     def alive(self) -> bool:
         """True unless the wire was watched for a heartbeat timeout without a heartbeat.
 
-        Measured on the bus, not on the scheduler: the heartbeat's time is its frame
-        timestamp (when it arrived), and silence counts only up to the wire time this side
-        has handled (``ReceiveWatch.seen_until``). A stalled process whose receive queue still
-        holds heartbeats is not "gateway silent"; a real silence shows once the receive
-        thread finds the queue empty (within its 0.05 s wake-up) past the timeout.
+        The heartbeat's age is monotonic time since it was handled. Silence counts only
+        as far as this side has handled the wire: the receive path's lag (wire time now
+        minus ``ReceiveWatch.seen_until``, the wire time up to which every frame has been
+        handled) is taken off the age, so a stalled process whose receive queue still holds
+        heartbeats is not "gateway silent"; a real silence shows once the receive thread
+        finds the queue empty (within its 0.05 s wake-up) past the timeout. The heartbeat
+        was on the wire before it was handled, so the wire watched since it is at least
+        ``age - lag``. A lag below 0 (the wall clock stepped back since the receive path
+        last noted it) counts as none: the age alone decides.
         """
         timeout = self._client.heartbeat_timeout
-        last = self.last_heartbeat
-        if wire_now() - last <= timeout:
+        age = self._clock() - self.heard_at
+        if age <= timeout:
             return True
         bus = self._client.bus
-        seen = bus.seen_until() if bus is not None else wire_now()
-        return seen - last <= timeout
+        if bus is None:
+            return False
+        lag = self._wire_clock() - bus.seen_until()
+        return age - max(lag, 0.0) <= timeout
 
     def on_heartbeat_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
         """The heartbeat frame (network thread): its receive time, then the NMT state."""
@@ -140,9 +171,8 @@ class Liveness:
                               "carries NMT state %d, none of CiA 301's (0, 4, 5, 127): ignored",
                               self._client.node_id, can_id, data.hex(" "), state)
             return
-        if timestamp > self.last_heartbeat:
-            self.last_heartbeat = timestamp
-        self.on_heartbeat(state, at=timestamp)
+        self.last_heartbeat = timestamp
+        self.on_heartbeat(state)
 
     def start(self) -> None:
         """Start the supervisor thread (after the first configuration)."""
@@ -163,11 +193,9 @@ class Liveness:
         """Ask the supervisor thread to configure the station again (e.g. the bus is back)."""
         self._reconfigure.set()
 
-    def on_heartbeat(self, state: int, at: float | None = None) -> None:
-        """A heartbeat in NMT ``state`` arrived at wire time ``at`` (network thread)."""
-        at = wire_now() if not at else at
-        if at > self.last_heartbeat:
-            self.last_heartbeat = at
+    def on_heartbeat(self, state: int) -> None:
+        """A heartbeat in NMT ``state`` is handled now (network thread)."""
+        at = self.heard_at = self._clock()
         self.state = state
         if state == NMT_STATE_BOOTUP:
             self._client.counters.restarts += 1
@@ -185,7 +213,7 @@ class Liveness:
         """Rounds every heartbeat period, or at once when a re-configuration is asked for."""
         client = self._client
         period = max(client.heartbeat_ms / 1000.0, 0.02)
-        self._next_probe = 0.0
+        self._next_probe = float("-inf")
         while not self._stop.is_set():
             self._reconfigure.wait(period)
             if self._stop.is_set():
@@ -206,14 +234,14 @@ class Liveness:
         if self._was_alive and not alive:
             logger.warning("gateway node %d silent: no heartbeat for %.3f s",
                            client.node_id, client.heartbeat_timeout)
-            self._silent_since, self._unanswered = wire_now(), 0
-        elif alive and not self._was_alive and self._silent_since:
+            self._silent_since, self._unanswered = self._clock(), 0
+        elif alive and not self._was_alive and self._silent_since is not None:
             logger.info("gateway node %d heard again after %.1f s of silence",
-                        client.node_id, wire_now() - self._silent_since)
-            self._silent_since = 0.0
+                        client.node_id, self._clock() - self._silent_since)
+            self._silent_since = None
         self._was_alive = alive
-        if not alive and wire_now() >= self._next_probe and not self._reconfigure.is_set():
-            self._next_probe = wire_now() + 5 * period
+        if not alive and self._clock() >= self._next_probe and not self._reconfigure.is_set():
+            self._next_probe = self._clock() + 5 * period
             _PROBING.active = True
             try:
                 client.read_object(HEARTBEAT_OBJECT)
@@ -221,11 +249,12 @@ class Liveness:
             except SsiBridgeError:
                 client.counters.timeouts += 1
                 self._unanswered += 1
-                if self._silent_since and wire_now() - self._silent_since >= SILENT_SUMMARY_S:
+                silent_s = (self._clock() - self._silent_since
+                            if self._silent_since is not None else 0.0)
+                if silent_s >= SILENT_SUMMARY_S:
                     self._summary.warning(
                         "still_silent", "gateway node %d still silent after %.0f s (%d SDO "
-                        "probes unanswered)", client.node_id, wire_now() - self._silent_since,
-                        self._unanswered)
+                        "probes unanswered)", client.node_id, silent_s, self._unanswered)
             finally:
                 _PROBING.active = False
         if not self._reconfigure.is_set() or self._stop.is_set():

@@ -38,11 +38,17 @@ class BusLoad:
                                  msg.arbitration_id == SYNC_COB_ID))
 
     def figures(self, now: float | None = None) -> dict[str, str]:
-        """load %, frames and wire time per cycle over the window ending ``now``."""
+        """load %, frames and wire time per cycle over the window ending ``now``.
+
+        The window is on the frames' wire times (their stamps: what the bus carried when).
+        A frame more than a window after ``now`` was stamped before the wall clock stepped
+        back: dropped like an old one, or the window would keep every frame since the step
+        (memory grows for as long as the step was).
+        """
         now = wire_now() if now is None else now
         with self._lock:
             frames = self._frames
-            while frames and frames[0][0] < now - self.window:
+            while frames and not now - self.window <= frames[0][0] <= now + self.window:
                 frames.popleft()
             items = list(frames)
         busy = sum(d for _, d, _ in items)

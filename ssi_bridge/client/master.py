@@ -39,7 +39,6 @@ from ssi_bridge.exceptions import (BusError, GatewayUnavailable, HandshakeTimeou
                                    RegisterError, SsiBridgeError)
 from ssi_bridge.client.bus import BusOpener, ReceiveWatch
 from ssi_bridge.protocol.settings import BusConfig
-from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.dictionary import (
     MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
     rpdo_cob_base)
@@ -173,7 +172,7 @@ class BridgeClient:
                 self.send_nmt(NMT_START)
             finally:
                 self._liveness.configuring = False
-            self._liveness.last_heartbeat = self._liveness.started_at = wire_now()
+            self._liveness.started()  # counts as heard: the liveness clock (monotonic)
             self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))
@@ -311,7 +310,7 @@ class BridgeClient:
             image = self.table.next_input(slot, min(left, self.assist_after))
             if image is not None:
                 return image
-            if wire_now() - self.table.last_sync_time >= self.assist_after:
+            if time.monotonic() - self.table.synced_at >= self.assist_after:
                 self.sync()
         return None
 

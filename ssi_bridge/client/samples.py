@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import struct
 import threading
+import time
 from dataclasses import dataclass, field
 
 from ssi_bridge.base.timebase import wire_now
@@ -156,7 +157,8 @@ class SlotTable:
         self.cond = gate.cond if gate is not None else threading.Condition()
         self.sync_seq = 0
         self.sync_time = 0.0
-        self.last_sync_time = 0.0
+        #: monotonic time of the last SYNC recorded (an interval's start, never a stamp)
+        self.synced_at = float("-inf")
         self._slots = {s: _Slot() for s in range(1, slots + 1)}
         self._times: dict[int, float] = {}
         self._due = 2 * slots
@@ -187,7 +189,8 @@ class SlotTable:
             self.sync_seq += 1
             self._foreign_since = None
             self._due = 2 * self.slots
-            self.sync_time = self.last_sync_time = wire_now() if at is None else at
+            self.sync_time = wire_now() if at is None else at
+            self.synced_at = time.monotonic()
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
             return self.sync_time
@@ -199,7 +202,7 @@ class SlotTable:
         before: it no longer counts for this cycle.
         """
         with self.cond:
-            self.sync_time = self.last_sync_time = at
+            self.sync_time = at
             if self._foreign_since is not None and self._foreign_since <= at:
                 self._foreign_since = None  # it was on the wire before this SYNC, not after
             seq = self.sync_seq

@@ -5,8 +5,11 @@ frame and answers with TPDOs; each joint's core (``core/joint.py``) turns its sa
 joint units and a velocity; the node publishes. ``header.stamp`` is the SYNC time, which is
 the SSI latch time of the sample (the module latches on SYNC, well inside one bit time after
 it; docs/node.md). Services call the ROS-free facade (``core/bridge.py``) from their own
-thread, so the cycle never waits on them. Diagnostics and run-time parameters are the parts
-in ``node_status.py`` and ``node_params.py``.
+thread, so the cycle never waits on them. Diagnostics, run-time parameters and the lifecycle
+transitions are the parts in ``node_status.py``, ``node_params.py`` and ``lifecycle.py``: the
+node is an rclpy ``LifecycleNode`` whose ``autostart`` parameter configures and activates it
+at start-up (``ssi_bridge_node``) or leaves that to ``~/change_state``
+(``ssi_bridge_managed_node``).
 """
 
 from __future__ import annotations
@@ -15,13 +18,14 @@ import dataclasses
 import os
 import sys
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
@@ -38,6 +42,7 @@ from ssi_bridge.protocol.images import ProcessInput
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits, cycle_wire_time
+from ssi_bridge.ros.lifecycle import BridgeLifecycle
 from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
@@ -50,14 +55,21 @@ from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.stamps import Stamper
 
-class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
-    """Bridge of the XN-1SSI channels of XN-GW-CANOPEN stations to ROS 2."""
+class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, LifecycleNode):
+    """Bridge of the XN-1SSI channels of XN-GW-CANOPEN stations to ROS 2 (a lifecycle node).
 
-    def __init__(self, stop: Callable[[], None] | None = None, **kwargs: Any) -> None:
+    ``autostart`` is the default of the ``autostart`` parameter: on, the constructor
+    configures and activates the node and raises the reason if that fails (nothing left
+    open); off, it returns unconfigured with nothing open.
+    """
+
+    def __init__(self, stop: Callable[[], None] | None = None, autostart: bool = True,
+                 **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
         #: ends the process's spin cleanly (main's stop request; without main: the context)
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
+        autostart = self._declare_autostart(autostart)
         self.settings: NodeSettings = declare_parameters(self)
         if self.settings.replay_can_log:
             # the log is played onto a channel of this process only; the sniffer of a
@@ -91,9 +103,8 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
-        self._open_bus_side(s)
-        self._create_ros_side(s)
-        self._start(s)
+        self.cycle: CycleThread | ObservedCycleThread | None = None
+        self._begin(autostart)  # lifecycle.py: configure and activate, or wait unconfigured
 
     @property
     def clock_steps(self) -> int:
@@ -135,7 +146,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         if not s.listen_only:
             self.refresh_cams()
         self._cycle_times: deque[float] = deque()
-        self._cycle_started = wire_now()
+        self._cycle_started = time.monotonic()
         self._last_levels: tuple = ()
         self._last_bus_counts: dict = {}
 
@@ -143,18 +154,10 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         """The master, one client per station, and each joint's start-up configuration."""
         self.master = CanMaster(self.bus_config, priority=s.cycle_priority,
                                 opener=self.station.open_bus if self.station else None)
-        try:
-            for sid in s.station_ids:
-                slots = max(j.slot for j in s.station_joints(sid))
-                self.station_clients[sid] = BridgeClient(self.master, sid, slots)
-                self.station_clients[sid].connect()
-        except Exception:
-            for client in self.station_clients.values():
-                client.close()
-            self.master.close()
-            if self.station is not None:
-                self.station.stop()
-            raise
+        for sid in s.station_ids:  # a failure: configure closes what is open (lifecycle.py)
+            slots = max(j.slot for j in s.station_joints(sid))
+            self.station_clients[sid] = BridgeClient(self.master, sid, slots)
+            self.station_clients[sid].connect()
         self.client = self.station_clients[s.station_ids[0]]
         if self.station is not None:
             self.bridge.faults = self.station.fault_injector(
@@ -211,7 +214,7 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         # Python hands the GIL to a waiting thread only every switch interval (5 ms by
         # default): a service burst's CPU-bound handlers would hold the cycle that long
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
-        self._cycle_started = wire_now()
+        self._cycle_started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -268,14 +271,14 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
         # wakes once every station's cycle is complete.
         assert self.master is not None
         self.master.wait_cycle(*cycle_waits(1.0 / self.settings.publish_rate, self.cycle_wire_s))
-        self._cycle_times.append(t_sync)
+        self._cycle_times.append(time.monotonic())  # the achieved rate: an interval
         self._publish_cycle(t_sync, self.client.table.sync_seq)
 
     def _on_observed(self, cycle: ObservedCycle) -> None:
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
         if not self.context.ok():
             return
-        self._cycle_times.append(wire_now())  # the achieved rate is the observed one
+        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
         try:
             self._publish_cycle(cycle.sync_time, cycle.seq)
         except RCLError:
@@ -370,30 +373,6 @@ class SsiBridgeNode(NodeDiagnostics, RuntimeParameters, Node):
             return False
         self.liveview.publish(publisher, msg)
         return True
-
-    def shutdown(self) -> None:
-        """Stop services, recording, the bus side; safe to call twice.
-
-        Every step runs even if an earlier one fails (a recording on a full disk must not
-        leave the bus open); failures are logged on one line each.
-        """
-        steps: list[tuple[str, Callable[[], object]]] = [
-            ("services", self.handlers.stop), ("cycle", self.cycle.stop)]
-        if self.player is not None:
-            steps.append(("log replay", self.player.stop))
-        steps += [("recording", self.recorder.finalize), ("live view", self.liveview.stop)]
-        steps += [(f"station {sid} client", c.close) for sid, c in self.station_clients.items()]
-        steps += [("bus", self.client.close)]
-        if self.master is not None:
-            steps.append(("master", self.master.close))
-        if self.station is not None:
-            steps.append(("simulated station", self.station.stop))
-        for what, step in steps:
-            try:
-                step()
-            except Exception as err:  # noqa: BLE001 - the remaining steps must still run
-                self.get_logger().error(f"stopping the {what} failed: {err}")
-        logbridge.uninstall()
 
 
 __all__ = ["SsiBridgeNode"]

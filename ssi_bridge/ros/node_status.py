@@ -10,11 +10,11 @@ levels and messages come from the per-joint core (``core/joint.py``, ``core/heal
 from __future__ import annotations
 
 import dataclasses
+import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, KeyValue
 
-from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.client.error_frames import error_frame_keys
 from ssi_bridge.core.health import ERROR, WARN
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
@@ -81,8 +81,9 @@ class NodeDiagnostics:
         return status
 
     def achieved_rate(self) -> float:
-        """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
-        now = wire_now()
+        """Cycles per second over the last diagnostics period (at least 1 s, at most uptime);
+        the cycles' times are monotonic (an interval measure, not the SYNC stamps)."""
+        now = time.monotonic()
         window = min(max(self.settings.diagnostics_period, 1.0), now - self._cycle_started)
         if window <= 0:
             return 0.0

@@ -2,7 +2,8 @@
 
 ``ros2 param describe`` shows each one's description, unit and range. Node-wide parameters are
 in :data:`NODE_PARAMETERS`, per-joint ones (declared as ``<joint>.<name>``) in
-:data:`JOINT_PARAMETERS`; :mod:`ssi_bridge.ros.params` declares them and checks the values.
+:data:`JOINT_PARAMETERS`; :mod:`ssi_bridge.ros.params` declares them and checks the values
+(``autostart`` first, by ``ros/lifecycle.py``, with its executable's default).
 """
 
 from __future__ import annotations
@@ -38,6 +39,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "Seconds between /diagnostics messages (also sent at once on a level change)",
         float_range=(0.1, 60.0))),
     "frame_id": ("", _describe("header.frame_id of joint_states and ~/status")),
+    "autostart": (True, _describe(
+        "true: configure and activate at start-up (ssi_bridge_node's default); false: start "
+        "unconfigured and wait for ~/change_state (ssi_bridge_managed_node's default)",
+        read_only=True)),
     "simulation": (True, _describe(
         "true: start the simulated encoders, XN-1SSI modules and gateway (a station of its "
         "own, see simulation.transport) and drive it over CAN; "

@@ -95,6 +95,8 @@ TRANSPORTS = ("udp_multicast", "virtual")
 
 
 def _declare(node: Node, name: str, default: Any, descriptor: ParameterDescriptor) -> Any:
+    if name == "autostart" and node.has_parameter(name):  # declared first (ros/lifecycle.py)
+        return node.get_parameter(name).value
     descriptor.name = name
     if isinstance(default, list):
         descriptor.type = (ParameterType.PARAMETER_INTEGER_ARRAY if default and

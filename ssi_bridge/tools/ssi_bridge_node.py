@@ -141,13 +141,11 @@ def _wait_for_callbacks(executor: MultiThreadedExecutor, node: Node,
 def main(args: list[str] | None = None, managed: bool = False) -> int:
     """Run the node until interrupted; exit 0 on a clean stop, 1 with the reason otherwise.
 
-    ``managed``: the lifecycle node (ssi_bridge_managed_node), which opens nothing until
-    configured.
+    The node is a lifecycle node; its ``autostart`` parameter defaults to on (configure and
+    activate at start-up; a failure is a start-up error) or, ``managed``
+    (ssi_bridge_managed_node), off: it opens nothing until configured over ``~/change_state``.
     """
-    if managed:
-        from ssi_bridge.ros.managed import ManagedBridgeNode as SsiBridgeNode
-    else:
-        from ssi_bridge.ros.node import SsiBridgeNode
+    from ssi_bridge.ros.node import SsiBridgeNode
 
     from ssi_bridge.tools.memprobe import start_from_env
 
@@ -163,7 +161,7 @@ def main(args: list[str] | None = None, managed: bool = False) -> int:
     node = None
     try:
         try:
-            node = SsiBridgeNode(stop=stops.request)
+            node = SsiBridgeNode(stop=stops.request, autostart=not managed)
         except START_ERRORS as err:
             if stops.requested or not rclpy.ok():
                 return 0  # stopped by a signal while starting

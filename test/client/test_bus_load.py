@@ -57,3 +57,22 @@ def test_bus_load_matches_the_formula_within_5_percent(channel, bitrate) -> None
         sniffer.shutdown()
         client.close()
         gateway.stop()
+
+
+def test_a_wall_clock_step_back_empties_the_window_instead_of_growing_it() -> None:
+    """Frames stamped before the wall clock stepped back 1 h lie 'in the future' of every
+    later window: dropped, not kept (and counted) for the hour the step was."""
+    import can
+
+    from ssi_bridge.client.load import BusLoad
+
+    load = BusLoad(500_000, window=1.0)
+    t0 = 1.7e9
+    for i in range(100):
+        load.add(can.Message(arbitration_id=0x80, is_extended_id=False, timestamp=t0 + i * 1e-3))
+    assert load.figures(now=t0 + 0.1)["frames_per_cycle"] == "1.00"
+    stepped = t0 + 0.2 - 3600.0  # the clock stepped back 1 h
+    load.add(can.Message(arbitration_id=0x80, is_extended_id=False, timestamp=stepped))
+    figures = load.figures(now=stepped + 1e-3)
+    assert len(load._frames) == 1 and figures["frames_per_cycle"] == "1.00"
+    assert float(figures["bus_load_percent"]) < 0.1  # one SYNC frame in 1 s at 500 kbit/s
