@@ -105,21 +105,26 @@ def type_hash(pkg: str, name: str) -> str:
     return ""
 
 
-@functools.lru_cache(maxsize=None)
-def build_schema(type_name: str) -> MessageSchema:
-    """Build the ``ros2msg`` schema of ``type_name`` with every transitive dependency."""
-    pkg, name = split_type(type_name)
-    root = msg_text(pkg, name)
-    parts = [root]
-    seen = {(pkg, name)}
-    pending = dependencies(pkg, root)
+def with_dependencies(pkg: str, text: str, seen: set[tuple[str, str]] | None = None) -> str:
+    """``text`` (an interface definition of package ``pkg``) followed by every message type it
+    uses, transitively, each once after a separator line, as rosbag2 lays out a ``ros2msg``
+    schema; ``seen`` holds types already in it (the root type)."""
+    parts, seen = [text], set(seen or ())
+    pending = dependencies(pkg, text)
     while pending:
         dep = pending.pop(0)
         if dep in seen:
             continue
         seen.add(dep)
-        text = msg_text(*dep)
-        parts.append(f"{SEPARATOR}\nMSG: {dep[0]}/{dep[1]}\n{text}")
-        pending.extend(d for d in dependencies(dep[0], text) if d not in seen)
-    body = "\n".join(part if part.endswith("\n") else part + "\n" for part in parts)
+        body = msg_text(*dep)
+        parts.append(f"{SEPARATOR}\nMSG: {dep[0]}/{dep[1]}\n{body}")
+        pending.extend(d for d in dependencies(dep[0], body) if d not in seen)
+    return "\n".join(part if part.endswith("\n") else part + "\n" for part in parts)
+
+
+@functools.lru_cache(maxsize=None)
+def build_schema(type_name: str) -> MessageSchema:
+    """Build the ``ros2msg`` schema of ``type_name`` with every transitive dependency."""
+    pkg, name = split_type(type_name)
+    body = with_dependencies(pkg, msg_text(pkg, name), seen={(pkg, name)})
     return MessageSchema(f"{pkg}/msg/{name}", body, type_hash(pkg, name))

@@ -47,19 +47,9 @@ def srv_type_name(srv_type: type) -> str:
 
 def _with_dependencies(pkg: str, text: str) -> str:
     """``text`` followed by every message type it uses, as rosbag2 lays out a schema."""
-    from ssi_bridge.record.schema import SEPARATOR, dependencies, msg_text
+    from ssi_bridge.record.schema import with_dependencies
 
-    parts, seen = [text], set()
-    pending = dependencies(pkg, text)
-    while pending:
-        dep = pending.pop(0)
-        if dep in seen:
-            continue
-        seen.add(dep)
-        body = msg_text(*dep)
-        parts.append(f"{SEPARATOR}\nMSG: {dep[0]}/{dep[1]}\n{body}")
-        pending.extend(d for d in dependencies(dep[0], body) if d not in seen)
-    return "\n".join(part if part.endswith("\n") else part + "\n" for part in parts)
+    return with_dependencies(pkg, text)
 
 
 @functools.lru_cache(maxsize=None)
