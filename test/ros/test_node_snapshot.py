@@ -8,6 +8,7 @@ as lost (``cycles_missed``, ``incomplete_cycles`` on the bus status)."""
 from __future__ import annotations
 
 import os
+import statistics
 import time
 from pathlib import Path
 
@@ -178,7 +179,7 @@ def test_memory_stays_bounded_with_snapshots_over_ten_minutes(running, probe, tm
     """Slow (test/conftest.py SLOW): 10 minutes at 500 Hz with a 5-s ring, a DATA_WIRE_BREAK
     of 1 s every 30 s (a snapshot each, at most 3 kept): the ring stays within its bound and
     the node's RSS, once the ring is full and the first snapshots are written, grows less
-    than 2 MB."""
+    than 2 MB (median of a minute against median of a minute)."""
     root = tmp_path / "rec"
     node = running({"publish_rate": RATE, "record.root": str(root), "record.snapshot.duration":
                     DURATION, "record.snapshot.after": AFTER, "record.snapshot.max_bags": 3})
@@ -202,6 +203,11 @@ def test_memory_stays_bounded_with_snapshots_over_ten_minutes(running, probe, tm
     assert 0 < int(values["snapshot_ring_bytes"]) < DURATION * RATE * 1024, values
     assert int(values["snapshots_written"]) >= SOAK_S // 30 - 1, values
     assert len(snapshots(root)) <= 3, "record.snapshot.max_bags bounds the disk"
-    settled = [mb for t, mb in samples if t >= min(60.0, SOAK_S / 3)]
-    growth = max(settled) - settled[0]
-    assert growth < 2.0, f"RSS grew {growth:.2f} MB after the first minute: {samples}"
+    # what the node keeps: the median RSS of the first minute after the ring filled against
+    # that of the last minute (a snapshot being written adds ~1 MB for a few seconds, freed
+    # when its bag is closed; one sample in six falls on it, the median does not)
+    begin = min(60.0, SOAK_S / 3)
+    first = statistics.median(mb for t, mb in samples if begin <= t < begin + 60.0)
+    last = statistics.median(mb for t, mb in samples if t >= SOAK_S - 60.0)
+    assert last - first < 2.0, (f"RSS grew {last - first:.2f} MB (median of the minute from "
+                                f"{begin:g} s to that of the last minute): {samples}")
