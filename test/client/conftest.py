@@ -35,6 +35,16 @@ class ScriptedReader:
                            end_time=t + (n_bits + 1) / bit_rate_hz)
 
 
+def run_cycles(client: BridgeClient, n: int, timeout: float = 0.5) -> int:
+    """Run ``n`` SYNC cycles, each waited for up to ``timeout`` s; return how many came back
+    complete (raises if SYNC fails)."""
+    done = 0
+    for _ in range(n):
+        client.sync()
+        done += client.wait_cycle(timeout)
+    return done
+
+
 @pytest.fixture
 def channel(request: pytest.FixtureRequest) -> Iterator[str]:
     """A virtual channel private to this test; fails the test if a bus is left open on it."""

@@ -29,7 +29,7 @@ from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader
+from .conftest import ScriptedReader, run_cycles
 
 NODE = 1
 #: a datagram that is no msgpack at all, and one that is msgpack but no CAN frame
@@ -45,15 +45,6 @@ def _raw_sender() -> socket.socket:
     sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 1))
     return sock
-
-
-def _cycles(client: BridgeClient, n: int) -> int:
-    """Run ``n`` SYNC cycles; return how many came back complete (raises if SYNC fails)."""
-    done = 0
-    for _ in range(n):
-        client.sync()
-        done += client.wait_cycle(0.5)
-    return done
 
 
 @pytest.fixture
@@ -82,14 +73,14 @@ def test_datagrams_that_are_no_can_frames_stop_neither_master_nor_station(
     station went deaf."""
     channel, station, client = udp_station
     endpoint = parse_channel(channel)
-    assert _cycles(client, 5) >= 4
+    assert run_cycles(client, 5) >= 4
     sender = _raw_sender()
     caplog.set_level(logging.WARNING)
     try:
         for i in range(100):
             sender.sendto(GARBAGE if i % 2 else BAD_FRAME, (endpoint.group, endpoint.port))
         time.sleep(0.3)
-        assert _cycles(client, 20) >= 18, "the master must still SYNC and receive TPDOs"
+        assert run_cycles(client, 20) >= 18, "the master must still SYNC and receive TPDOs"
     finally:
         sender.close()
     assert client.counters.undecodable_frames == 100
@@ -161,16 +152,16 @@ def test_a_receive_error_is_counted_and_the_master_receives_again(channel: str) 
     gateway.start()
     try:
         client.connect()
-        assert _cycles(client, 5) >= 4
+        assert run_cycles(client, 5) >= 4
         master_bus.unplugged = True
         time.sleep(0.2)
         master_bus.unplugged = False
         assert client.counters.receive_errors > 0
         # a receive step that saw the interface down just before it came back may still
         # raise once: the count settles with the first cycles after the return
-        _cycles(client, 3)
+        run_cycles(client, 3)
         errors = client.counters.receive_errors
-        assert _cycles(client, 10) >= 8, "the master must receive again"
+        assert run_cycles(client, 10) >= 8, "the master must receive again"
         assert client.counters.receive_errors == errors
         sample = client.latest(1)
         assert sample is not None and sample.position == 77

@@ -23,7 +23,7 @@ from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader
+from .conftest import ScriptedReader, run_cycles
 
 NODE = 5
 ENETDOWN = can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)
@@ -75,14 +75,6 @@ def _open(config: BusConfig) -> can.BusABC:
     return UnpluggableVirtual(channel=config.channel, preserve_timestamps=True)
 
 
-def _cycles(client: BridgeClient, n: int) -> int:
-    done = 0
-    for _ in range(n):
-        client.sync()
-        done += client.wait_cycle(0.5)
-    return done
-
-
 @pytest.fixture
 def unplugged_later(channel: str):
     gateway = XnGateway(BusConfig(channel=channel, node_id=NODE), NODE,
@@ -105,7 +97,7 @@ def test_the_lost_interface_is_reopened_and_the_station_configured_again(
     client = unplugged_later
     link = client.master.link
     assert isinstance(link, ReopeningBus)
-    assert _cycles(client, 5) >= 4
+    assert run_cycles(client, 5) >= 4
     configured = client.counters.configurations
     Cable.unplugged = True
     deadline = time.monotonic() + 2.0
@@ -126,7 +118,7 @@ def test_the_lost_interface_is_reopened_and_the_station_configured_again(
         time.sleep(0.01)
     assert not link.lost and link.reopens == 1 and link.losses == 1
     assert client.counters.configurations > configured, "the station was not configured again"
-    assert _cycles(client, 10) >= 8, "the master must cycle again"
+    assert run_cycles(client, 10) >= 8, "the master must cycle again"
     assert client.latest(1).position == 77
     assert client.master.link_figures() == {"interface_losses": 1, "interface_reopens": 1,
                                             "interface_reopen_attempts": link.attempts}

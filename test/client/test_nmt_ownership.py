@@ -24,7 +24,7 @@ from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader, lossy_wire
+from .conftest import ScriptedReader, run_cycles, lossy_wire
 
 NODE = 5
 #: a state byte outside CiA 301 (0x35 = 53), as a CAN tool sent it
@@ -57,14 +57,6 @@ def _supervisor_alive() -> bool:
                for t in threading.enumerate())
 
 
-def _cycles(client: BridgeClient, n: int) -> int:
-    done = 0
-    for _ in range(n):
-        client.sync()
-        done += client.wait_cycle(0.3)
-    return done
-
-
 def test_a_heartbeat_in_no_cia301_state_is_counted_and_the_station_still_supervised(
         station: tuple[XnGateway, BridgeClient, list], foreign: can.BusABC,
         caplog: pytest.LogCaptureFixture) -> None:
@@ -82,11 +74,11 @@ def test_a_heartbeat_in_no_cia301_state_is_counted_and_the_station_still_supervi
     assert client.counters.supervisor_errors == 0
     lines = [r for r in caplog.records if "none of CiA 301" in r.getMessage()]
     assert len(lines) == 1, "logged at most once per second"
-    assert _cycles(client, 5) >= 4
+    assert run_cycles(client, 5, timeout=0.3) >= 4
     gateway.restart()  # boot-up, PRE-OPERATIONAL, PDOs invalid (000 chapter 4)
     assert _until(lambda: client.counters.configurations > configured
                   and gateway.nmt_state == "OPERATIONAL", 3.0), "station not re-configured"
-    assert _cycles(client, 5) >= 4
+    assert run_cycles(client, 5, timeout=0.3) >= 4
 
 
 @pytest.mark.parametrize("command, seen", [(NMT_STOP, "STOPPED"),
@@ -100,7 +92,7 @@ def test_a_station_another_node_took_out_of_operational_is_started_again(
     re-tried its SDO configuration every 0.55 s, which a STOPPED node cannot answer, and never
     sent an NMT command."""
     gateway, client, _ = station
-    assert _cycles(client, 3) >= 2
+    assert run_cycles(client, 3, timeout=0.3) >= 2
     sent = time.monotonic()
     _send(foreign, 0x000, bytes([command, NODE]))
     assert _until(lambda: gateway.nmt_state == seen, 0.5)
@@ -108,7 +100,7 @@ def test_a_station_another_node_took_out_of_operational_is_started_again(
         f"station left {gateway.nmt_state}"
     took = time.monotonic() - sent
     assert _until(lambda: client.counters.nmt_restarts == 1, 0.5)
-    assert _cycles(client, 10) >= 9
+    assert run_cycles(client, 10, timeout=0.3) >= 9
     # the liveness time (heartbeat_timeout) plus one configuration over SDO, with the slack a
     # loaded 2-core machine needs
     assert took < client.heartbeat_timeout + 0.5, f"started again after {took:.3f} s"
