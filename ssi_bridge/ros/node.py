@@ -156,7 +156,8 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                                 opener=self.station.open_bus if self.station else None)
         for sid in s.station_ids:  # a failure: configure closes what is open (lifecycle.py)
             slots = max(j.slot for j in s.station_joints(sid))
-            self.station_clients[sid] = BridgeClient(self.master, sid, slots)
+            self.station_clients[sid] = BridgeClient(self.master, sid, slots,
+                                                     sdo_timeout=s.bus_sdo_timeout)
             self.station_clients[sid].connect()
         self.client = self.station_clients[s.station_ids[0]]
         if self.station is not None:

@@ -45,6 +45,8 @@ class NodeSettings:
     bus_interface: str = "virtual"
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
+    #: bound of one SDO transfer step (s), bus.sdo_timeout
+    bus_sdo_timeout: float = 1.0
     node_id: int = 1
     #: node ids of the XN-GW-CANOPEN stations this master drives (() : just ``node_id``)
     stations: tuple[int, ...] = ()
@@ -219,6 +221,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         simulation_station_priority=values["simulation.station_priority"],
         bus_interface=values["bus.interface"],
         bus_channel=values["bus.channel"], bus_bitrate=values["bus.bitrate"],
+        bus_sdo_timeout=values["bus.sdo_timeout"],
         node_id=stations[0], stations=stations, storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
         record_enabled=values["record.enabled"], record_root=values["record.root"],
