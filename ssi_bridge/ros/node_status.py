@@ -96,9 +96,11 @@ class NodeDiagnostics:
         """The diagnostic levels without building the statuses (checked every cycle)."""
         levels: list[Any] = [j.level for j in self.joints.values()]
         # PowerFail / error bits change a joint's level too (a failed check under noise would
-        # flip it every few cycles: that one waits for the periodic message)
-        levels += [(f.power_failure, f.encoder_error) if (f := j.counters.frame) else None
-                   for j in self.joints.values()]
+        # flip it every few cycles: that one waits for the periodic message). No check (a
+        # register read holds REG_RD_ADR) raises nothing, as a clean one: not a change, or
+        # every ~/read_register would publish the diagnostics twice
+        levels += [(bool(f and f.power_failure), bool(f and f.encoder_error))
+                   for j in self.joints.values() for f in (j.counters.frame,)]
         levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
         levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
         return tuple(levels)

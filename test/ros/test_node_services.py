@@ -134,6 +134,27 @@ def test_each_failure_has_a_distinct_clear_message(shared_node, shared_probe, sr
     assert words in res.message, res.message
 
 
+def test_register_reads_do_not_publish_extra_diagnostics(shared_node, shared_probe):
+    """A read holds REG_RD_ADR on another register for a few cycles, so the frame checks of
+    REG_SSI_FRAME (idle read 33, 000 "Internal registers") pause and resume: no level changes,
+    so /diagnostics keeps its period (diagnostics_period 1 s) instead of two messages a read."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    node = shared_node()  # reads change nothing another test sees
+    diags = shared_probe.subscribe(DiagnosticArray, "/diagnostics")
+    shared_probe.wait_for(lambda: len(diags) > 0, 10.0, "the first /diagnostics", node)
+    before, t0 = len(diags), time.monotonic()
+    for _ in range(20):
+        res = shared_probe.call(ReadRegister, node.topic("~/read_register"),
+                                ReadRegister.Request(address=REG_CMP1))
+        assert res.success, res.message
+    elapsed = time.monotonic() - t0
+    time.sleep(0.2)  # a message the last read would have caused is on its way
+    extra = len(diags) - before
+    assert extra <= elapsed / 1.0 + 2, (
+        f"{extra} /diagnostics messages during 20 reads in {elapsed:.2f} s")
+
+
 def test_recording_already_running_is_refused(running, probe, tmp_path):
     node = running({"record.root": str(tmp_path / "rec")})
     first = probe.call(StartRecording, node.topic("~/start_recording"),
