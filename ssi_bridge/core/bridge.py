@@ -21,7 +21,7 @@ from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.core.frame_watch import read_cam
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.core.joint_scale import to_int32
-from ssi_bridge.exceptions import ConfigError, SsiBridgeError
+from ssi_bridge.exceptions import ConfigError, GatewayUnavailable, SsiBridgeError
 from ssi_bridge.protocol.encoder_config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.protocol.para1 import validate_para1
 from ssi_bridge.protocol.registers import Para1, Reg
@@ -136,10 +136,17 @@ class Bridge:
 
     def refresh_cams(self) -> list[tuple[str, SsiBridgeError]]:
         """Read the CAM objects 0x6B10/0x6B20/0x6B01/0x6B02 of every joint (000 Tables 43-48)
-        into its frame watch; the joints whose objects could not be read, with the error."""
-        failed = []
+        into its frame watch; the joints whose objects could not be read, with the error.
+
+        A joint whose gateway is silent (no heartbeat) is not asked: each SDO transfer to it
+        would wait out ``bus.sdo_timeout`` and hold up the diagnostics of every station; its
+        frame watch keeps the CAM state last read."""
+        failed: list[tuple[str, SsiBridgeError]] = []
         for joint in self.joints.values():
             client = self.client_of(joint.name)
+            if not client.gateway_alive:
+                failed.append((joint.name, GatewayUnavailable("gateway silent: not asked")))
+                continue
             try:
                 joint.frames.set_cam(read_cam(
                     lambda index: int(client.read_object(index, joint.slot))))

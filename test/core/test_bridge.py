@@ -26,6 +26,15 @@ class Bank:
         self.regs = {int(Reg.REG_OFFSET): 0, int(Reg.REG_PARA1): DEFAULT_PARA1}
         self.fail_writes = False
         self.written: list[tuple[int, int]] = []
+        #: the gateway's heartbeat is current (BridgeClient.gateway_alive)
+        self.gateway_alive = True
+        #: SDO objects read (index, slot) and their values (read_object)
+        self.objects_read: list[tuple[int, int]] = []
+        self.objects: dict[int, int] = {}
+
+    def read_object(self, index: int, slot: int) -> int:
+        self.objects_read.append((index, slot))
+        return self.objects.get(index, 0)
 
     def read_register(self, slot: int, address: int) -> int:
         if address == Reg.REG_SSI_POS:
@@ -130,3 +139,20 @@ def test_fault_injection_is_refused_on_real_hardware(setup):
     bridge, _, _ = setup
     with pytest.raises(ConfigError, match="simulation:=true"):
         bridge.inject_fault(bridge.joint("a"), 1, 0.0, 0.0)
+
+
+def test_cam_objects_are_read_each_round_but_not_from_a_silent_gateway(setup):
+    """The CAM objects (0x6B10/0x6B20/0x6B01/0x6B02, 000 Tables 43-48) are read over SDO each
+    diagnostics round; a gateway without heartbeat is not asked (each transfer would wait
+    out bus.sdo_timeout and hold up the diagnostics of every station), and the joint is
+    named as not read."""
+    bridge, bank, _ = setup
+    bank.objects[0x6B01] = 1  # CAM enable: the limits are read too (Table 42)
+    assert bridge.refresh_cams() == []
+    asked = {index for index, _ in bank.objects_read}
+    assert asked == {0x6B10, 0x6B20, 0x6B01, 0x6B02}, asked
+    bank.objects_read.clear()
+    bank.gateway_alive = False
+    failed = bridge.refresh_cams()
+    assert [name for name, _ in failed] == ["a"] and "silent" in str(failed[0][1])
+    assert bank.objects_read == [], "a silent gateway is not asked"
