@@ -90,13 +90,20 @@ def test_a_rate_the_wire_cannot_carry_runs_complete_cycles_at_the_rate_that_does
     window = time.time_ns()  # header.stamp is the SYNC's wire time: ROS (system) time
     time.sleep(4.0)
     window = (window, time.time_ns())
-    bus = [s for _, arr in list(diags) for s in arr.status if s.name.endswith(": bus")][-1]
+    time.sleep(0.6)  # the diagnostics of the window's last second
+    # the bus statuses whose 1 s rate window lies inside ours: on a loaded machine the rate
+    # moves from second to second, so one status alone may not be the window's rate
+    inside = [(arr.header.stamp.sec * 10**9 + arr.header.stamp.nanosec, st)
+              for _, arr in list(diags) for st in arr.status if st.name.endswith(": bus")]
+    inside = [st for t, st in inside if window[0] + 10**9 <= t <= window[1] + 5 * 10**8]
+    assert inside, "no bus status in the window"
     assert node.stop() == 0, node.log()[-3000:]  # closes the recording
     with Bag(next((tmp_path / "rec" / "cycles").glob("*.mcap"))) as bag:
         stamps = [r.publish_time for _, r in bag.messages([node.topic("joint_states")])]
     published = sum(window[0] <= s < window[1] for s in stamps) / ((window[1] - window[0]) / 1e9)
-    values = {kv.key: kv.value for kv in bus.values}
-    achieved = float(values["achieved_rate_hz"])
+    values = {kv.key: kv.value for kv in inside[-1].values}
+    rates = [float(kv.value) for st in inside for kv in st.values if kv.key == "achieved_rate_hz"]
+    achieved = sum(rates) / len(rates)
     wire_rate = 1.0 / wire.cycle_seconds(8, 500_000)  # ~340 Hz: no more cycles fit a second
     assert achieved <= wire_rate, values
     assert float(values["bus_load_percent"]) <= 100.0, values
