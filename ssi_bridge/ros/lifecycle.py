@@ -115,6 +115,7 @@ class BridgeLifecycle:
                 self._ros_side = True
             else:
                 self.cycle = self._new_cycle(s)  # type: ignore[attr-defined]
+                self.recorder.open_frame_tap()
         except Exception as err:  # noqa: BLE001 - reported as FAILURE, the node stays unconfigured
             self._close_bus_side()
             return self._failed("configure", err)
@@ -183,7 +184,8 @@ class BridgeLifecycle:
         self.cycle = None  # a thread runs once: activate builds the next one
 
     def _close_bus_side(self) -> None:
-        """Close every station's client, the bus, the master, stop the simulated station."""
+        """Close every station's client, the bus, the master, the snapshots' CAN listener; stop
+        the simulated station."""
         self.configured = False
         steps: list[Step] = [(f"station {sid} client", c.close)
                              for sid, c in getattr(self, "station_clients", {}).items()]
@@ -193,6 +195,8 @@ class BridgeLifecycle:
             steps.append(("master", self.master.close))
         if getattr(self, "station", None) is not None:
             steps.append(("simulated station", self.station.stop))
+        if self._ros_side:  # the snapshots' CAN listener holds the bus too
+            steps.append(("snapshot CAN listener", self.recorder.close_frame_tap))
         self._run_steps(steps)
         self.station = None
         self.station_clients = {}

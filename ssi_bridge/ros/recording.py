@@ -9,8 +9,7 @@ A session can be paused (messages are not written until resumed: a gap in the ba
 log goes on) and split at once into its next file (``~/pause_recording``,
 ``~/resume_recording``, ``~/split_recording``, as rosbag2's recorder names them). With
 ``record.snapshot.duration`` every message also goes into the fault snapshot's ring
-(``ros/snapshot.py``), session or not. Once the node is finalized (lifecycle shutdown, or the
-process ending) every start is refused: there is no cycle left to record.
+(``ros/snapshot.py``), session or not. Once the node is finalized every start is refused.
 """
 
 from __future__ import annotations
@@ -66,6 +65,7 @@ class SessionRecorder:
         self._frame_tap: FrameTap | None = None
         self.snapshots: SnapshotKeeper | None = self._snapshot_keeper()
         self._errors = ErrorWatch()
+        self.open_frame_tap()
 
     def offer(self, topic: str, qos: Any) -> None:
         """Record ``topic`` with the QoS its publisher offers (rosbag2 stores it per channel)."""
@@ -304,9 +304,7 @@ class SessionRecorder:
         try:
             return self.stop()
         finally:
-            tap, self._frame_tap = self._frame_tap, None
-            if tap is not None:
-                tap.close()
+            self.close_frame_tap()
             if self.snapshots is not None:
                 self.snapshots.close()
 
@@ -360,16 +358,27 @@ class SessionRecorder:
             return BagRecorder.open(path, compression=s.record_compression, metadata=meta)
 
         clock = self._node.get_clock()
-        keeper = SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
-                                clock_ns=lambda: clock.now().nanoseconds,
-                                log=self._node.get_logger())
-        if config.can_log:
-            try:
-                self._frame_tap = FrameTap(self._bus_config(), keeper)
-            except BusError as err:  # the messages' ring still runs; the reason is shown
-                self.error = f"snapshot CAN ring not kept: {err}"
-                self._node.get_logger().error(self.error)
-        return keeper
+        return SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
+                              clock_ns=lambda: clock.now().nanoseconds,
+                              log=self._node.get_logger())
+
+    def open_frame_tap(self) -> None:
+        """Snapshots with ``record.can_log``: listen on the node's bus for the frames' ring
+        (each configure); a bus that cannot be opened leaves the messages' ring running."""
+        keeper = self.snapshots
+        if keeper is None or not keeper.config.can_log or self._frame_tap or self.finalized:
+            return
+        try:
+            self._frame_tap = FrameTap(self._bus_config(), keeper)
+        except BusError as err:
+            self.error = f"snapshot CAN ring not kept: {err}"
+            self._node.get_logger().error(self.error)
+
+    def close_frame_tap(self) -> None:
+        """Stop listening on the bus (cleanup closes the bus side; the ring keeps its frames)."""
+        if (tap := self._frame_tap) is not None:
+            self._frame_tap = None
+            tap.close()
 
     def _type_of(self, topic: str) -> str:
         for suffix, type_name in TOPIC_TYPES.items():

@@ -8,6 +8,7 @@ station's child process, shutdown ends in finalized.
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import time
@@ -64,8 +65,31 @@ def _quiet_for(msgs: list, seconds: float) -> int:
     return len(msgs) - before
 
 
+def _bus_sockets(pid: int, log: str) -> int:
+    """How many sockets process ``pid`` holds bound to the node's udp_multicast bus port
+    (the port its log names), from /proc/net/udp* and /proc/<pid>/fd."""
+    port = int(re.findall(r"udp_multicast:[0-9.]+:(\d+)", log)[-1])
+    inodes = set()
+    for table in ("/proc/net/udp", "/proc/net/udp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            fields = line.split()
+            if int(fields[1].rsplit(":", 1)[1], 16) == port:
+                inodes.add(f"socket:[{fields[9]}]")
+    held = 0
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            held += os.readlink(fd) in inodes
+        except OSError:  # closed meanwhile
+            pass
+    return held
+
+
 def test_walk_through_the_lifecycle(tmp_path, domain_id, child_preexec, probe):
-    node = _start_managed(tmp_path, domain_id, child_preexec, {})
+    """With fault snapshots of the CAN frames (a listener of its own on the bus), so that
+    cleanup is seen to close every socket of the node on the bus, not the master's alone."""
+    node = _start_managed(tmp_path, domain_id, child_preexec, {
+        "record.root": str(tmp_path / "rec"), "record.snapshot.duration": 2.0,
+        "record.can_log": True})
     try:
         msgs = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: "managed node: unconfigured" in node.log(), 30.0,
@@ -77,6 +101,7 @@ def test_walk_through_the_lifecycle(tmp_path, domain_id, child_preexec, probe):
         assert _state(probe, node) == State.PRIMARY_STATE_INACTIVE
         pid = _station_pid(node, probe)
         assert Path(f"/proc/{pid}").exists(), "configure starts the simulated station"
+        assert _bus_sockets(node.proc.pid, node.log()) >= 2, "the master and the snapshots' tap"
         assert _quiet_for(msgs, 1.0) == 0, "inactive: no joint_states"
 
         for _ in range(2):  # active -> inactive -> active again
@@ -96,11 +121,13 @@ def test_walk_through_the_lifecycle(tmp_path, domain_id, child_preexec, probe):
         probe.wait_for(lambda: not Path(f"/proc/{pid}").exists(), 10.0,
                        "the station process to end after cleanup", node)
         assert "cleaned up: bus closed" in node.log()
+        assert _bus_sockets(node.proc.pid, node.log()) == 0, "cleanup leaves no socket on the bus"
 
         # configure again opens a new bus side; activate publishes again
         assert _change(probe, node, Transition.TRANSITION_CONFIGURE), node.log()
         pid2 = _station_pid(node, probe)
         assert pid2 != pid
+        assert _bus_sockets(node.proc.pid, node.log()) >= 2, "configure opens the tap again"
         assert _change(probe, node, Transition.TRANSITION_ACTIVATE), node.log()
         start = len(msgs)
         probe.wait_for(lambda: len(msgs) >= start + 10, 20.0, "joint_states after reconfigure",
