@@ -80,6 +80,8 @@ class ReceiveWatch(can.BusABC):
         if msg is None:
             now = wire_now()
             self.rx_idle_at = now if wire is None else min(now, wire.undelivered_since())
+            if self.rx_latest > now:  # stamped before the wall clock stepped back
+                self.rx_latest = self.rx_idle_at
         elif msg.timestamp > self.rx_latest:
             ts = msg.timestamp
             self.rx_latest = ts if wire is None else min(ts, wire.undelivered_since())
