@@ -90,12 +90,19 @@ class SimStation:
 
     @staticmethod
     def _store(storage_path: str, slot: int) -> RetentiveStore | MemoryStore:
-        """One retentive bank file per slot next to ``storage_path`` (or memory only)."""
+        """One retentive bank file per slot next to ``storage_path`` (or memory only).
+
+        Saved without fsync: the atomic replace keeps the bank whole if the station is killed
+        at any point, and a simulated module need not survive a power loss of the host. An
+        fsync waits on the host's disk (over 1 s beside a busy test suite, measured), and a
+        retentive write is answered over SDO only once saved: the station would fall silent
+        for the master's SDO timeout (docs/module.md)."""
         if not storage_path:
             return MemoryStore()
         path = Path(storage_path).expanduser()
         path.parent.mkdir(parents=True, exist_ok=True)
-        return RetentiveStore(path.with_name(f"{path.stem}.slot{slot}{path.suffix or '.bank'}"))
+        return RetentiveStore(path.with_name(f"{path.stem}.slot{slot}{path.suffix or '.bank'}"),
+                              fsync=False)
 
 
 class Station:
