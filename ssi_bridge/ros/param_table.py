@@ -69,7 +69,7 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "CAN bit rate in bit/s (CiA 301 rates; the simulated wire (virtual, udp_multicast) "
         "times every frame at it)",
         read_only=True, int_range=(10_000, 1_000_000))),
-    "bus.sdo_timeout": (1.0, _describe(
+    "bus.sdo_timeout": (0.5, _describe(
         "Seconds one SDO transfer step may take (start-up configuration, ~/sdo_read, "
         "~/sdo_write, register writes by SDO) before the gateway counts as not answering; the "
         "request goes out twice, each waiting half. A real gateway answers in milliseconds; "

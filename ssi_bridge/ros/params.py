@@ -46,7 +46,7 @@ class NodeSettings:
     bus_channel: str = "ssi_bridge"
     bus_bitrate: int = 500_000
     #: bound of one SDO transfer step (s), bus.sdo_timeout
-    bus_sdo_timeout: float = 1.0
+    bus_sdo_timeout: float = 0.5
     node_id: int = 1
     #: node ids of the XN-GW-CANOPEN stations this master drives (() : just ``node_id``)
     stations: tuple[int, ...] = ()
