@@ -20,7 +20,6 @@ from ssi_bridge_msgs.srv import StartRecording, StopRecording
 from .test_node_lifecycle import _change, _start_managed, _state
 
 RATE = 100.0
-PERIOD_NS = int(1e9 / RATE)
 BUS = "/ssi_bridge: bus"
 
 
@@ -83,12 +82,15 @@ def test_pause_leaves_a_gap_and_split_gives_two_readable_files(running, probe, t
     assert counts[node.topic("joint_states")] == len(recorded), "rosbags reads the whole bag"
     in_pause = {ns(m.header.stamp) for _, m in received[after_pause:before_resume]}
     assert in_pause and not in_pause & set(recorded), "messages during the pause are absent"
-    # all others present: the one gap is the pause; elsewhere the stamps follow the rate
-    gaps = [(a, b) for a, b in zip(recorded, recorded[1:]) if b - a > 10 * PERIOD_NS]
-    assert len(gaps) == 1 and gaps[0][1] - gaps[0][0] >= 0.9e9, gaps
+    # all others present: the pause is the one gap of a second; a loaded machine may stall
+    # the cycle for a few hundred ms elsewhere, but a stall publishes nothing, so every
+    # message received outside the pause must be in the bag
+    gaps = sorted(zip(recorded, recorded[1:]), key=lambda g: g[1] - g[0])
+    pause = gaps[-1]
+    assert pause[1] - pause[0] >= 0.9e9 > gaps[-2][1] - gaps[-2][0], gaps[-3:]
     first, last = recorded[0], recorded[-1]
     seen = [ns(m.header.stamp) for _, m in received]
-    others = {t for t in seen if first <= t <= last and not gaps[0][0] < t < gaps[0][1]}
+    others = {t for t in seen if first <= t <= last and not pause[0] < t < pause[1]}
     assert others <= set(recorded), f"{len(others - set(recorded))} messages outside the pause lost"
 
 
