@@ -197,13 +197,16 @@ class CanMaster:
         Waits ``timeout``; while a station has not answered this SYNC with a single frame (its
         process starved, not its frames lost), up to ``unanswered_timeout`` in all. Frames lost
         on the wire never come, so waiting for them would only delay the next SYNC: the SYNC
-        period stays the configured one under frame loss (CiA 301 0x1006 is a period).
+        period stays the configured one under frame loss (CiA 301 0x1006 is a period). Nor is
+        a station waited for whose gateway is known silent (no heartbeat): the other stations'
+        cycles keep their period.
         """
         start = time.monotonic()
         if self.gate.wait(timeout):
             return True
         with self.gate.cond:
-            if all(client.table.answering for client in self.clients):
+            if all(client.table.answering or not client.gateway_alive
+                   for client in self.clients):
                 return False
         left = unanswered_timeout - (time.monotonic() - start)
         return left > 0 and self.gate.wait(left)

@@ -7,6 +7,7 @@ chapter 1) on station 3 slot 1 leaves station 1 slot 1 alone.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 
 import can
@@ -25,7 +26,8 @@ from .conftest import wait_for
 
 
 @pytest.fixture
-def rig(channel: str) -> Iterator[tuple[CanMaster, dict[int, BridgeClient], can.BusABC]]:
+def rig(channel: str, request: pytest.FixtureRequest
+        ) -> Iterator[tuple[CanMaster, dict[int, BridgeClient], can.BusABC]]:
     """Stations 1 (joints a, b) and 3 (joint c) on one virtual bus, one master, a sniffer."""
     stations = [Station(station_settings({"joints": names, "bus.channel": channel,
                                           "bus.node_id": sid}))
@@ -43,6 +45,7 @@ def rig(channel: str) -> Iterator[tuple[CanMaster, dict[int, BridgeClient], can.
     sniffer = open_bus(BusConfig(channel=channel))
     for client in clients.values():
         client.connect()
+    request.node.stations = stations
     yield master, clients, sniffer
     for client in clients.values():
         client.close()
@@ -91,3 +94,20 @@ def test_a_node_id_is_attached_once(rig) -> None:
     master, _, _ = rig
     with pytest.raises(ValueError, match="node id 3 already attached"):
         BridgeClient(master, 3, 1).connect()
+
+
+def test_a_silent_station_does_not_hold_up_the_others_cycles(rig, request) -> None:
+    """A station that answers a SYNC with nothing gets a starved process's turn (the second
+    wait of ``wait_cycle``); once its gateway counts as silent (no heartbeat, CiA 301
+    consumer) it does not: the cycle of the station that answers is complete at once."""
+    master, clients, _ = rig
+    request.node.stations[1].stop()  # station 3 falls silent
+    wait_for(lambda: not clients[3].gateway_alive, "station 3 never counted as silent", 5.0)
+    assert clients[1].gateway_alive
+    for _ in range(3):
+        clients[1].sync()
+        start = time.monotonic()
+        master.wait_cycle(0.05, 2.0)
+        waited = time.monotonic() - start
+        assert waited < 1.0, f"waited {waited:.2f} s for a silent station"
+        assert clients[1].table.cycle_complete()
