@@ -19,7 +19,9 @@ and QoS from ``topic_info``.
 With ``can_log`` a second ring of the same duration holds the raw CAN frames
 (:meth:`SnapshotKeeper.add_frame`, ``record/can_frames.py``; time = the frame's wire time, the
 same clock as the node's log time), written beside the bag as ``can_0.log`` (candump), as a
-session's ``record.can_log`` does.
+session's ``record.can_log`` does. The frames come through a listener of their own, which may
+lag the messages: the CAN log takes frames until one stamped after the snapshot's end comes
+(at most ``FRAME_GRACE_S`` after its messages ended).
 """
 
 from __future__ import annotations
@@ -51,6 +53,9 @@ TIME_FORMAT = "%Y_%m_%d-%H_%M_%S"
 LABEL_MAX = 64
 #: the CAN log of a snapshot, as a session's (record.can_log)
 CAN_LOG = "can_0.log"
+#: longest wait (s) after a snapshot's messages end for its CAN frames to catch up (the
+#: frames come through a listener of their own, which a loaded machine may hold back)
+FRAME_GRACE_S = 1.0
 
 #: opens a new bag at a path (BagRecorder.open with the session's settings)
 OpenBag = Callable[[Path], Any]
@@ -103,6 +108,8 @@ class _Snapshot:
     frame_queue: deque = field(default_factory=deque)
     #: no more messages go in (the time after the last trigger is over, or a stop)
     ended: bool = False
+    #: a CAN frame stamped after ``until_ns`` arrived: the frames up to it are all in
+    frames_caught_up: bool = False
 
 
 class SnapshotKeeper:
@@ -124,6 +131,9 @@ class SnapshotKeeper:
         self._log = log
         self._cond = threading.Condition()
         self._active: _Snapshot | None = None
+        #: the snapshot taking CAN frames: the tap's receive path may lag the messages, so
+        #: it stays open past the messages' end until a frame after ``until_ns`` comes
+        self._frame_snap: _Snapshot | None = None
         self._threads: list[threading.Thread] = []
         #: snapshot bags written (complete) and triggers that extended one
         self.written = 0
@@ -153,9 +163,14 @@ class SnapshotKeeper:
             return
         with self._cond:
             self.frames.append("can", wire_time_ns, wire_time_ns, data)
-            snap = self._active
-            if snap is not None and wire_time_ns <= snap.until_ns:
+            snap = self._frame_snap
+            if snap is None:
+                return
+            if wire_time_ns <= snap.until_ns:
                 snap.frame_queue.append(data)
+            elif not snap.frames_caught_up:
+                snap.frames_caught_up = True
+                self._cond.notify_all()
 
     def trigger(self, label: str, now_ns: int | None = None) -> tuple[Path, bool]:
         """Write a snapshot at ``now_ns`` (log time; default the clock), named after ``label``.
@@ -169,11 +184,16 @@ class SnapshotKeeper:
             snap = self._active
             if snap is not None and not snap.ended:
                 snap.until_ns = max(snap.until_ns, until)
+                snap.frames_caught_up = False
                 snap.triggers.append(label)
                 self.extended += 1
                 return snap.path, True
             snap = _Snapshot(self._new_path(label), until, [label])
             self._active = snap
+            if self.frames is not None:
+                if self._frame_snap is not None:  # the last one's frames: no longer awaited
+                    self._frame_snap.frames_caught_up = True
+                self._frame_snap = snap
             topics, entries = self.ring.raw()
             frames = [e[3] for e in self.frames.raw()[1]] if self.frames is not None else None
             worker = threading.Thread(target=self._write, args=(snap, topics, entries, frames),
@@ -198,6 +218,9 @@ class SnapshotKeeper:
         with self._cond:
             if self._active is not None:
                 self._end(self._active)
+            if self._frame_snap is not None:  # its frames are not waited for
+                self._frame_snap.frames_caught_up = True
+                self._cond.notify_all()
             threads, self._threads = self._threads, []
         for worker in threads:
             worker.join(timeout)
@@ -256,6 +279,7 @@ class SnapshotKeeper:
                 elif snap.ended:
                     break
             if can_log is not None:
+                can_log.write(self._last_frames(snap))
                 can_log.close()
             summary = bag.close()
         except (RecordingError, OSError, ValueError) as err:
@@ -276,6 +300,19 @@ class SnapshotKeeper:
                        f"{', '.join(snap.triggers)})")
         self._prune(snap.path)
 
+    def _last_frames(self, snap: _Snapshot) -> list[bytes]:
+        """The CAN frames still owed to ``snap`` once its messages ended: those its tap
+        receives until one stamped after ``until_ns`` comes (at most FRAME_GRACE_S)."""
+        deadline = time.monotonic() + FRAME_GRACE_S
+        with self._cond:
+            while not snap.frames_caught_up and time.monotonic() < deadline:
+                self._cond.wait(0.05)
+            if self._frame_snap is snap:
+                self._frame_snap = None
+            more = list(snap.frame_queue)
+            snap.frame_queue.clear()
+        return more
+
     def _put(self, bag: Any, added: set[str], items: list) -> None:
         for topic, log_ns, pub_ns, data in items:
             if topic not in added:
@@ -288,6 +325,9 @@ class SnapshotKeeper:
         with self._cond:
             self._end(snap)
             snap.queue.clear()
+            if self._frame_snap is snap:
+                self._frame_snap = None
+            snap.frame_queue.clear()
         self.error = message
         self._log.error(message)
 

@@ -202,3 +202,29 @@ def test_a_snapshot_with_can_log_writes_the_frames_beside_the_bag(tmp_path: Path
     assert times == sorted(times)
     assert abs(times[-1] - (T0 + 3499 * MS) / 1e9) < 1e-3
     assert k.counters()["snapshot_can_ring_bytes"] > 0
+
+
+def test_can_frames_that_lag_the_messages_still_reach_the_snapshot(tmp_path: Path):
+    """The frames come through a listener of their own: on a loaded machine they may arrive
+    after the messages that end the snapshot. The CAN log waits for them until a frame stamped
+    after the snapshot's end comes (FRAME_GRACE_S at most), so every frame of its time is in."""
+    clock = FakeClock()
+    k = keeper(tmp_path, clock, duration_s=1.0, after_s=0.5, can_log=True)
+    sync = lambda t: pack_frame(can.Message(arbitration_id=0x80, data=b"",  # noqa: E731
+                                            is_extended_id=False), t / 1e9)
+    for i in range(2000):
+        clock.now = T0 + i * MS
+        k.add(TOPIC, cdr.serialize(joint_state(i)), clock.now, clock.now)
+        k.add_frame(clock.now, sync(clock.now))
+    path, _ = k.trigger("joint1", clock.now)
+    lag = 200  # the frames run 200 ms behind the messages
+    for i in range(2000, 2700):
+        clock.now = T0 + i * MS
+        k.add(TOPIC, cdr.serialize(joint_state(i)), clock.now, clock.now)  # ends it at 2500
+        if i - lag >= 2000:
+            k.add_frame(T0 + (i - lag) * MS, sync(T0 + (i - lag) * MS))
+    wait_written(k, 1, clock)
+    stamps = [round(f.timestamp * 1e3) for f in can.LogReader(str(path / CAN_LOG))]
+    last = round((T0 + 2499 * MS) / 1e6)
+    assert stamps[-1] == last, (stamps[-1], last)
+    assert len(stamps) == len(set(stamps)) == stamps[-1] - stamps[0] + 1, "none lost, none twice"
