@@ -151,7 +151,9 @@ def test_register_reads_do_not_publish_extra_diagnostics(shared_node, shared_pro
     elapsed = time.monotonic() - t0
     time.sleep(0.2)  # a message the last read would have caused is on its way
     extra = len(diags) - before
-    assert extra <= elapsed / 1.0 + 2, (
+    # the period's messages, one more at each end, and one for a level change a loaded
+    # machine may bring (a late cycle): far from the two per read this guards against
+    assert extra <= elapsed / 1.0 + 3, (
         f"{extra} /diagnostics messages during 20 reads in {elapsed:.2f} s")
 
 
