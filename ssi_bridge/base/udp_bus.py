@@ -3,7 +3,7 @@
 The simulated station runs in its own process (or on another host) and meets the master on
 python-can's ``udp_multicast`` bus: every CAN frame is one msgpack datagram to a multicast
 group, the wire format of python-can, so any python-can tool on the same group sees the
-traffic. :class:`UdpCanBus` is that interface with three things a CAN wire needs:
+traffic. :class:`UdpCanBus` is that interface with what a CAN wire needs:
 
 * a sender does not receive its own frames (a CAN controller does not either; python-can's
   bus would, through multicast loop-back): frames go out through a second socket and
@@ -16,7 +16,9 @@ traffic. :class:`UdpCanBus` is that interface with three things a CAN wire needs
   only its own group even when another bus on the machine uses the same port;
 * a datagram that is not a python-can CAN frame raises :class:`UndecodableFrame` (a
   ``can.CanOperationError``, as python-can's own udp_multicast raises) with what was wrong;
-  the receive paths of master and station (``base/rx_guard.py``) count and drop it and go on.
+  the receive paths of master and station (``base/rx_guard.py``) count and drop it and go on;
+* the receive queue is as deep as the kernel allows (``RECEIVE_BUFFER_BYTES``): a process
+  starved of CPU for a moment reads the frames late, it does not lose them.
 
 The channel string is ``GROUP[:PORT][@INTERFACE_ADDRESS]``, e.g. ``239.74.163.2:43113@127.0.0.1``.
 Receive timestamps are the kernel's (``SO_TIMESTAMPNS``, ``time.time()`` base), as python-can
@@ -52,6 +54,10 @@ DEFAULT_PORT = 43113
 LOOPBACK = "127.0.0.1"
 #: Linux socket option: deliver only the groups this socket joined (in.h)
 IP_MULTICAST_ALL = 49
+#: receive queue asked for (SO_RCVBUF; the kernel caps it at net.core.rmem_max): a CAN wire
+#: loses no frame because a reader was late, so a starved process reads them late instead
+#: (the default 208 kB holds ~256 datagrams: 85 ms of a 1 kHz cycle with two slots)
+RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 #: derived groups live in the administratively scoped 239.74.0.0/16 (RFC 2365)
 _DERIVED_NET = (239, 74)
 #: derived ports: above Linux's ephemeral range (net.ipv4.ip_local_port_range, 32768-60999 by
@@ -227,6 +233,8 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
             sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
             self.timestamp_nanosecond = True
+            # the kernel caps this at net.core.rmem_max (the default queue holds ~256 frames)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
             # the destination must be the group: unicast datagrams to the port are not ours
             sock.bind((self.group, self.port))
         except OSError as err:
@@ -268,6 +276,12 @@ class UdpCanBus(UdpMulticastBus):
         self._can_protocol = can.CanProtocol.CAN_20
         self.endpoint = endpoint
         self.channel_info = f"udp_multicast {endpoint.channel}"
+
+    @property
+    def receive_buffer_bytes(self) -> int:
+        """The receive queue the kernel granted (SO_RCVBUF: twice the bytes asked for, up to
+        net.core.rmem_max; :data:`RECEIVE_BUFFER_BYTES`)."""
+        return int(self._multicast._socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         result = self._multicast.recv(timeout)
