@@ -185,7 +185,9 @@ def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
         span = msgs[-1].header.stamp.sec + msgs[-1].header.stamp.nanosec * 1e-9 - (
             msgs[0].header.stamp.sec + msgs[0].header.stamp.nanosec * 1e-9)
         moved = msgs[-1].position[k] - msgs[0].position[k]
-        assert abs(moved - 0.01 * span) < 0.002, f"carriage moved {moved} m in {span:.2f} s"
+        # metres, not radians (the bug this guards against was a factor of ~700): within 10 %
+        # of the motion, which a station process starved beside burners keeps (7 % seen)
+        assert abs(moved - 0.01 * span) < 0.001 * span, f"carriage moved {moved} m in {span:.2f} s"
     finally:
         if station is not None:
             _stop_station(station)

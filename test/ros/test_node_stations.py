@@ -104,8 +104,12 @@ def test_a_silent_station_stales_only_its_joints(running, probe, transport):
     n = len(diags)
     probe.wait_for(lambda: len(diags) > n + 2, 5.0, "diagnostics while station 3 is silent",
                    node)
+    # station 1 and its joints are OK while station 3 stays silent and c STALE (a loaded
+    # machine may hold back a few of station 1's SYNCs too: WARN for a moment, then OK again)
     for name in ("/ssi_bridge: station 1", "/ssi_bridge: a", "/ssi_bridge: b"):
-        assert latest_status(diags, name).level == DiagnosticStatus.OK, latest_status(diags, name)
+        wait_for_level(probe, node, diags, name, DiagnosticStatus.OK, 2 * PERIOD + 3)
+    assert latest_status(diags, "/ssi_bridge: c").level == DiagnosticStatus.STALE
+    assert latest_status(diags, "/ssi_bridge: station 3").level == DiagnosticStatus.ERROR
     # station 1's joints keep moving; c's position is the last one heard
     k = len(msgs)
     probe.wait_for(lambda: len(msgs) > k + 30, 5.0, "joint_states during the silence", node)
@@ -116,8 +120,9 @@ def test_a_silent_station_stales_only_its_joints(running, probe, transport):
     res = probe.call(InjectFault, node.topic("~/inject_fault"),
                      InjectFault.Request(kind=InjectFault.Request.CLEAR_ALL))
     assert res.success, res.message
-    wait_for_level(probe, node, diags, "/ssi_bridge: station 3", DiagnosticStatus.OK, 3 * PERIOD + 2)
-    wait_for_level(probe, node, diags, "/ssi_bridge: c", DiagnosticStatus.OK, 3 * PERIOD + 2)
+    # back: heard again, configured again (NMT, PDOs) and fresh samples; slower when loaded
+    for name in ("/ssi_bridge: station 3", "/ssi_bridge: c"):
+        wait_for_level(probe, node, diags, name, DiagnosticStatus.OK, 3 * PERIOD + 4)
 
 
 def test_one_sync_per_cycle_serves_both_stations(running, probe, tmp_path: Path):
