@@ -60,11 +60,16 @@ monitor: setup
 
 # make test: TEST_WORKERS processes (pytest-xdist), each module's tests in one of them (they
 # share the module's node); the slow tier one test at a time, nothing beside it
+# Both compile the package's bytecode first (only what changed): each node and station process
+# of the tests would otherwise compile every module it imports, ~0.1 s of CPU per process
+# (PYTHONDONTWRITEBYTECODE set in the environment stops Python writing the cache, not reading it)
+BYTECODE = python -m compileall -q -j 0 ssi_bridge > /dev/null
+
 test: setup
-	@$(ENV) && python -m pytest -m "not slow" -n $(TEST_WORKERS) --dist loadscope $(PYTEST_ARGS)
+	@$(ENV) && $(BYTECODE) && python -m pytest -m "not slow" -n $(TEST_WORKERS) --dist loadscope $(PYTEST_ARGS)
 
 test-slow: setup
-	@$(ENV) && python -m pytest -m slow $(PYTEST_ARGS)
+	@$(ENV) && $(BYTECODE) && python -m pytest -m slow $(PYTEST_ARGS)
 
 test-all: test test-slow
 

@@ -43,12 +43,13 @@ def test_shipped_two_encoder_station(running, probe):
     assert slope == pytest.approx(0.01, rel=0.02), f"carriage moves at {slope} m/s"
     assert np.all(np.abs(np.array([m.velocity[1] for m in msgs]) - 0.01) < 0.001)
 
+    # every status OK (the bus may say WARN for a moment when a loaded machine holds a cycle
+    # back: the next message is awaited, not the first taken)
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    probe.wait_for(lambda: len(diags) > 0, 5.0, "diagnostics", node)
-    levels = {st.name: st.level for st in diags[-1][1].status}
-    assert levels == {"/ssi_bridge: shoulder": DiagnosticStatus.OK,
-                      "/ssi_bridge: carriage": DiagnosticStatus.OK,
-                      "/ssi_bridge: bus": DiagnosticStatus.OK}, levels
+    want = {"/ssi_bridge: shoulder": DiagnosticStatus.OK,
+            "/ssi_bridge: carriage": DiagnosticStatus.OK, "/ssi_bridge: bus": DiagnosticStatus.OK}
+    probe.wait_for(lambda: any({st.name: st.level for st in arr.status} == want
+                               for _, arr in list(diags)), 10.0, f"diagnostics {want}", node)
 
 
 def test_two_bridges_side_by_side_in_namespaces(running, probe):
