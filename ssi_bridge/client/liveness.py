@@ -13,9 +13,11 @@ only shows up by answering.
 
 The master owns the NMT state of its stations (CiA 301 §7.2.8.2.1: one NMT master per
 network): a heartbeat in STOPPED or PRE-OPERATIONAL, put there by another node's NMT command or
-by the station itself, wakes the supervisor at once; ``configure()`` sends NMT "enter
-PRE-OPERATIONAL" first (a STOPPED node serves no SDO), configures and starts the station again
-(counted in ``nmt_restarts``). A heartbeat whose state is none of CiA 301's (0 boot-up,
+by the station itself, wakes the supervisor at once, which sends NMT start alone
+(``start_again()``: such a command keeps the object dictionary, §7.2.8.2.1) and then reads the
+PDOs' COB-IDs back; only when they are no longer the configured ones does ``configure()`` run
+(NMT "enter PRE-OPERATIONAL" first, a STOPPED node serves no SDO). Either is counted in
+``nmt_restarts``. A heartbeat whose state is none of CiA 301's (0 boot-up,
 4 STOPPED, 5 OPERATIONAL, 127 PRE-OPERATIONAL, §7.2.8.3.2.1) is no heartbeat: it is counted
 (``invalid_nmt_states``), logged at most once per second, and changes nothing. No exception
 of one supervisor round ends the thread: it is counted (``supervisor_errors``), logged at most
@@ -95,6 +97,9 @@ class Supervised(Protocol):
 
     def configure(self) -> None:
         """Configure the station again (raises SsiBridgeError)."""
+
+    def start_again(self) -> bool:
+        """NMT start alone; False when the PDOs need ``configure()`` (raises SsiBridgeError)."""
 
 
 class Liveness:
@@ -262,7 +267,8 @@ class Liveness:
         self._reconfigure.clear()
         restart_from, self._restart_from = self._restart_from, None
         try:
-            client.configure()
+            if not (restart_from in NOT_STARTED and client.start_again()):
+                client.configure()
         except Exception as err:
             # asked for again: the next round retries (an unexpected error is counted there)
             if restart_from is not None and self._restart_from is None:

@@ -32,6 +32,7 @@ from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
 from ssi_bridge.client.load import BusLoad
+from ssi_bridge.client.pulses import next_pulse_output
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
@@ -43,16 +44,9 @@ from ssi_bridge.protocol.dictionary import (
     MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
     rpdo_cob_base)
 from ssi_bridge.base.od import build_dictionary
-from ssi_bridge.protocol.images import CmpControl, CmpStatus, Control, ProcessInput
+from ssi_bridge.protocol.images import CmpControl, Control, ProcessInput
 
 logger = logging.getLogger(__name__)
-#: how often a clear pulse is sent again when the next image shows it never arrived
-PULSE_RESENDS = 3
-#: (CLR_CMPx, FLAG_CMPx, STS_CMPx) per comparator
-_PULSE_CHECKS = tuple((int(c), int(f), int(s_)) for c, f, s_ in (
-    (CmpControl.CLR_CMP1, CmpStatus.FLAG_CMP1, CmpStatus.STS_CMP1),
-    (CmpControl.CLR_CMP2, CmpStatus.FLAG_CMP2, CmpStatus.STS_CMP2)))
-
 __all__ = ["SYNC_COB_ID", "BridgeClient", "CanMaster"]
 
 
@@ -160,24 +154,47 @@ class BridgeClient:
     def configure(self) -> None:
         """(Re)configure the gateway: PRE-OP, PDOs, heartbeat, OPERATIONAL, resend outputs."""
         assert self.sdo is not None and self.node is not None
+        sdo, node = self.sdo, self.node
+
+        def setup() -> None:
+            # first, so a STOPPED station (another node's NMT stop) serves SDO again
+            self.send_nmt(NMT_ENTER_PRE_OPERATIONAL)
+            sdo.read(0x1000)  # probe: a clear error when nobody answers
+            sdo.configure_pdos(self.slots, images=self.transport == "pdo")
+            self._routes.release_maps(node)
+            sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
+
+        self._start(setup)
+        self.counters.configurations += 1
+        logger.info("gateway node %d configured (%d slot(s), %s transport)", self.node_id,
+                    self.slots, self.transport)
+
+    def start_again(self) -> bool:
+        """NMT start alone, for a station another node put in STOPPED or PRE-OPERATIONAL.
+
+        Such a command leaves the object dictionary as it was (CiA 301 §7.2.8.2.1), so the
+        PDOs are running again with the next SYNC. Afterwards (data already flows) each PDO's
+        COB-ID is read back: False when one is no longer the one configured (a reset whose
+        boot-up was not seen, another tool's SDO writes); :meth:`configure` is then due.
+        Raises SsiBridgeError (BusError, GatewayUnavailable) like :meth:`configure`.
+        """
+        assert self.sdo is not None
+        self._start(lambda: None)
+        return self.sdo.pdos_configured(self.slots, images=self.transport == "pdo")
+
+    def _start(self, setup: Callable[[], None]) -> None:
+        """``setup()`` then NMT start, as the master's own NMT commands; resend the outputs."""
+        assert self.sdo is not None
         with self.sdo.lock:
             self._liveness.configuring = True
             try:
-                # first, so a STOPPED station (another node's NMT stop) serves SDO again
-                self.send_nmt(NMT_ENTER_PRE_OPERATIONAL)
-                self.sdo.read(0x1000)  # probe: a clear error when nobody answers
-                self.sdo.configure_pdos(self.slots, images=self.transport == "pdo")
-                self._routes.release_maps(self.node)
-                self.sdo.write(HEARTBEAT_OBJECT, 0, self.heartbeat_ms)
+                setup()
                 self.send_nmt(NMT_START)
             finally:
                 self._liveness.configuring = False
             self._liveness.started()  # counts as heard: the liveness clock (monotonic)
-            self.counters.configurations += 1
         for slot in range(1, self.slots + 1):
             self._send_output(slot, bytes(self.table.slot(slot).output))
-        logger.info("gateway node %d configured (%d slot(s), %s transport)", self.node_id,
-                    self.slots, self.transport)
 
     def request_configuration(self) -> None:
         """Have the supervisor thread configure the station again (the bus came back)."""
@@ -362,37 +379,9 @@ class BridgeClient:
         if st.pulse_seq is None and st.release_seq is None:  # re-checked under the lock
             return
         with self.table.cond:
-            seq = self.table.sync_seq
-            if st.release_seq is not None and seq > st.release_seq:
-                # the release is sent once more: a lost release RPDO would leave CLR_CMPx
-                # set, and a flag that can never latch again (000 comparator table)
-                st.release_seq = None
-                out = bytes(st.output)
-            elif st.pulse_seq is None or seq <= st.pulse_seq:
-                return
-            elif self._pulse_lost(st.output[6], data[6]) and st.pulse_resends < PULSE_RESENDS:
-                # the image of a cycle after the pulse still shows FLAG_CMPx = 1 with the
-                # values not matching (a clear that the module would have carried out): the
-                # pulse RPDO never arrived, so send it again for one more cycle
-                st.pulse_resends += 1
-                st.pulse_seq = seq
-                self.counters.pulse_resends += 1
-                out = bytes(st.output)
-                logger.info("slot %d: clear pulse not applied (lost RPDO?), sent again (%d)",
-                            slot, st.pulse_resends)
-            else:
-                st.pulse_seq = None
-                st.release_seq = seq
-                st.output[6] &= ~(CmpControl.CLR_CMP1 | CmpControl.CLR_CMP2) & 0xFF
-                out = bytes(st.output)
-        self._send_output(slot, out)
-
-    @staticmethod
-    def _pulse_lost(control: int, cmp: int) -> bool:
-        """A requested CLR_CMPx whose FLAG_CMPx is still 1 while STS_CMPx = 0 (000 comparator
-        table: "Reset of FLAG_CMPx not possible when values match", else CLR resets it)."""
-        return any(control & clr and cmp & flag and not cmp & sts
-                   for clr, flag, sts in _PULSE_CHECKS)
+            out = next_pulse_output(slot, st, self.table.sync_seq, data, self.counters)
+        if out is not None:
+            self._send_output(slot, out)
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1

@@ -19,7 +19,7 @@ from ssi_bridge.protocol.images import ProcessInput
 POSITION_PAIR = struct.Struct("<ii")
 #: SYNC times remembered to stamp late samples
 _KEEP_SYNC_TIMES = 64
-#: bits of _Slot.answered: which of a slot's two TPDOs answered a SYNC
+#: bits of SlotState.answered: which of a slot's two TPDOs answered a SYNC
 IMAGE, POSITION = 1, 2
 
 
@@ -86,7 +86,9 @@ class ClientCounters:
 
 
 @dataclass
-class _Slot:
+class SlotState:
+    """One slot's newest image and position, its output image and clear-pulse state."""
+
     image: bytes | None = None
     image_seq: int = -1
     image_time: float = 0.0  # wire time (frame timestamp) of the image
@@ -103,13 +105,13 @@ class _Slot:
     answered: dict[int, int] = field(default_factory=dict)
 
 
-def _mark(st: _Slot, bit: int, seq: int) -> None:
+def _mark(st: SlotState, bit: int, seq: int) -> None:
     """A frame (``bit``) answered SYNC ``seq``; forget the SYNCs older than the kept times."""
     st.answered[seq] = st.answered.get(seq, 0) | bit
     st.answered.pop(seq - _KEEP_SYNC_TIMES, None)
 
 
-def _move(st: _Slot, bit: int, seq: int, to: int) -> None:
+def _move(st: SlotState, bit: int, seq: int, to: int) -> None:
     """A frame counted for SYNC ``seq`` answered ``to`` (its wire time says so)."""
     left = st.answered.get(seq, 0) & ~bit
     if left:
@@ -159,7 +161,7 @@ class SlotTable:
         self.sync_time = 0.0
         #: monotonic time of the last SYNC recorded (an interval's start, never a stamp)
         self.synced_at = float("-inf")
-        self._slots = {s: _Slot() for s in range(1, slots + 1)}
+        self._slots = {s: SlotState() for s in range(1, slots + 1)}
         self._times: dict[int, float] = {}
         self._due = 2 * slots
         self._input_waiters = 0
@@ -172,7 +174,7 @@ class SlotTable:
         #: where ``foreign_sync_answers`` is counted too (the station's client), or None
         self.counters: ClientCounters | None = None
 
-    def slot(self, slot: int) -> _Slot:
+    def slot(self, slot: int) -> SlotState:
         """The state of ``slot`` (raises KeyError with the valid range)."""
         try:
             return self._slots[slot]
@@ -244,7 +246,7 @@ class SlotTable:
             return True
         return False
 
-    def on_image(self, slot: int, data: bytes, timestamp: float = 0.0) -> _Slot:
+    def on_image(self, slot: int, data: bytes, timestamp: float = 0.0) -> SlotState:
         """Store a received process input image (wire time ``timestamp``); return the slot.
 
         A SYNC's TPDOs follow it on the wire, so an image that ended before the current

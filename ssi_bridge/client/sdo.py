@@ -30,6 +30,10 @@ TRANS_EVENT = 255
 POSITION = 0x6820
 #: first encoder default PDO (000 Table 15: PDO9 = channels 0+1)
 FIRST_POSITION_PDO = 9
+#: COB-ID bit 31 of a PDO communication parameter: the PDO is not valid (CiA 301)
+COB_ID_INVALID = 1 << 31
+#: the 29 identifier bits of a COB-ID entry
+COB_ID_BITS = (1 << 29) - 1
 
 
 def position_pdos(slots: int) -> list[tuple[int, list[int]]]:
@@ -139,6 +143,28 @@ class SdoAccess:
                                     TRANS_EVENT, [(PROCESS_OUTPUT, slot)])
             except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "PDO configuration", 0x1400, 0) from err
+
+    def pdos_configured(self, slots: int, *, images: bool = True) -> bool:
+        """True when every PDO :meth:`configure_pdos` enables is still valid on its COB-ID.
+
+        One upload of sub-index 1 (COB-ID) of each communication parameter (0x1800 + n - 1
+        for TPDO n, 0x1400 + n - 1 for RPDO n). Raises GatewayUnavailable / SdoAbortError.
+        """
+        node_id = self.node.id
+        expected = [(0x1800 + pdo - 1, tpdo_cob_base(pdo) + node_id)
+                    for pdo, _carried in position_pdos(slots)]
+        if images:
+            for slot in range(1, slots + 1):
+                expected += [(0x1800 + slot - 1, tpdo_cob_base(slot) + node_id),
+                             (0x1400 + slot - 1, rpdo_cob_base(slot) + node_id)]
+        for index, cob_id in expected:
+            raw = self.upload(index, 1)
+            found = int.from_bytes(raw[:4], "little")
+            if found & (COB_ID_INVALID | COB_ID_BITS) != cob_id:
+                logger.info("0x%04X:01 is 0x%08X, configured was 0x%03X (valid): the PDOs "
+                            "are no longer the configured ones", index, found, cob_id)
+                return False
+        return True
 
     @staticmethod
     def _setup(pdo: canopen.pdo.PdoMap, cob_id: int, trans_type: int,

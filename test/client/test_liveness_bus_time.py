@@ -110,18 +110,20 @@ def test_a_heartbeat_producer_stuck_for_good_is_found_silent(station) -> None:
         stall.join()
 
 
-def _configurations_after(client, seconds: float) -> int:
+def _restarts_after(client, seconds: float) -> int:
+    """Starts of the station by the master within ``seconds``: NMT start alone or a whole
+    re-configuration (both are counted in ``nmt_restarts`` when a heartbeat asked)."""
     deadline = time.monotonic() + seconds
-    start = client.counters.configurations
-    while time.monotonic() < deadline and client.counters.configurations == start:
+    start = client.counters.nmt_restarts
+    while time.monotonic() < deadline and client.counters.nmt_restarts == start:
         time.sleep(0.005)
-    return client.counters.configurations - start
+    return client.counters.nmt_restarts - start
 
 
 def test_a_heartbeat_queued_before_the_nmt_start_is_no_state_change(station, channel) -> None:
     """A PRE-OPERATIONAL heartbeat (CiA 301 state 127) on the wire within the heartbeat timeout
-    after the master's NMT start was queued before the command took effect: no re-configuration.
-    One later than that is the station's real state: re-configured."""
+    after the master's NMT start was queued before the command took effect: not started again.
+    One later than that is the station's real state: started again."""
     gateway, client, _ = station
     poke = open_bus(BusConfig(channel=channel, node_id=5))
     stale = can.Message(arbitration_id=0x700 + client.node_id, data=bytes([127]),
@@ -129,9 +131,9 @@ def test_a_heartbeat_queued_before_the_nmt_start_is_no_state_change(station, cha
     try:
         client.configure()
         poke.send(stale)
-        assert _configurations_after(client, 2 * client.heartbeat_timeout) == 0
+        assert _restarts_after(client, 2 * client.heartbeat_timeout) == 0
         time.sleep(client.heartbeat_timeout)
         poke.send(stale)
-        assert _configurations_after(client, 2.0) == 1
+        assert _restarts_after(client, 2.0) == 1
     finally:
         poke.shutdown()

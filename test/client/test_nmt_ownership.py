@@ -16,10 +16,12 @@ import time
 from collections.abc import Callable, Iterator
 
 import can
+import canopen
 import pytest
 
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.protocol.dictionary import NMT_ENTER_PRE_OPERATIONAL, NMT_STOP
+from ssi_bridge.client.sdo import FIRST_POSITION_PDO
+from ssi_bridge.protocol.dictionary import NMT_ENTER_PRE_OPERATIONAL, NMT_STOP, tpdo_cob_base
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
@@ -87,12 +89,14 @@ def test_a_station_another_node_took_out_of_operational_is_started_again(
         station: tuple[XnGateway, BridgeClient, list], foreign: can.BusABC,
         command: int, seen: str) -> None:
     """Another node's NMT stop / enter PRE-OPERATIONAL to the station: within the liveness
-    time (4 heartbeat periods, 0.2 s) plus one configuration the station is OPERATIONAL
-    again, cycles complete, and ``nmt_restarts`` counts it. Before (stop): the master
-    re-tried its SDO configuration every 0.55 s, which a STOPPED node cannot answer, and never
-    sent an NMT command."""
+    time (4 heartbeat periods, 0.2 s) the station is OPERATIONAL again by NMT start alone (the
+    command kept its dictionary, CiA 301 §7.2.8.2.1: no SDO re-configuration), cycles
+    complete, and ``nmt_restarts`` counts it. Before (stop): the master re-tried its SDO
+    configuration every 0.55 s, which a STOPPED node cannot answer, and never sent an NMT
+    command; later it configured every PDO again, ~30 SDO transfers before data flowed."""
     gateway, client, _ = station
     assert run_cycles(client, 3, timeout=0.3) >= 2
+    configured = client.counters.configurations
     sent = time.monotonic()
     _send(foreign, 0x000, bytes([command, NODE]))
     assert _until(lambda: gateway.nmt_state == seen, 0.5)
@@ -104,6 +108,30 @@ def test_a_station_another_node_took_out_of_operational_is_started_again(
     # the liveness time (heartbeat_timeout) plus one configuration over SDO, with the slack a
     # loaded 2-core machine needs
     assert took < client.heartbeat_timeout + 0.5, f"started again after {took:.3f} s"
+    assert client.counters.configurations == configured, "configured again over SDO"
+
+
+def test_a_station_stopped_after_another_tool_changed_its_pdos_is_configured_again(
+        station: tuple[XnGateway, BridgeClient, list], foreign: can.BusABC) -> None:
+    """Another tool writes TPDO9's COB-ID invalid over SDO (CiA 301: bit 31), then stops the
+    station: NMT start alone would leave the positions off, so the master, reading the
+    COB-IDs back after its start, configures the station again; cycles complete."""
+    gateway, client, _ = station
+    assert run_cycles(client, 3, timeout=0.3) >= 2
+    configured = client.counters.configurations
+    tool = canopen.Network(foreign).connect()  # the tool's SDO client on the same wire
+    remote = tool.add_node(NODE, canopen.ObjectDictionary())
+    try:
+        cob = tpdo_cob_base(FIRST_POSITION_PDO) + NODE
+        remote.sdo.download(0x1800 + FIRST_POSITION_PDO - 1, 1,
+                            ((1 << 31) | cob).to_bytes(4, "little"))
+        _send(foreign, 0x000, bytes([NMT_STOP, NODE]))
+        assert _until(lambda: client.counters.configurations == configured + 1
+                      and client.counters.nmt_restarts == 1, 3.0)
+    finally:
+        tool.disconnect()
+    assert _until(lambda: gateway.nmt_state == "OPERATIONAL", 1.0)
+    assert run_cycles(client, 10, timeout=0.3) >= 9
 
 
 class _ConfigureFailsOnce(BridgeClient):
