@@ -183,7 +183,7 @@ def test_playback_ends_at_the_message_at_or_before_the_end_time(one_s: Path, pro
 def test_topic_selection(two_topics: Path, probe: Probe, args: list[str], arm: int,
                          base: int) -> None:
     got_arm, got_base = probe.subscribe(ARM), probe.subscribe(BASE)
-    run(two_topics, "--wait-for-subscribers", "3", "--quiet", *args)
+    run(two_topics, "--wait-for-subscribers", "20", "--quiet", *args)
     settle(got_arm if arm else got_base)
     assert (len(got_arm), len(got_base)) == (arm, base)
     played = got_arm or got_base
