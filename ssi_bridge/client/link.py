@@ -235,11 +235,12 @@ class ReopeningBus(can.BusABC):
         with self._lock:
             if not self._probation or self._inner is not inner:
                 return
+            # said before ``lost`` turns False: whoever sees the interface back finds the line
+            logger.warning("CAN interface %s open again after %.1f s (%d attempt(s)); "
+                           "configuring the stations again", self.name,
+                           time.monotonic() - self.lost_at, self._tries)
             self._probation = False
             self.reopens += 1
-        logger.warning("CAN interface %s open again after %.1f s (%d attempt(s)); configuring "
-                       "the stations again", self.name, time.monotonic() - self.lost_at,
-                       self._tries)
         if self.on_reopen is not None:
             self.on_reopen()
 

@@ -74,10 +74,16 @@ class NodeDiagnostics:
         return (WARN, "; ".join(parts)) if parts else (None, "")
 
     def _with_bus_findings(self, status: Any, counters: dict[str, Any]) -> Any:
-        """``status`` raised to the level of :meth:`_bus_findings` where that is worse."""
+        """``status`` raised to the level of :meth:`_bus_findings` where that is worse; a
+        status already as bad keeps its message and gets the findings after it (a low cycle
+        rate must not hide the undecodable frames that came with it)."""
         level, message = self._bus_findings(counters)
-        if level is not None and status.level < level:
+        if level is None:
+            return status
+        if status.level < level:
             status.level, status.message = level, message
+        else:
+            status.message = f"{status.message}; {message}"
         return status
 
     def achieved_rate(self) -> float:

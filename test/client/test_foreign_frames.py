@@ -21,6 +21,7 @@ import pytest
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
@@ -77,12 +78,13 @@ def test_a_second_sync_producer_is_counted_and_its_answers_not_taken(
     clean = _slopes(client, 50)
     assert clean and max(abs(v - RATE) for v in clean) < 0.02 * RATE  # the ramp, as latched
     stop = threading.Event()
-    other = can.Bus(interface="virtual", channel=channel)
+    # another node on the same simulated wire: its SYNCs take their time on it, and every
+    # node sees every frame in one order, as on a CAN wire
+    other = wire_bus(BusConfig(channel=channel, node_id=NODE))
 
     def produce() -> None:  # another SYNC producer at 1 kHz
         while not stop.is_set():
-            other.send(can.Message(arbitration_id=0x080, is_extended_id=False,
-                                   timestamp=time.time()))
+            other.send(can.Message(arbitration_id=0x080, is_extended_id=False))
             time.sleep(0.001)
 
     producer = threading.Thread(target=produce, daemon=True)

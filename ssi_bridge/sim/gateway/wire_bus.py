@@ -65,6 +65,11 @@ class Wire:
     def __init__(self, bitrate: int) -> None:
         self.bitrate = bitrate
         self.lock = threading.Lock()
+        #: held while one frame is handed to the receivers: python-can's virtual bus puts a
+        #: frame in each receiver's queue in turn, so without it two senders' frames could
+        #: reach two nodes in different orders (a station's answer before the SYNC it
+        #: answers), which a CAN wire never does
+        self.broadcast = threading.Lock()
         #: wire time (s) at which the last frame known to this process ends
         self.busy_until = 0.0
         #: end (s) of the newest SYNC (COB-ID 0x080) put on this wire in this process
@@ -238,7 +243,8 @@ class WireBus(can.BusABC):
                     time.sleep(wait)
                 if is_shut_down(self):
                     return False  # shut down while the frame was on the wire: nobody gets it
-                self._inner.send(msg, timeout)
+                with self.wire.broadcast:
+                    self._inner.send(msg, timeout)
                 delivered(msg)
         finally:
             for msg in ordered:
