@@ -108,8 +108,12 @@ class BridgeClient:
                                   self._on_malformed)
 
     # -- life cycle -------------------------------------------------------------------------
-    def connect(self) -> None:
-        """Open the bus and configure the gateway (raises GatewayUnavailable / SdoAbortError)."""
+    def connect(self, patience: float = 0.0) -> None:
+        """Open the bus and configure the gateway (raises GatewayUnavailable / SdoAbortError).
+
+        ``patience``: for this long (s) a gateway that does not answer is asked again (a
+        station process that has just booted on a busy machine); 0: the first timeout raises.
+        """
         if self.network is not None:
             return
         self.master.connect()
@@ -127,11 +131,18 @@ class BridgeClient:
         self.network.subscribe(0x700 + self.node_id, self._liveness.on_heartbeat_frame)
         self.node.emcy.add_callback(self._on_emcy)
         self._routes.attach(self.network)
-        try:
-            self.configure()
-        except SsiBridgeError:
-            self.close()
-            raise
+        give_up = time.monotonic() + patience
+        while True:
+            try:
+                self.configure()
+                break
+            except SsiBridgeError as err:
+                if isinstance(err, GatewayUnavailable) and time.monotonic() < give_up:
+                    self._rx_log.log(logging.INFO, "first_contact", "gateway node %d did not "
+                                     "answer yet (%s); asking again", self.node_id, err)
+                    continue
+                self.close()
+                raise
         self._liveness.start()
 
     def close(self) -> None:

@@ -158,7 +158,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
             slots = max(j.slot for j in s.station_joints(sid))
             self.station_clients[sid] = BridgeClient(self.master, sid, slots,
                                                      sdo_timeout=s.bus_sdo_timeout)
-            self.station_clients[sid].connect()
+            # our own station booted just now: on a busy machine its first answer may be late
+            self.station_clients[sid].connect(
+                patience=s.simulation_start_timeout if self.station is not None else 0.0)
         self.client = self.station_clients[s.station_ids[0]]
         if self.station is not None:
             self.bridge.faults = self.station.fault_injector(

@@ -54,7 +54,8 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "process on the virtual bus; also the fallback without multicast on loopback)",
         read_only=True)),
     "simulation.start_timeout": (30.0, _describe(
-        "Seconds the node waits for the simulated station's boot-up message at start",
+        "Seconds the node waits for the simulated station's boot-up message at start, and "
+        "again for its first SDO answer (a station process on a busy machine may be late)",
         read_only=True, float_range=(0.5, 120.0))),
     "simulation.station_priority": (10, _describe(
         "simulation.transport udp_multicast: SCHED_FIFO priority of the station child process, "

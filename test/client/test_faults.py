@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
@@ -10,7 +11,11 @@ from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import GatewayUnavailable, HandshakeTimeout
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
+from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 from ssi_bridge.protocol.registers import MAGIC_NO, Reg
+
+from .conftest import ScriptedReader, lossy_wire
 
 
 def wait_for(condition, message: str, timeout: float = 3.0) -> None:
@@ -74,6 +79,28 @@ def test_missing_node_fails_clearly_within_the_timeout(channel) -> None:
         client.connect()
     assert time.monotonic() - start < 0.6
     client.close()
+
+
+def test_a_late_first_answer_within_the_patience_is_waited_for(channel) -> None:
+    """connect(patience): a station that does not answer its first SDO (a station process
+    just booted on a busy machine) is asked again until the patience is over; then it is
+    configured once. Before: the node exited 1 at the first timeout."""
+    config = BusConfig(channel=channel, node_id=9)
+    gateway = XnGateway(config, 9, [Xn1Ssi(ScriptedReader(1), slot=1)])
+    client = BridgeClient(config, 9, 1, sdo_timeout=0.2, opener=lossy_wire)
+    gateway.start()
+    gateway.silent = True
+    timer = threading.Timer(0.7, lambda: setattr(gateway, "silent", False))
+    timer.start()
+    try:
+        start = time.monotonic()
+        client.connect(patience=5.0)
+        assert 0.6 < time.monotonic() - start < 5.0
+        assert client.counters.configurations == 1 and gateway.nmt_state == "OPERATIONAL"
+    finally:
+        timer.cancel()
+        client.close()
+        gateway.stop()
 
 
 def test_clear_pulse_lasts_one_cycle_and_keeps_enables(station) -> None:

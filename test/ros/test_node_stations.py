@@ -58,11 +58,14 @@ def test_three_joints_on_two_stations_publish_their_own_motion(running, probe, t
     for i, (joint, (velocity, start)) in enumerate(MOTION.items()):
         # velocity: the constant shaft speed, from this joint's own station
         # bound as for one station: one count over the window of 4 periods plus SYNC-stamp
-        # timing noise (docs/node.md)
+        # timing noise (docs/node.md). The window is at least 3.5 periods: a cycle less than
+        # half a period late runs at once (CycleThread), so the oldest of its five samples
+        # may be up to half a period late (a busy machine)
         truth = 2 * math.pi * velocity
-        bound = STEP / (4 / RATE) + 0.01 * abs(truth)
+        bound = STEP / (3.5 / RATE) + 0.01 * abs(truth)
         speeds = [m.velocity[i] for _, m in msgs[-30:]]
-        assert all(abs(v - truth) <= bound for v in speeds), (joint, truth, bound, speeds)
+        worst = max(speeds, key=lambda v: abs(v - truth))
+        assert abs(worst - truth) <= bound, (joint, truth, bound, worst, speeds)
         # position: start + velocity x (time since the simulated station started)
         expected = 2 * math.pi * start
         assert abs(last.position[i] - expected) <= 2 * math.pi * abs(velocity) * elapsed + 0.01, \
