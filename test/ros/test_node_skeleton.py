@@ -25,14 +25,13 @@ def test_joint_states_rate_name_stamps_and_speed(running, probe):
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(msgs) >= 5, 10.0, "joint_states", node)
     start = len(msgs)
-    t0 = time.monotonic()
     time.sleep(3.0)
     window = msgs[start:]
-    elapsed = time.monotonic() - t0
-    rate = len(window) / elapsed
-    assert abs(rate - RATE) <= 0.1 * RATE, f"received {rate:.1f} Hz, configured {RATE} Hz"
-
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in window]
+    # the rate the node published at, from its stamps (one per SYNC): the probe's own
+    # receive times move with how late this busy test process gets to its messages
+    rate = (len(window) - 1) / (stamps[-1] - stamps[0])
+    assert abs(rate - RATE) <= 0.1 * RATE, f"published {rate:.1f} Hz, configured {RATE} Hz"
     assert all(b > a for a, b in zip(stamps, stamps[1:])), "stamps must increase strictly"
     assert all(m.name == ["wrist"] for _, m in window)
     assert all(len(m.position) == 1 and len(m.velocity) == 1 and not m.effort for _, m in window)
