@@ -62,9 +62,15 @@ RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 _DERIVED_NET = (239, 74)
 #: derived ports: above Linux's ephemeral range (net.ipv4.ip_local_port_range, 32768-60999 by
 #: default), where any socket bound to port 0 (DDS's, a client's) may hold a port without
-#: SO_REUSEADDR and the bus's bind then fails; DDS itself uses these ports only for domain IDs
-#: from 215, beyond the 0-101 ROS recommends on Linux
+#: SO_REUSEADDR and the bus's bind then fails
 _DERIVED_PORTS = (61000, 65536)
+#: DDS (RTPS port mapping: 7400 + 250 x domain id, unicast ports at offsets 10 + 2 x
+#: participant and 11 + 2 x participant, bound without SO_REUSEADDR) uses the derived range
+#: for ROS_DOMAIN_ID 215-232: derived ports keep to offsets 160-249 of each domain's block,
+#: beyond the unicast ports of a domain's first 75 participants on the host
+_DDS_PORT_BASE, _DDS_DOMAIN_GAIN, _DDS_FREE_OFFSET = 7400, 250, 160
+_PORTS = tuple(p for p in range(*_DERIVED_PORTS)
+               if (p - _DDS_PORT_BASE) % _DDS_DOMAIN_GAIN >= _DDS_FREE_OFFSET)
 #: where Linux keeps its ephemeral port range
 _EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
 #: a sender's timestamp is taken as the frame's wire time only this close to its receive time
@@ -180,12 +186,12 @@ def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     """A group and port of their own for a bus named ``name`` (e.g. the node's bus.channel).
 
     A hash of the name picks 239.74.x.y and a port in 61000-65535 (above Linux's ephemeral
-    ports), so nodes (and test runs) with different channel names never share a group and port.
+    ports) that no DDS domain's unicast port takes (:data:`_PORTS`), so nodes (and test runs)
+    with different channel names never share a group and port.
     """
     digest = hashlib.sha256(str(name).encode()).digest()
     x, y = digest[0], max(1, digest[1])
-    port = _DERIVED_PORTS[0] + int.from_bytes(digest[2:4], "big") % (
-        _DERIVED_PORTS[1] - _DERIVED_PORTS[0])
+    port = _PORTS[int.from_bytes(digest[2:4], "big") % len(_PORTS)]
     return Endpoint(f"{_DERIVED_NET[0]}.{_DERIVED_NET[1]}.{x}.{y}", port, interface).channel
 
 

@@ -112,6 +112,10 @@ def test_derived_ports_lie_above_the_ephemeral_ports() -> None:
     ports = {parse_channel(derive_channel(f"test_{d}_{n}")).port
              for d in range(1, 233) for n in range(4)}
     assert min(ports) >= 61000 and max(ports) <= 65535
+    # nor a DDS unicast port (RTPS port mapping 7400 + 250 d + 10 / 11 + 2 p) of any domain
+    # 0-232 with up to 75 participants on the host
+    dds = {7400 + 250 * d + off + 2 * p for d in range(233) for p in range(75) for off in (10, 11)}
+    assert not ports & dds, sorted(ports & dds)[:5]
     ephemeral = ephemeral_ports()
     if ephemeral is not None:
         assert not ports & set(ephemeral), (ephemeral, sorted(ports & set(ephemeral))[:5])
