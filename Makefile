@@ -14,10 +14,9 @@ ENV         := source scripts/env.sh
 ARGS        ?=
 PYTEST_ARGS ?=
 #: pytest-xdist workers of `make test` (0: one process); the slow tier always runs alone.
-#: Two on two cores. The node tests mostly wait on the wire and on DDS, so TEST_WORKERS=4
-#: nearly halves the wall time on an idle machine; beside two CPU burners some timing tests
-#: still fail with four (figures: the README's "Tests")
-TEST_WORKERS ?= 2
+#: Four on two cores: the node tests mostly wait on the wire and on DDS, so four nearly halve
+#: the wall time of two, idle and beside two CPU burners alike (figures: the README's "Tests")
+TEST_WORKERS ?= 4
 ONLY        ?=
 
 SOURCES := $(shell find msg_defs config launch resource -type f 2>/dev/null) setup.py setup.cfg package.xml
