@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from dataclasses import dataclass
 
 import can
 import canopen
@@ -17,21 +18,18 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
 
 from ssi_bridge.exceptions import BusError, GatewayUnavailable, SdoAbortError
 from ssi_bridge.protocol.dictionary import (
-    PROCESS_INPUT, PROCESS_OUTPUT, rpdo_cob_base, tpdo_cob_base,
+    PDO_INVALID, PROCESS_INPUT, PROCESS_OUTPUT, RPDO_COM, TPDO_COM, TRANS_EVENT, rpdo_cob_base,
+    tpdo_cob_base,
 )
 
 logger = logging.getLogger(__name__)
 
 #: CiA 301 transmission type "synchronous, every SYNC"
 TRANS_SYNC_EVERY = 1
-#: CiA 301 transmission type "event driven (manufacturer specific)"
-TRANS_EVENT = 255
 #: object 0x6820 position value (000 Table 40)
 POSITION = 0x6820
 #: first encoder default PDO (000 Table 15: PDO9 = channels 0+1)
 FIRST_POSITION_PDO = 9
-#: COB-ID bit 31 of a PDO communication parameter: the PDO is not valid (CiA 301)
-COB_ID_INVALID = 1 << 31
 #: the 29 identifier bits of a COB-ID entry
 COB_ID_BITS = (1 << 29) - 1
 
@@ -40,6 +38,43 @@ def position_pdos(slots: int) -> list[tuple[int, list[int]]]:
     """Return (PDO number, slots carried) for the encoder default PDOs PDO9-12 in use."""
     return [(FIRST_POSITION_PDO + g, [s for s in (2 * g + 1, 2 * g + 2) if s <= slots])
             for g in range((slots + 1) // 2)]
+
+
+@dataclass(frozen=True)
+class PdoPlan:
+    """One PDO the master maps and enables: direction, number, COB-ID, type, mapping."""
+
+    transmit: bool
+    number: int
+    cob_id: int
+    trans_type: int
+    entries: tuple[tuple[int, int], ...]
+
+    @property
+    def com_index(self) -> int:
+        """Its communication parameter object (0x1800 + n - 1 for TPDO n, 0x1400 + n - 1 for
+        RPDO n)."""
+        return (TPDO_COM if self.transmit else RPDO_COM) + self.number - 1
+
+
+def pdo_plan(slots: int, node_id: int, *, images: bool = True) -> list[PdoPlan]:
+    """What :meth:`SdoAccess.configure_pdos` sets up, in its order.
+
+    TPDO s / RPDO s (s = 1..slots) carry slot s's process input / output image
+    (0x2000:s / 0x2100:s); the encoder default PDOs 9.. carry 0x6820 of slot pairs.
+    TPDOs are synchronous (type 1), the image RPDOs event driven (type 255, applied on
+    reception, so the handshake does not wait an extra cycle).
+    """
+    plan = [PdoPlan(True, pdo, tpdo_cob_base(pdo) + node_id, TRANS_SYNC_EVERY,
+                    tuple((POSITION, s) for s in carried))
+            for pdo, carried in position_pdos(slots)]
+    if images:
+        for slot in range(1, slots + 1):
+            plan += [PdoPlan(True, slot, tpdo_cob_base(slot) + node_id, TRANS_SYNC_EVERY,
+                             ((PROCESS_INPUT, slot),)),
+                     PdoPlan(False, slot, rpdo_cob_base(slot) + node_id, TRANS_EVENT,
+                             ((PROCESS_OUTPUT, slot),))]
+    return plan
 
 
 def abort_meaning(code: int) -> str:
@@ -122,47 +157,28 @@ class SdoAccess:
                 raise self._fail(err, "download", index, subindex) from err
 
     def configure_pdos(self, slots: int, *, images: bool = True) -> None:
-        """Map and enable what the bridge consumes; every PDO is invalid by default.
-
-        TPDO s / RPDO s (s = 1..slots) carry slot s's process input / output image
-        (0x2000:s / 0x2100:s); the encoder default PDOs 9.. carry 0x6820 of slot pairs.
-        TPDOs are synchronous (type 1), the image RPDOs event driven (type 255, applied on
-        reception, so the handshake does not wait an extra cycle).
-        """
-        node_id = self.node.id
+        """Map and enable what the bridge consumes (:func:`pdo_plan`); every PDO is invalid
+        by default."""
         with self.lock:
             try:
-                for pdo, carried in position_pdos(slots):
-                    self._setup(self.node.tpdo[pdo], tpdo_cob_base(pdo) + node_id,
-                                TRANS_SYNC_EVERY, [(POSITION, s) for s in carried])
-                if images:
-                    for slot in range(1, slots + 1):
-                        self._setup(self.node.tpdo[slot], tpdo_cob_base(slot) + node_id,
-                                    TRANS_SYNC_EVERY, [(PROCESS_INPUT, slot)])
-                        self._setup(self.node.rpdo[slot], rpdo_cob_base(slot) + node_id,
-                                    TRANS_EVENT, [(PROCESS_OUTPUT, slot)])
+                for pdo in pdo_plan(slots, self.node.id, images=images):
+                    pdo_map = (self.node.tpdo if pdo.transmit else self.node.rpdo)[pdo.number]
+                    self._setup(pdo_map, pdo.cob_id, pdo.trans_type, list(pdo.entries))
             except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
-                raise self._fail(err, "PDO configuration", 0x1400, 0) from err
+                raise self._fail(err, "PDO configuration", RPDO_COM, 0) from err
 
     def pdos_configured(self, slots: int, *, images: bool = True) -> bool:
         """True when every PDO :meth:`configure_pdos` enables is still valid on its COB-ID.
 
-        One upload of sub-index 1 (COB-ID) of each communication parameter (0x1800 + n - 1
-        for TPDO n, 0x1400 + n - 1 for RPDO n). Raises GatewayUnavailable / SdoAbortError.
+        One upload of sub-index 1 (COB-ID) of each communication parameter. Raises
+        GatewayUnavailable / SdoAbortError.
         """
-        node_id = self.node.id
-        expected = [(0x1800 + pdo - 1, tpdo_cob_base(pdo) + node_id)
-                    for pdo, _carried in position_pdos(slots)]
-        if images:
-            for slot in range(1, slots + 1):
-                expected += [(0x1800 + slot - 1, tpdo_cob_base(slot) + node_id),
-                             (0x1400 + slot - 1, rpdo_cob_base(slot) + node_id)]
-        for index, cob_id in expected:
-            raw = self.upload(index, 1)
-            found = int.from_bytes(raw[:4], "little")
-            if found & (COB_ID_INVALID | COB_ID_BITS) != cob_id:
+        for pdo in pdo_plan(slots, self.node.id, images=images):
+            found = int.from_bytes(self.upload(pdo.com_index, 1)[:4], "little")
+            if found & (PDO_INVALID | COB_ID_BITS) != pdo.cob_id:
                 logger.info("0x%04X:01 is 0x%08X, configured was 0x%03X (valid): the PDOs "
-                            "are no longer the configured ones", index, found, cob_id)
+                            "are no longer the configured ones", pdo.com_index, found,
+                            pdo.cob_id)
                 return False
         return True
 
