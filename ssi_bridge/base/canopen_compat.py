@@ -4,17 +4,27 @@
   (``Network.subscribers``): the guarded listener calls each on its own, and the master takes
   canopen's own PDO handlers off the COB-IDs it routes itself;
 * :func:`pdo_handler`: the handler a ``PdoMap`` subscribes when it is saved
-  (``PdoMap.on_message``).
+  (``PdoMap.on_message``);
+* :class:`CheckedSdoClient`: canopen's ``SdoClient`` that sets its retry attributes
+  (``RESPONSE_TIMEOUT``, ``MAX_RETRIES``, ``PAUSE_BEFORE_SEND``) and overrides the two methods
+  its transfer streams wait through (``request_response``, ``read_response``, reading the
+  ``responses`` queue ``on_response`` fills), so that a frame which does not answer the
+  current request is set aside instead of ending the transfer; :class:`CheckedRemoteNode`
+  makes its SDO channels such clients (``add_sdo``, which ``RemoteNode.__init__`` calls
+  before it binds the PDO maps to the default channel).
 
 ``test/gateway/test_library_compat.py`` fails on a canopen whose private names changed.
 """
 
 from __future__ import annotations
 
+import queue
+import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import canopen
+from canopen.sdo import SdoAbortedError, SdoClient, SdoCommunicationError
 
 
 def subscribers(network: canopen.Network, can_id: int) -> list[Callable[..., Any]]:
@@ -27,4 +37,106 @@ def pdo_handler(node: canopen.RemoteNode, tpdo: int) -> Callable[..., Any]:
     return node.tpdo[tpdo].on_message
 
 
-__all__ = ["pdo_handler", "subscribers"]
+class AnswerJudge(Protocol):
+    """Tells the answer to the current SDO request from a stale frame
+    (``client/sdo_answers.py`` ``SdoAnswers``)."""
+
+    def sent(self, request: bytes) -> None:
+        """``request`` is the one the next answer must answer."""
+
+    def why_stale(self, response: bytes) -> str | None:
+        """None when ``response`` may answer the current request; else why it cannot."""
+
+
+#: what a set-aside frame is reported to: (the frame, why it answers no current request)
+OnStale = Callable[[bytes, str], None]
+#: command specifier of a server's abort (CiA 301: bits 7-5 of byte 0 = 4)
+_ABORT = 4 << 5
+
+
+class CheckedSdoClient(SdoClient):
+    """canopen's SDO client that takes only the answer to its current request.
+
+    Each wait for an answer (``read_response``, one attempt) lasts up to ``timeout / 2``; a
+    request gets one repeat after a lost frame (canopen counts the first attempt as a retry:
+    ``MAX_RETRIES = 2``), so a transfer step is bounded by ``timeout``. A frame ``judge`` finds
+    stale, and a frame that arrived while no request was outstanding, goes to ``on_stale``
+    and the wait goes on within the same deadline; an abort that answers the current request
+    raises ``SdoAbortedError``, no answer in time ``SdoCommunicationError``, as canopen's own.
+    """
+
+    def __init__(self, rx_cobid: int, tx_cobid: int, od: canopen.ObjectDictionary, *,
+                 timeout: float, judge: AnswerJudge, on_stale: OnStale) -> None:
+        super().__init__(rx_cobid, tx_cobid, od)
+        self.RESPONSE_TIMEOUT = timeout / 2
+        self.MAX_RETRIES = 2
+        self.PAUSE_BEFORE_SEND = 0.0
+        self.judge = judge
+        self.on_stale = on_stale
+        self._awaiting = False
+
+    def request_response(self, sdo_request: bytes | bytearray) -> bytes:
+        """Set aside what arrived since the last answer, send ``sdo_request`` (again after a
+        timeout) and return its answer (raises SdoAbortedError, SdoCommunicationError)."""
+        while True:
+            try:
+                left = self.responses.get_nowait()
+            except queue.Empty:
+                break
+            self.on_stale(left, "it arrived while no request was outstanding")
+        self.judge.sent(bytes(sdo_request))
+        self._awaiting = True
+        try:
+            return bytes(super().request_response(sdo_request))
+        finally:
+            self._awaiting = False
+
+    def read_response(self) -> bytes:
+        """The next frame that answers the current request, within ``RESPONSE_TIMEOUT``
+        (raises SdoAbortedError for its abort, SdoCommunicationError when none came)."""
+        deadline = time.monotonic() + self.RESPONSE_TIMEOUT
+        while True:
+            try:
+                response = bytes(self.responses.get(
+                    timeout=max(0.0, deadline - time.monotonic())))
+            except queue.Empty:
+                raise SdoCommunicationError("No SDO response received") from None
+            why = self.judge.why_stale(response) if self._awaiting else None
+            if why is None:
+                break
+            self.on_stale(response, why)
+        if response and response[0] & 0xE0 == _ABORT:
+            raise SdoAbortedError(int.from_bytes(response[4:8], "little"))
+        return response
+
+
+class CheckedRemoteNode(canopen.RemoteNode):
+    """A ``RemoteNode`` whose SDO channels are checked SDO clients (:class:`CheckedSdoClient`).
+
+    ``RemoteNode.__init__`` makes its default channel (0x600 + id / 0x580 + id) through
+    ``add_sdo`` before its PDO maps bind their communication and mapping records to that
+    client, so every SDO transfer of the node, the PDO set-up's too, is checked.
+
+    :param judge: makes the judge of one channel (called once per channel)
+    :param on_stale: told of every frame set aside, on the thread that waited for an answer
+    """
+
+    def __init__(self, node_id: int, dictionary: canopen.ObjectDictionary, *, timeout: float,
+                 judge: Callable[[], AnswerJudge], on_stale: OnStale) -> None:
+        self._sdo_timeout = timeout
+        self._judge = judge
+        self._on_stale = on_stale
+        super().__init__(node_id, dictionary)
+
+    def add_sdo(self, rx_cobid: int, tx_cobid: int) -> CheckedSdoClient:
+        """An SDO channel to the server on ``rx_cobid`` answering on ``tx_cobid``."""
+        client = CheckedSdoClient(rx_cobid, tx_cobid, self.object_dictionary,
+                                  timeout=self._sdo_timeout, judge=self._judge(),
+                                  on_stale=self._on_stale)
+        self.sdo_channels.append(client)
+        if self.has_network():
+            self.network.subscribe(client.tx_cobid, client.on_response)
+        return client
+
+
+__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "pdo_handler", "subscribers"]

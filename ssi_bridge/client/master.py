@@ -121,13 +121,14 @@ class BridgeClient:
         self.bus = self.master.bus
         self.network = self.master.network
         assert self.network is not None
-        self.node = canopen.RemoteNode(self.node_id, build_dictionary(self.node_id, self.slots))
+        self.sdo = SdoAccess(self.node_id, build_dictionary(self.node_id, self.slots),
+                             self.sdo_timeout, self.counters)
+        self.node = self.sdo.node
         self.network.add_node(self.node)
         # the master sends its own NMT commands (send_nmt) and consumes the heartbeat itself:
         # canopen's tracking of NMT commands on 0x000 would look states up that a foreign
         # heartbeat may have left outside CiA 301 (KeyError)
         self.network.unsubscribe(NMT_COB_ID, self.node.nmt.on_command)
-        self.sdo = SdoAccess(self.node, self.sdo_timeout)
         self.network.subscribe(0x700 + self.node_id, self._liveness.on_heartbeat_frame)
         self.node.emcy.add_callback(self._on_emcy)
         self._routes.attach(self.network)

@@ -83,6 +83,9 @@ class ClientCounters:
     foreign_nmt_commands: int = 0
     #: SDO requests to this master's stations that it did not send
     foreign_station_frames: int = 0
+    #: SDO server frames that answered no current request (a late answer to an earlier,
+    #: timed-out request, a repeated answer), set aside (``client/sdo_answers.py``)
+    stale_sdo_answers: int = 0
 
 
 @dataclass

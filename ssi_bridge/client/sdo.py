@@ -3,7 +3,10 @@
 Every SDO goes through :class:`SdoAccess`, which serialises transfers (canopen's SDO client
 is not safe for two threads talking to one server) and turns canopen's exceptions into
 :class:`~ssi_bridge.exceptions.SdoAbortError` (abort code + CiA 301 meaning + object) or
-:class:`~ssi_bridge.exceptions.GatewayUnavailable` (no answer within the timeout).
+:class:`~ssi_bridge.exceptions.GatewayUnavailable` (no answer within the timeout). Its canopen
+client takes only the answer to the current request (``client/sdo_answers.py``): a late answer
+to an earlier one is set aside and counted (``stale_sdo_answers``), the transfer goes on
+waiting for its own.
 """
 
 from __future__ import annotations
@@ -16,6 +19,10 @@ import can
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
 
+from ssi_bridge.base.canopen_compat import CheckedRemoteNode
+from ssi_bridge.base.rate_log import RateLimitedLog
+from ssi_bridge.client.samples import ClientCounters
+from ssi_bridge.client.sdo_answers import SdoAnswers
 from ssi_bridge.exceptions import BusError, GatewayUnavailable, SdoAbortError
 from ssi_bridge.protocol.dictionary import (
     PDO_INVALID, PROCESS_INPUT, PROCESS_OUTPUT, RPDO_COM, TPDO_COM, TRANS_EVENT, rpdo_cob_base,
@@ -85,21 +92,35 @@ def abort_meaning(code: int) -> str:
 
 
 class SdoAccess:
-    """Serialised, typed SDO access to one RemoteNode."""
+    """Serialised, typed SDO access to one station, whose ``RemoteNode`` it makes (``node``).
 
-    def __init__(self, node: canopen.RemoteNode, timeout: float) -> None:
-        self.node = node
+    :param node_id: the station's node id
+    :param dictionary: its object dictionary (``base/od.build_dictionary``)
+    :param timeout: bound of one transfer step (s): one repeat after a lost frame, each
+        attempt waiting half of it
+    :param counters: where set-aside answers are counted (``stale_sdo_answers``); a private
+        set when None
+    """
+
+    def __init__(self, node_id: int, dictionary: canopen.ObjectDictionary, timeout: float,
+                 counters: ClientCounters | None = None) -> None:
         self.lock = threading.RLock()
-        # canopen counts the first attempt as a retry: 2 = one repeat after a lost frame,
-        # each waiting half the budget, so a transfer step is bounded by ``timeout``
-        node.sdo.RESPONSE_TIMEOUT = timeout / 2
-        node.sdo.MAX_RETRIES = 2
-        node.sdo.PAUSE_BEFORE_SEND = 0.0
+        self.counters = counters if counters is not None else ClientCounters()
+        self._stale_log = RateLimitedLog(logger)
+        #: the station; its SDO client takes only the answer to its current request
+        self.node: canopen.RemoteNode = CheckedRemoteNode(
+            node_id, dictionary, timeout=timeout, judge=SdoAnswers, on_stale=self._stale)
         self.timeout = timeout
         #: SDO transfers that got no answer
         self.timeouts = 0
         #: SDO transfers the gateway aborted
         self.aborts = 0
+
+    def _stale(self, frame: bytes, why: str) -> None:
+        """A frame on the station's SDO response COB-ID that answers no current request."""
+        self.counters.stale_sdo_answers += 1
+        self._stale_log.log(logging.INFO, "stale", "SDO answer %s of node %d set aside: %s",
+                            frame.hex(" "), self.node.id, why)
 
     def _fail(self, err: Exception, what: str, index: int, subindex: int) -> Exception:
         where = f"0x{index:04X}:{subindex:02X}"

@@ -55,3 +55,40 @@ def test_canopens_subscribers_and_the_pdo_handler():
     assert canopen_compat.subscribers(network, 0x186) == []
     handler = canopen_compat.pdo_handler(node, 1)
     assert callable(handler)
+
+
+def test_every_sdo_channel_of_the_checked_node_is_a_checked_client():
+    """``CheckedRemoteNode``: ``RemoteNode.__init__`` makes its default channel through
+    ``add_sdo`` before the PDO maps bind their records to it; the network subscribes it on
+    0x580 + id; its transfers run through ``request_response`` / ``read_response`` on the
+    ``responses`` queue (the overridden methods: a renamed one would bypass the check;
+    test/client/test_sdo_stale_answers.py shows the behaviour)."""
+    made: list[object] = []
+
+    class Judge:
+        def __init__(self) -> None:
+            made.append(self)
+
+        def sent(self, request: bytes) -> None:
+            return None
+
+        def why_stale(self, response: bytes) -> str | None:
+            return "test"
+
+    node = canopen_compat.CheckedRemoteNode(5, build_dictionary(5, 1), timeout=0.2,
+                                            judge=Judge, on_stale=lambda f, why: None)
+    checked = node.sdo
+    assert isinstance(checked, canopen_compat.CheckedSdoClient)
+    assert node.sdo_channels == [checked] and checked.judge is made[0]
+    assert (checked.rx_cobid, checked.tx_cobid) == (0x605, 0x585)
+    assert (checked.RESPONSE_TIMEOUT, checked.MAX_RETRIES) == (0.1, 2)
+    assert node.tpdo[1].com_record.sdo_node is checked
+    assert node.rpdo[1].map_array.sdo_node is checked
+    network = canopen.Network()
+    network.add_node(node)
+    assert checked.on_response in canopen_compat.subscribers(network, 0x585)
+    for stream in (canopen.sdo.client.ReadableStream, canopen.sdo.client.WritableStream):
+        assert "request_response" in inspect.getsource(stream)
+    assert "read_response" in inspect.getsource(canopen.sdo.SdoClient.request_response)
+    checked.on_response(0x585, b"\x43\x17\x10\x00\x32\x00\x00\x00", 0.0)
+    assert checked.responses.qsize() == 1
