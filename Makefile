@@ -78,10 +78,12 @@ bench: setup
 	  case "$$f" in *bench_soak.py) [ -n "$(ONLY)" ] || { echo "# $$f: minutes long, run it with make bench ONLY=soak"; continue; };; esac; \
 	  echo "# $$f"; python "$$f" || echo "# $$f exited $$?"; done
 
+# a venv of its own (not a fixed /tmp path two checkouts would share), removed afterwards
 lock:
-	@py=$$(scripts/find_python.sh); rm -rf /tmp/ssi_bridge_lock_venv; "$$py" -m venv /tmp/ssi_bridge_lock_venv
-	/tmp/ssi_bridge_lock_venv/bin/python -m pip install --quiet --upgrade pip==26.3
-	/tmp/ssi_bridge_lock_venv/bin/python scripts/lock.py
+	@py=$$(scripts/find_python.sh); tmp=$$(mktemp -d); trap 'rm -rf "$$tmp"' EXIT; \
+	"$$py" -m venv "$$tmp/venv" && \
+	"$$tmp/venv/bin/python" -m pip install --quiet --upgrade pip==26.3 && \
+	"$$tmp/venv/bin/python" scripts/lock.py
 
 clean:
 	rm -rf build install log $(VENV)

@@ -5,6 +5,8 @@
   canopen's own PDO handlers off the COB-IDs it routes itself;
 * :func:`pdo_handler`: the handler a ``PdoMap`` subscribes when it is saved
   (``PdoMap.on_message``);
+* :func:`set_eds_default`: the text an exported EDS gives as a variable's DefaultValue
+  (``ODVariable.default_raw``, which canopen's EDS import sets and its export reads, undeclared);
 * :class:`CheckedSdoClient`: canopen's ``SdoClient`` that sets its retry attributes
   (``RESPONSE_TIMEOUT``, ``MAX_RETRIES``, ``PAUSE_BEFORE_SEND``) and overrides the two methods
   its transfer streams wait through (``request_response``, ``read_response``, reading the
@@ -24,17 +26,26 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 import canopen
-from canopen.sdo import SdoAbortedError, SdoClient, SdoCommunicationError
+from canopen.objectdictionary import ODVariable
+from canopen.sdo.client import SdoClient
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 
 def subscribers(network: canopen.Network, can_id: int) -> list[Callable[..., Any]]:
     """The callbacks subscribed to ``can_id`` (the network's own list: do not change it)."""
-    return network.subscribers.get(can_id, [])
+    found: list[Callable[..., Any]] = network.subscribers.get(can_id, [])
+    return found
+
+
+def set_eds_default(var: ODVariable, text: str) -> None:
+    """Export ``var`` with DefaultValue ``text`` (e.g. ``$NODEID+0x180``) in an EDS."""
+    var.default_raw = text  # type: ignore[attr-defined]  # undeclared in canopen
 
 
 def pdo_handler(node: canopen.RemoteNode, tpdo: int) -> Callable[..., Any]:
     """The handler TPDO ``tpdo`` of ``node`` subscribes to its COB-ID when saved."""
-    return node.tpdo[tpdo].on_message
+    handler: Callable[..., Any] = node.tpdo[tpdo].on_message
+    return handler
 
 
 class AnswerJudge(Protocol):
@@ -67,7 +78,7 @@ class CheckedSdoClient(SdoClient):
 
     def __init__(self, rx_cobid: int, tx_cobid: int, od: canopen.ObjectDictionary, *,
                  timeout: float, judge: AnswerJudge, on_stale: OnStale) -> None:
-        super().__init__(rx_cobid, tx_cobid, od)
+        super().__init__(rx_cobid, tx_cobid, od)  # type: ignore[no-untyped-call]
         self.RESPONSE_TIMEOUT = timeout / 2
         self.MAX_RETRIES = 2
         self.PAUSE_BEFORE_SEND = 0.0
@@ -87,7 +98,7 @@ class CheckedSdoClient(SdoClient):
         self.judge.sent(bytes(sdo_request))
         self._awaiting = True
         try:
-            return bytes(super().request_response(sdo_request))
+            return bytes(super().request_response(sdo_request))  # type: ignore[no-untyped-call]
         finally:
             self._awaiting = False
 
@@ -139,4 +150,5 @@ class CheckedRemoteNode(canopen.RemoteNode):
         return client
 
 
-__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "pdo_handler", "subscribers"]
+__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "pdo_handler",
+           "set_eds_default", "subscribers"]

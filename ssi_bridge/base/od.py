@@ -11,6 +11,7 @@ from __future__ import annotations
 from canopen import objectdictionary as od
 from canopen.objectdictionary import eds
 
+from ssi_bridge.base.canopen_compat import set_eds_default
 from ssi_bridge.protocol.dictionary import (
     DEVICE_NAME, DEVICE_TYPE, ENCODER_OBJECTS, ERROR_HISTORY, IDENTITY_COMMENT, MAP_ENTRIES,
     MAX_SLOTS, N_PDOS, PROCESS_INPUT, PROCESS_OUTPUT, PRODUCT_CODE, REVISION, RPDO_COM,
@@ -29,10 +30,10 @@ def _var(name: str, index: int, sub: int, data_type: int, access: str, default: 
     var.pdo_mappable = pdo
     if cob_base is not None:
         var.default = cob_base + node_id
-        var.default_raw = f"$NODEID+0x{cob_base:X}"
+        set_eds_default(var, f"$NODEID+0x{cob_base:X}")
         var.relative = True
     else:
-        var.default = default
+        var.default = default  # type: ignore[assignment]  # canopen: int; REAL32 and strings too
     return var
 
 
@@ -99,7 +100,7 @@ def _simulation_objects(d: od.ObjectDictionary) -> None:
         if data_type == dt.REAL32:
             # CiA 306 writes a REAL32 value as an integer (its IEEE 754 bits): 0.0 is "0",
             # which canopen's import also reads as 0.0
-            var.default_raw = "0"
+            set_eds_default(var, "0")
         d.add_object(var)
 
 
@@ -115,8 +116,9 @@ def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
     d.device_information.product_number = PRODUCT_CODE
     d.device_information.revision_number = REVISION
     d.device_information.allowed_baudrates = set(CIA_BITRATES)
-    d.device_information.nr_of_RXPDO = N_PDOS
-    d.device_information.nr_of_TXPDO = N_PDOS
+    # canopen annotates these counts bool
+    d.device_information.nr_of_RXPDO = N_PDOS  # type: ignore[assignment]
+    d.device_information.nr_of_TXPDO = N_PDOS  # type: ignore[assignment]
     d.add_object(_var("Device type", 0x1000, 0, dt.UNSIGNED32, "ro", DEVICE_TYPE))
     d.add_object(_var("Error register", 0x1001, 0, dt.UNSIGNED8, "ro", 0))
     errors = od.ODArray("Pre-defined error field", 0x1003)

@@ -91,6 +91,7 @@ class UdpFrame(can.Message):
     :attr:`wire_time` (its end on the wire, the instant every receiver shares)."""
 
     __slots__ = ("wire_time",)
+    wire_time: float
 
     @classmethod
     def of(cls, msg: can.Message, timestamp: float, wire_time: float) -> UdpFrame:
@@ -269,6 +270,8 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
 
 class UdpCanBus(UdpMulticastBus):
     """python-can's ``udp_multicast`` bus on one :class:`Endpoint`, without its own frames."""
+
+    _multicast: _GroupSockets
 
     def __init__(self, channel: str, hop_limit: int = 1, **kwargs: object) -> None:
         endpoint = parse_channel(channel)

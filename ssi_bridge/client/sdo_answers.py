@@ -38,8 +38,10 @@ RESPONSE_TO = {CCS_INITIATE_DOWNLOAD: SCS_INITIATE_DOWNLOAD,
                CCS_INITIATE_UPLOAD: SCS_INITIATE_UPLOAD,
                CCS_DOWNLOAD_SEGMENT: SCS_DOWNLOAD_SEGMENT,
                CCS_UPLOAD_SEGMENT: SCS_UPLOAD_SEGMENT}
-_SERVER_NAMES = {SCS_UPLOAD_SEGMENT: "upload segment", SCS_DOWNLOAD_SEGMENT: "download segment",
-                 SCS_INITIATE_UPLOAD: "initiate upload", SCS_INITIATE_DOWNLOAD: "initiate download",
+_SERVER_NAMES = {SCS_UPLOAD_SEGMENT: "upload segment",
+                 SCS_DOWNLOAD_SEGMENT: "download segment",
+                 SCS_INITIATE_UPLOAD: "initiate upload",
+                 SCS_INITIATE_DOWNLOAD: "initiate download",
                  CS_ABORT: "abort", 5: "block download", 6: "block upload", 7: "unknown"}
 _MULTIPLEXER = struct.Struct("<HB")
 

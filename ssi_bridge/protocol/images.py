@@ -168,8 +168,8 @@ class ProcessInput:
             out[f"SSI_STS{i}"] = self.ssi_sts >> i & 1
         for flag in CmpStatus:
             out[str(flag.name)] = int(flag in self.cmp)
-        for flag in ModuleStatus:
-            out[str(flag.name)] = int(flag in self.sts)
+        for bit in ModuleStatus:
+            out[str(bit.name)] = int(bit in self.sts)
         return out
 
 

@@ -92,3 +92,20 @@ def test_every_sdo_channel_of_the_checked_node_is_a_checked_client():
     assert "read_response" in inspect.getsource(canopen.sdo.SdoClient.request_response)
     checked.on_response(0x585, b"\x43\x17\x10\x00\x32\x00\x00\x00", 0.0)
     assert checked.responses.qsize() == 1
+
+
+def test_an_eds_default_is_exported_as_set(tmp_path):
+    """``set_eds_default``: canopen's EDS export writes ``default_raw`` as the DefaultValue
+    (the COB-IDs relative to the node id, CiA 306 ``$NODEID``), and its import reads it back."""
+    dictionary = canopen.ObjectDictionary()
+    var = canopen.objectdictionary.ODVariable("COB-ID EMCY", 0x1014, 0)
+    var.data_type = canopen.objectdictionary.UNSIGNED32
+    var.access_type = "ro"
+    var.default = 0x85
+    canopen_compat.set_eds_default(var, "$NODEID+0x80")
+    dictionary.add_object(var)
+    path = tmp_path / "one.eds"
+    with open(path, "w", encoding="ascii") as fh:
+        canopen.objectdictionary.eds.export_eds(dictionary, fh)
+    assert "DefaultValue=$NODEID+0x80" in path.read_text(encoding="ascii")
+    assert canopen.import_od(str(path), node_id=7)[0x1014].default == 0x87

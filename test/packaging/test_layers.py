@@ -2,7 +2,9 @@
 
 ``.importlinter`` holds the contracts: the driver never imports the simulator (but for the
 node's supervisor of its simulated station), the simulator never imports the driver or ROS,
-``protocol/`` is pure, only ``ros/``, ``record/`` and ``tools/`` import ROS, no import circles.
+``protocol/`` is pure, only ``ros/``, ``record/`` and ``tools/`` import ROS, the order inside
+the driver (tools over ros over core | client | record), only ``record/`` imports mcap, no
+import circles.
 """
 
 from __future__ import annotations
