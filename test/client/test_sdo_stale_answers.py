@@ -226,6 +226,15 @@ def test_an_abort_of_another_object_is_not_the_current_transfers_failure(
     assert master.counters.stale_sdo_answers == 1
 
 
+def test_frames_too_short_for_an_answer_are_set_aside(
+        master: Master, respond: Callable[..., Responder]) -> None:
+    """An empty frame and a 2-byte abort (no multiplexer, no code) on 0x580 + id answer
+    nothing; before, canopen's client read bytes 1-3 of whatever came first."""
+    respond(lambda request: [(0.0, b""), (0.0, b"\x80\x00"), (0.02, DEVICE_TYPE_ANSWER)])
+    assert master.sdo.upload(0x1000, 0) == DEVICE_TYPE
+    assert master.counters.stale_sdo_answers == 2
+
+
 def test_a_download_takes_its_own_confirmation_not_an_upload_answer_of_the_same_object(
         master: Master, respond: Callable[..., Responder]) -> None:
     def script(request: bytes) -> list[tuple[float, bytes]]:
