@@ -11,6 +11,7 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.images import ProcessInput
@@ -21,6 +22,27 @@ POSITION_PAIR = struct.Struct("<ii")
 _KEEP_SYNC_TIMES = 64
 #: bits of SlotState.answered: which of a slot's two TPDOs answered a SYNC
 IMAGE, POSITION = 1, 2
+
+
+class FrameSink(Protocol):
+    """Where a slot table hands every SYNC and TPDO it sees, with its wire time: the cycle's
+    frame log (``core/cycle_log.StationLog``), which decides which SYNC a sample answers.
+
+    Called under the table's lock, from the receive thread (frames, foreign SYNCs) and the
+    cycle thread (own SYNCs); an implementation must be quick and must not call back.
+    """
+
+    def sync(self, seq: int, t: float) -> None:
+        """The master's SYNC ``seq`` at wire time ``t`` (again, once its exact time is known)."""
+
+    def foreign_sync(self, t: float) -> None:
+        """Another producer's SYNC at wire time ``t``."""
+
+    def image(self, slot: int, t: float, data: bytes, count: int) -> None:
+        """A process input image of ``slot`` (the ``count``-th) at wire time ``t``."""
+
+    def position(self, slot: int, t: float, value: int) -> None:
+        """A position of ``slot`` at wire time ``t``."""
 
 
 @dataclass(frozen=True)
@@ -176,6 +198,8 @@ class SlotTable:
         self.foreign_answers = 0
         #: where ``foreign_sync_answers`` is counted too (the station's client), or None
         self.counters: ClientCounters | None = None
+        #: the cycle's frame log: every SYNC and TPDO with its wire time, or None
+        self.sink: FrameSink | None = None
 
     def slot(self, slot: int) -> SlotState:
         """The state of ``slot`` (raises KeyError with the valid range)."""
@@ -198,6 +222,8 @@ class SlotTable:
             self.synced_at = time.monotonic()
             self._times[self.sync_seq] = self.sync_time
             self._times.pop(self.sync_seq - _KEEP_SYNC_TIMES, None)
+            if self.sink is not None:
+                self.sink.sync(self.sync_seq, self.sync_time)
             return self.sync_time
 
     def set_sync_time(self, at: float) -> float:
@@ -212,6 +238,8 @@ class SlotTable:
                 self._foreign_since = None  # it was on the wire before this SYNC, not after
             seq = self.sync_seq
             self._times[seq] = at
+            if self.sink is not None:
+                self.sink.sync(seq, at)
             was_complete = self._due == 0
             for st in self._slots.values():
                 if st.image_seq == seq and 0.0 < st.image_time < at:
@@ -229,6 +257,8 @@ class SlotTable:
     def on_foreign_sync(self, at: float) -> None:
         """Another producer's SYNC ended on the wire at ``at`` (call under :attr:`cond`): a
         TPDO after it answers that SYNC, latched then, and is not taken for this cycle."""
+        if self.sink is not None:
+            self.sink.foreign_sync(at)
         if at > self.sync_time and (self._foreign_since is None or at < self._foreign_since):
             self._foreign_since = at
 
@@ -257,6 +287,8 @@ class SlotTable:
         """
         with self.cond:
             st = self._slots[slot]
+            if self.sink is not None:
+                self.sink.image(slot, timestamp, data, st.image_count + 1)
             if self._foreign(timestamp):
                 return st
             completed = False
@@ -282,6 +314,9 @@ class SlotTable:
         else:
             values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
         with self.cond:
+            if self.sink is not None:
+                for slot, value in zip(slots, values):
+                    self.sink.position(slot, timestamp, value)
             if self._foreign(timestamp):
                 return
             late = self._late(timestamp)

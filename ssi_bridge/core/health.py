@@ -48,6 +48,11 @@ class ChannelCounters:
     handshake_failures: int = 0
     #: samples whose step from the previous one exceeded ``<joint>.max_speed``
     implausible: int = 0
+    #: samples that arrived but could not be vouched for as latched at their SYNC (a backlog,
+    #: an answer later than latch_bound, a station not in step): left out, never published
+    set_aside: int = 0
+    #: why the joint was left out of the last cycle ("" when it was published)
+    last_reason: str = ""
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0

@@ -205,10 +205,27 @@ class Joint:
             self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
                          lost=lost)
 
-    def missing(self, seq: int, settled: tuple[float, float] | None) -> None:
-        """No sample of this channel yet: a stale cycle."""
-        self.counters.stale_cycles += 1
-        self.counters.consecutive_stale += 1
+    def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
+                  image: bytes = b"", position: int | None = None) -> None:
+        """No sample of this SYNC can be vouched for (``reason``, ``core/cycle_log.py``): the
+        joint is left out of the cycle, which counts as a stale cycle.
+
+        ``image``/``position``: what did arrive (kept for the status bits and diagnostics, not
+        published). After ``stale_cycles`` of them the velocity estimate restarts, so a gap
+        never becomes a speed. ``settled`` as for :meth:`update`.
+        """
+        counters = self.counters
+        counters.stale_cycles += 1
+        counters.consecutive_stale += 1
+        if image or position is not None:
+            counters.set_aside += 1
+        counters.last_reason = reason
+        if image:
+            counters.last_image = image
+        if position is not None:
+            counters.last_position = position
+        if counters.consecutive_stale >= self.stale_cycles:
+            self.velocity.reset()
         self._settle(settled, seq, False)
 
     def count(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float) -> bool:
@@ -224,6 +241,7 @@ class Joint:
             counters.consecutive_stale += 1
         counters.last_image = image
         counters.last_position = reg_ssi_pos
+        counters.last_reason = ""
         if image[7] & ERRORS:
             counters.error_cycles += 1
         return fresh
@@ -231,7 +249,8 @@ class Joint:
     def update(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float, *,
                seq: int, settled: tuple[float, float] | None) -> JointOutput:
         """What the joint publishes for the sample it has at the SYNC ``t_sync`` (number
-        ``seq``). Call :meth:`count` first; ``settled`` as for :meth:`missing`."""
+        ``seq``). Call :meth:`count` first; ``settled``: (wire time, share not vouched) of the
+        SYNC before, judged once its window is over (None for the first SYNC)."""
         counters = self.counters
         fresh = sample_time >= t_sync
         estimator = self.velocity
@@ -272,10 +291,6 @@ class Joint:
         self.position = position
         out.position, out.velocity = position, velocity
         return out
-
-    def skipped(self, seq: int, settled: tuple[float, float] | None) -> None:
-        """The cycle is not published (another joint missed its SYNC): it still counts."""
-        self._settle(settled, seq, False)
 
 
 __all__ = ["ERRORS", "Joint", "JointOutput", "NOT_MEASURING", "encoder_layout", "joint_scale",

@@ -37,6 +37,8 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
         "error_cycles": str(counters.error_cycles),
         "handshake_failures": str(counters.handshake_failures),
         "implausible_jumps": str(counters.implausible),
+        "samples_set_aside": str(counters.set_aside),
+        "left_out_because": counters.last_reason,
     }
     values.update(extra or {})
     if inp is not None:

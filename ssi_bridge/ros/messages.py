@@ -30,12 +30,13 @@ def time_msg(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
+def channel_msg(name: str, slot: int, image: bytes, position: int, inp: ProcessInput,
                  counters: ChannelCounters, watch: FrameWatch | None = None) -> ChannelStatus:
-    """Every bit of one channel's process input image, as ~/status carries it."""
+    """Every bit of one channel's process input image ``image`` (decoded: ``inp``) and its
+    REG_SSI_POS ``position``, as ~/status carries it."""
     sts, cmp = inp.sts, inp.cmp
     m = ChannelStatus(joint=name, slot=slot)
-    m.process_input = list(sample.process_input)
+    m.process_input = list(image)
     m.reg_rd_data, m.reg_rd_adr, m.reg_rd_abort = inp.reg_rd_data, inp.reg_rd_adr, inp.reg_rd_abort
     m.reg_wr_accept, m.reg_wr_akn = inp.reg_wr_accept, inp.reg_wr_akn
     m.ssi_sts0, m.ssi_sts1, m.ssi_sts2, m.ssi_sts3 = (bool(inp.ssi_sts >> i & 1) for i in range(4))
@@ -47,7 +48,7 @@ def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
     m.sts_stop, m.err_para = bool(sts & sts.STS_STOP), bool(sts & sts.ERR_PARA)
     m.sts_uflw, m.sts_oflw = bool(sts & sts.STS_UFLW), bool(sts & sts.STS_OFLW)
     m.err_ssi, m.ssi_diag = bool(sts & sts.ERR_SSI), bool(sts & sts.SSI_DIAG)
-    m.reg_ssi_pos = int(sample.position)
+    m.reg_ssi_pos = int(position)
     m.ssi_frame_valid = (not inp.reg_rd_abort) and inp.reg_rd_adr == int(IDLE_READ_REGISTER)
     m.ssi_frame = inp.reg_rd_data if m.ssi_frame_valid else 0
     m.samples, m.stale_cycles, m.error_cycles = (counters.samples, counters.stale_cycles,
@@ -60,7 +61,7 @@ def channel_msg(name: str, slot: int, sample: Any, inp: ProcessInput,
             m.parity_error, m.filler_error = v.parity_error, v.filler_error
             m.checksum_error = v.checksum_error
             m.power_failure, m.encoder_error = v.power_failure, v.encoder_error
-        m.cam_state = watch.cam_state(int(sample.position))
+        m.cam_state = watch.cam_state(int(position))
         m.cam_enabled = watch.cam.enabled
     return m
 

@@ -36,6 +36,8 @@ from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.one_master import ensure_node_alone
 from ssi_bridge.core.bridge import Bridge
+from ssi_bridge.core.cycle import Cycle, CycleResult
+from ssi_bridge.core.cycle_log import StationLog
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.protocol.images import ProcessInput
@@ -94,17 +96,31 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         #: the simulated station's clock: wire time since the node started (fault durations)
         self.model_clock = ModelClock()
         self.stamper = Stamper(self.get_clock(), self.get_logger())
-        #: cycles not published because a joint's TPDOs of that SYNC were missing
-        self.incomplete_cycles = 0
         self._mirror = threading.local()  # .active: a parameter set mirroring the module
         #: the joints' cores by name, in the configured order (filled by the bus side)
         self.joints: dict[str, Joint] = {}
+        #: each station's frame log by node id (filled by the bus side): which SYNC a TPDO
+        #: answers, and whether a sample is vouched for (core/cycle_log.py)
+        self.frame_logs: dict[int, StationLog] = {}
+        #: the cycle decisions (core/cycle.py): ros/ only turns its results into messages
+        self.cycle_core = Cycle(self.joints, self.frame_logs)
         self.bridge = Bridge(self.joints, self.client_of, self.mirror_para1)
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
         self._begin(autostart)  # lifecycle.py: configure and activate, or wait unconfigured
+
+    @property
+    def incomplete_cycles(self) -> int:
+        """Cycles in which at least one joint was left out (no sample latched at its SYNC)."""
+        return self.cycle_core.incomplete_cycles
+
+    @property
+    def latch_bound_s(self) -> float:
+        """The longest a sample's frames may end after its SYNC to be published (s): the
+        ``latch_bound`` parameter plus one cycle's worst-case wire time."""
+        return self.settings.latch_bound + self.cycle_wire_s
 
     @property
     def clock_steps(self) -> int:
@@ -143,12 +159,25 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                 self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
         else:
             self._connect_stations(s)
+        self._attach_frame_logs()
         if not s.listen_only:
             self.refresh_cams()
         self._cycle_times: deque[float] = deque()
         self._cycle_started = time.monotonic()
         self._last_levels: tuple = ()
         self._last_bus_counts: dict = {}
+
+    def _attach_frame_logs(self) -> None:
+        """A frame log per station, fed by its slot table (every SYNC and TPDO it sees)."""
+        self.frame_logs.clear()
+        by_client: dict[int, StationLog] = {}
+        for joint in self.joints.values():
+            client = self.client_of(joint.name)
+            log = by_client.get(id(client))
+            if log is None:
+                log = by_client[id(client)] = StationLog(self.latch_bound_s)
+                client.table.sink = log
+            self.frame_logs[joint.settings.station] = log
 
     def _connect_stations(self, s: NodeSettings) -> None:
         """The master, one client per station, and each joint's start-up configuration."""
@@ -309,62 +338,62 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
     def _publish_cycle(self, t_sync: float, seq: int) -> None:
         """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time).
 
-        ``seq`` is the SYNC's sequence number: the joints' health counts a SYNC it never saw
-        as lost (core/health.ChannelHealth).
+        ``seq`` is the SYNC's sequence number. The cycle core decides every joint
+        (core/cycle.py); a joint it sets aside is left out of joint_states and says why in
+        ~/status, and a cycle with no joint to publish sends no joint_states.
         """
         stamp_ns = self.stamper.stamp_ns(t_sync)
         if stamp_ns is None:
             return
-        js = JointState()
-        js.header.stamp = time_msg(stamp_ns)
-        js.header.frame_id = self.settings.frame_id
+        result = self.cycle_core.run(seq, t_sync)
+        for part in result.published:
+            assert part.output is not None
+            for ok, text in part.output.events:
+                self.handlers.log_event("encoder_status", part.joint.name, "frame check", ok,
+                                        text)
+        js = self._joint_state(result, stamp_ns)
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         want_status = (self.recorder.capturing or self.status_pub.get_subscription_count() > 0
                        or self.liveview.wants(self.status_pub))
-        status = Status(header=js.header) if want_status else None
-        # a joint without a sample latched at this SYNC holds an older latch than this stamp:
-        # while it is not (yet) STALE the cycle is not published and no estimate takes it in
-        # (so a velocity window is always the published samples); a STALE joint's last value
-        # is published with the others (its diagnostics say STALE), so joint_states goes on
-        samples = [(j, self.client_of(j.name)) for j in self.joints.values()]
-        samples = [(j, c, c.latest(j.slot)) for j, c in samples]
-        transient = any((sample is None or sample.sync_time < t_sync)
-                        and j.counters.consecutive_stale + 1 < j.stale_cycles
-                        for j, _c, sample in samples)
-        for joint, client, sample in samples:
-            settled = client.table.loss(joint.slot, seq - 1)
-            if sample is None:
-                joint.missing(seq, settled)
-                continue
-            image = sample.process_input
-            joint.count(sample.sync_time, image, sample.position, t_sync)
-            if transient:
-                joint.skipped(seq, settled)  # not published; it still counts
-                continue
-            out = joint.update(sample.sync_time, image, sample.position, t_sync, seq=seq,
-                               settled=settled)
-            for ok, text in out.events:
-                self.handlers.log_event("encoder_status", joint.name, "frame check", ok, text)
-            js.name.append(joint.name)
-            js.position.append(out.position)
-            js.velocity.append(out.velocity)
-            if status is not None:
-                status.channels.append(channel_msg(joint.name, joint.slot, sample,
-                                                   ProcessInput.decode(image), joint.counters,
-                                                   joint.frames))
-        if transient:
-            # a joint missed this SYNC but is not (yet) STALE: its value is an older latch
-            # than this stamp, so the cycle is not published (a STALE joint's last value is)
-            self.incomplete_cycles += 1
-        elif not js.name:
-            return
-        elif self.publish_safe(self.joint_pub, js):
+        if js.name:
+            if not self.publish_safe(self.joint_pub, js):
+                return
             self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
-            if status is not None and self.publish_safe(self.status_pub, status):
+        if want_status:
+            status = self._status(result, js)
+            if status.channels and self.publish_safe(self.status_pub, status):
                 self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
-        else:
-            return
         self._publish_on_change()
+
+    def _joint_state(self, result: CycleResult, stamp_ns: int) -> JointState:
+        """joint_states of one cycle: the joints with a sample latched at the stamp."""
+        js = JointState()
+        js.header.stamp = time_msg(stamp_ns)
+        js.header.frame_id = self.settings.frame_id
+        for part in result.published:
+            assert part.output is not None
+            js.name.append(part.joint.name)
+            js.position.append(part.output.position)
+            js.velocity.append(part.output.velocity)
+        return js
+
+    def _status(self, result: CycleResult, js: JointState) -> Status:
+        """~/status of one cycle: every joint that has an image, published or set aside."""
+        status = Status(header=js.header)
+        for part in result.joints:
+            joint = part.joint
+            image = part.image or joint.counters.last_image
+            if image is None:
+                continue
+            position = (part.sample.position if part.sample is not None
+                        else joint.counters.last_position)
+            msg = channel_msg(joint.name, joint.slot, image, position,
+                              ProcessInput.decode(image), joint.counters, joint.frames)
+            msg.published = part.output is not None
+            msg.set_aside_reason = part.reason
+            msg.set_aside = joint.counters.set_aside
+            status.channels.append(msg)
+        return status
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""

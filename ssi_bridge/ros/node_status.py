@@ -46,6 +46,7 @@ class NodeDiagnostics:
     diag_pub: Any
     clock_steps: int
     incomplete_cycles: int
+    latch_bound_s: float
     _cycle_times: Any
     _cycle_started: float
     _last_levels: tuple
@@ -161,6 +162,8 @@ class NodeDiagnostics:
         or several)."""
         counters: dict[str, Any] = {
             "clock_steps": self.clock_steps, "incomplete_cycles": self.incomplete_cycles,
+            "samples_set_aside": sum(j.counters.set_aside for j in self.joints.values()),
+            "latch_bound_s": f"{self.latch_bound_s:.6f}",
             "cycles_missed": getattr(self.cycle, "missed", 0),
             "cycle_scheduling": getattr(self.cycle, "scheduling", "")}
         if self.master is not None:

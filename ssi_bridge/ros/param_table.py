@@ -116,6 +116,11 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "velocity_window": (5, _describe(
         "Samples in the velocity estimate (newest - oldest over their time difference)",
         int_range=(2, 100))),
+    "latch_bound": (0.002, _describe(
+        "Seconds a sample's first TPDO may end after its SYNC, beyond the cycle's wire time, "
+        "for the sample to be published as latched at the SYNC (the gateway's reaction "
+        "allowance); a later, surplus or out-of-step answer is left out of joint_states and "
+        "counted as set aside (docs/node.md)", read_only=True, float_range=(0.0001, 0.5))),
     "stale_cycles": (5, _describe(
         "Cycles without a fresh sample before a joint's diagnostics go STALE",
         int_range=(1, 1000))),

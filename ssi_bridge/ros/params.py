@@ -53,6 +53,9 @@ class NodeSettings:
     storage_path: str = ""
     velocity_window: int = 5
     stale_cycles: int = 5
+    #: latch_bound: the gateway's reaction allowance (s) for a sample to count as latched at
+    #: its SYNC (core/cycle_log.py); the node adds one cycle's wire time
+    latch_bound: float = 0.002
     record_enabled: bool = False
     record_root: str = "ssi_bridge_sessions"
     record_path: str = ""
@@ -224,7 +227,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         bus_sdo_timeout=values["bus.sdo_timeout"],
         node_id=stations[0], stations=stations, storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
-        record_enabled=values["record.enabled"], record_root=values["record.root"],
+        latch_bound=values["latch_bound"], record_enabled=values["record.enabled"], record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
         record_can_log=values["record.can_log"], record_max_size=values["record.max_size"],
         record_max_duration=values["record.max_duration"], bus_listen_only=values["bus.listen_only"],

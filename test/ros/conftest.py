@@ -397,6 +397,17 @@ def shared_node(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPat
         _stop_and_report(node)
 
 
+# -- joint_states by joint name --------------------------------------------------------------------
+def joint_of(msg: Any, name: str) -> tuple[float, float] | None:
+    """(position, velocity) of joint ``name`` in a JointState, None when the cycle left it out
+    (no sample latched at the stamp: docs/node.md)."""
+    try:
+        i = list(msg.name).index(name)
+    except ValueError:
+        return None
+    return msg.position[i], msg.velocity[i]
+
+
 # -- /diagnostics and fault injection, as the node tests read and drive them ---------------------
 def latest_status(diags: list[tuple[float, Any]], name: str) -> Any:
     """The newest DiagnosticStatus called ``name`` among received DiagnosticArrays, or None."""

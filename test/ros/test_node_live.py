@@ -20,6 +20,7 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Event
 from ssi_bridge_msgs.srv import ReadRegister, ResetRegisters, SdoWrite, WriteRegister
+from .conftest import joint_of
 
 SPEED = 2 * math.pi * 0.25  # the default simulated shaft: 0.25 rev/s = 1.571 rad/s
 PARA1_DEFAULT = 0x19010000  # 000 Table 19: 25-bit frame, 500 kbit/s, binary
@@ -91,7 +92,9 @@ def test_every_reg_para1_path_keeps_position_and_velocity_true(running, probe, p
     probe.wait_for(lambda: len(msgs) >= 20, 10.0, "joint_states before the change", node)
     truth = 2 * math.pi * STILL_REV
     coarse = 2 * math.pi / 4096  # one count at INVALID_BITS_LSB = 1
-    assert abs(msgs[-1][1].position[0] - truth) <= 2 * coarse
+    probe.wait_for(lambda: joint_of(msgs[-1][1], "still") is not None, 5.0, "still published",
+                   node)
+    assert abs(joint_of(msgs[-1][1], "still")[0] - truth) <= 2 * coarse
     t_change = time.monotonic()
     for joint in ("still", "moving"):
         expected = _change(probe, node, path, joint)
@@ -104,16 +107,18 @@ def test_every_reg_para1_path_keeps_position_and_velocity_true(running, probe, p
     after = [m for t, m in msgs if t >= t_change]
     # the standing shaft: every known position is its true one (a scale left behind doubled
     # or halved it: 8.17 -> 16.3 or 4.1 rad), and its speed is never a spike
-    known = [m for m in after if not math.isnan(m.position[0])]
+    still = [v for m in after if (v := joint_of(m, "still")) is not None]
+    known = [p for p, _v in still if not math.isnan(p)]
     assert len(known) >= 30, "a change leaves at most the samples of its handshake unknown"
-    worst = max(abs(m.position[0] - truth) for m in known)
+    worst = max(abs(p - truth) for p in known)
     assert worst <= 2 * coarse, (f"{path}: a published position left the shaft's by "
                                  f"{worst:.3f} rad (REG_PARA1 and the scale disagreed)")
-    still_v = [m.velocity[0] for m in after if not math.isnan(m.velocity[0])]
+    still_v = [v for _p, v in still if not math.isnan(v)]
     assert still_v and max(abs(v) for v in still_v) < 1e-9, f"{path}: speed of a standing shaft"
     # the turning shaft: its velocity is the profile's (median of the last 20 estimates), and
     # none after the change is off by the factor 2 a stale scale gives
-    moving = [m.velocity[1] for m in after if not math.isnan(m.velocity[1])]
+    moving = [v for m in after if (pv := joint_of(m, "moving")) is not None
+              and not math.isnan(v := pv[1])]
     recent = sorted(moving[-20:])
     assert recent and abs(recent[len(recent) // 2] - SPEED) < 0.03 * SPEED, \
         f"{path}: velocity {recent[len(recent) // 2] if recent else None} instead of {SPEED:.3f}"

@@ -19,6 +19,7 @@ import pytest
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
+from ssi_bridge_msgs.msg import Status
 from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
 
 from ssi_bridge.base.udp_bus import derive_channel
@@ -92,9 +93,13 @@ def test_a_clean_stop_of_the_node_stops_the_station(running):
 
 
 def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running, probe):
+    """No sample can be vouched for once the station is gone: joint_states stops (no value
+    under a stamp it was not latched at), while ~/status says why every cycle and the
+    diagnostics go on."""
     node = running({"diagnostics_period": PERIOD, **CHILD})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     joints = probe.subscribe(JointState, node.topic("joint_states"))
+    status = probe.subscribe(Status, node.topic("~/status"))
     probe.wait_for(lambda: (st := _bus_status(diags)) is not None
                    and st.level == DiagnosticStatus.OK, 10.0, "bus OK", node)
     os.kill(_station_of(node), signal.SIGKILL)
@@ -102,8 +107,15 @@ def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running,
                    and st.level == DiagnosticStatus.ERROR
                    and "simulated station process exited" in st.message,
                    2 * PERIOD + 3, "bus ERROR naming the ended station", node)
-    before = len(joints)
-    probe.wait_for(lambda: len(joints) > before + 10, 5.0, "joint_states after the crash", node)
+    before, n = len(status), len(diags)
+    probe.wait_for(lambda: len(status) > before + 10, 5.0, "~/status after the crash", node)
+    probe.wait_for(lambda: len(diags) > n + 2, 5.0, "/diagnostics after the crash", node)
+    reasons = {ch.set_aside_reason for _, m in status[before:] for ch in m.channels}
+    assert reasons == {"no answer"}, reasons
+    assert all(not ch.published for _, m in status[before:] for ch in m.channels)
+    last = len(joints)
+    time.sleep(0.5)
+    assert len(joints) == last, "no joint_states without a sample latched at its stamp"
     assert node.proc.poll() is None
 
 

@@ -1,0 +1,100 @@
+"""One cycle of the bridge, ROS-free: for each joint, publish a vouched sample or set it aside.
+
+The node's cycle thread sends SYNC ``seq`` at wire time ``t_sync``, waits for the TPDOs and
+calls :meth:`Cycle.run`. For every joint the station's :class:`~ssi_bridge.core.cycle_log.StationLog`
+says whether the joint's sample is the encoder's position at ``t_sync`` (rules in
+``core/cycle_log.py``); the joint's core (``core/joint.py``) turns a vouched sample into
+position and velocity, and counts one that is set aside as a stale cycle. The result says
+per joint what to publish (or that it is left out, and why): the ROS layer only turns it into
+messages. No joint is ever published under a stamp its sample was not latched at (docs/node.md,
+"Which cycle a TPDO answers").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from ssi_bridge.core.cycle_log import StationLog, Verdict, VouchedSample
+from ssi_bridge.core.joint import Joint, JointOutput
+
+
+@dataclass(frozen=True, slots=True)
+class JointCycle:
+    """One joint's share of one cycle."""
+
+    joint: Joint
+    #: what is published (None: the joint is left out of this cycle's message)
+    output: JointOutput | None
+    #: the vouched sample (None when set aside)
+    sample: VouchedSample | None
+    #: why the joint is left out ("" when published)
+    reason: str
+    #: the newest image of this SYNC's window, vouched or not (b"": none), for ``~/status``
+    image: bytes
+
+
+@dataclass
+class CycleResult:
+    """One cycle: the SYNC, and each joint's share in the configured order."""
+
+    seq: int
+    t_sync: float
+    joints: list[JointCycle] = field(default_factory=list)
+
+    @property
+    def published(self) -> list[JointCycle]:
+        """The joints with a sample latched at ``t_sync`` (the message's joints)."""
+        return [j for j in self.joints if j.output is not None]
+
+    @property
+    def set_aside(self) -> list[JointCycle]:
+        """The joints left out of this cycle."""
+        return [j for j in self.joints if j.output is None]
+
+
+class Cycle:
+    """The cycle decisions of every joint of a bridge.
+
+    :param joints: the joints' cores by name, in the configured order (the dict is read each
+        cycle: the node refills it when the bus side is opened again)
+    :param logs: the frame log of each station by node id (read each cycle, like ``joints``)
+    """
+
+    def __init__(self, joints: Mapping[str, Joint], logs: Mapping[int, StationLog]) -> None:
+        self.joints = joints
+        self.logs = logs
+        #: cycles in which at least one joint was set aside
+        self.incomplete_cycles = 0
+
+    def run(self, seq: int, t_sync: float) -> CycleResult:
+        """Decide SYNC ``seq`` (wire time ``t_sync``) for every joint.
+
+        Each joint's counters and health take the cycle whether it is published or not.
+        """
+        result = CycleResult(seq, t_sync)
+        for joint in self.joints.values():
+            log = self.logs.get(joint.settings.station)
+            result.joints.append(self._joint(joint, log, seq, t_sync))
+        if any(j.output is None for j in result.joints):
+            self.incomplete_cycles += 1
+        return result
+
+    @staticmethod
+    def _joint(joint: Joint, log: StationLog | None, seq: int, t_sync: float) -> JointCycle:
+        if log is None:
+            joint.set_aside(seq, None, "no frame log for the joint's station")
+            return JointCycle(joint, None, None, "no frame log", b"")
+        settled = log.settled(joint.slot, seq - 1)
+        verdict: Verdict = log.verdict(joint.slot, seq)
+        sample = verdict.sample
+        if sample is None:
+            joint.set_aside(seq, settled, verdict.reason, verdict.image, verdict.position)
+            return JointCycle(joint, None, None, verdict.reason, verdict.image)
+        joint.count(t_sync, sample.process_input, sample.position, t_sync)
+        out = joint.update(t_sync, sample.process_input, sample.position, t_sync, seq=seq,
+                           settled=settled)
+        return JointCycle(joint, out, sample, "", sample.process_input)
+
+
+__all__ = ["Cycle", "CycleResult", "JointCycle"]

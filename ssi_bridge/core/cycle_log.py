@@ -1,0 +1,250 @@
+"""Which SYNC a station's TPDOs answer, decided from wire times alone: the station's frame log.
+
+ROS-free and free of any bus library: the master hands every event of one station to a
+:class:`StationLog` (the master's ``FrameSink``: its own SYNC with sequence number and wire
+time, another producer's SYNC, each process input image and each position of a slot with its
+wire time), and the cycle asks :meth:`StationLog.verdict` whether a slot's sample can be
+vouched for as latched at the stamp of one of the master's SYNCs.
+
+The rule (docs/node.md, "Which cycle a TPDO answers"). Every SYNC on the wire, the master's or
+another producer's, opens a *window* that lasts until the next SYNC. A station answers each
+SYNC it handles with one image and one position per slot (000 Table 15, transmission type 1),
+latched when it handles the SYNC, and sends them after that. A slot's sample counts for the
+master's SYNC ``k`` (wire time ``t_k``) only when
+
+1. the window of ``k`` holds exactly one image and one position of the slot (none: not
+   answered; one kind only: partial; more: a backlog, so the first is not ``k``'s answer);
+2. the earlier of the two ended on the wire at most ``latch_bound`` after ``t_k``: the station
+   latched when it handled the SYNC, after ``t_k`` and before it sent either frame, so the
+   sample is the encoder's position at ``t_k`` within ``latch_bound`` of motion (the node's
+   bound is the gateway's reaction allowance plus the cycle's wire time, since a slot's frames
+   may wait behind the other slots' on the wire);
+3. the window before ``k`` (of whichever producer's SYNC) also held exactly one image and one
+   position, the earlier of them within ``latch_bound`` of that window's SYNC: the station was
+   in step when ``k`` came. A station that missed the previous window, or answered it only
+   late, may still owe an answer, and that late answer would be the first one after ``t_k``.
+
+Anything else is *set aside* with a reason (:data:`REASONS`); the cycle leaves the joint out.
+A station that stays exactly one SYNC behind for good, with on-time-looking answers, cannot be
+told from one in step on the wire: docs/node.md says so.
+"""
+
+from __future__ import annotations
+
+import threading
+from bisect import bisect_left, bisect_right, insort
+from collections import deque
+from dataclasses import dataclass
+
+#: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
+IMAGE, POSITION = 0, 1
+#: why a sample was set aside, as the diagnostics and ``~/status`` say it
+NO_ANSWER = "no answer"
+PARTIAL = "partial answer"
+SURPLUS = "more than one answer (a backlog)"
+LATE = "answer later than latch_bound"
+UNSETTLED = "station not in step with the SYNC before"
+UNKNOWN_SYNC = "SYNC not in the log"
+REASONS = (NO_ANSWER, PARTIAL, SURPLUS, LATE, UNSETTLED, UNKNOWN_SYNC)
+#: SYNCs (own and foreign) and frames per slot the log keeps: far more than two windows of
+#: the densest traffic the wire carries between two cycles of the master
+KEEP_SYNCS = 256
+KEEP_FRAMES = 256
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One received TPDO of one slot: its kind, wire time (s) and content."""
+
+    kind: int
+    t: float
+    #: the 8-byte process input image (IMAGE), else b""
+    image: bytes
+    #: REG_SSI_POS (POSITION), else 0
+    position: int
+    #: images received for the slot so far (IMAGE), else 0
+    count: int
+
+
+@dataclass(frozen=True, slots=True)
+class VouchedSample:
+    """A slot's sample latched at the master's SYNC (within ``latch_bound``)."""
+
+    slot: int
+    #: REG_SSI_POS as Integer32 (object 0x6820)
+    position: int
+    #: the 8-byte process input image (000 "Process input")
+    process_input: bytes
+    #: the SYNC's wire time (s): the stamp
+    sync_time: float
+    #: process input images received for this slot
+    counter: int
+    #: the earlier of the two frames' wire times minus ``sync_time`` (s): the latch lies
+    #: between ``sync_time`` and ``sync_time + delay``
+    delay: float
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What the log says of one slot at one of the master's SYNCs."""
+
+    #: the sample, or None when set aside
+    sample: VouchedSample | None
+    #: "" when vouched, else one of :data:`REASONS`
+    reason: str
+    #: share of the slot's two TPDOs of the window that never came (0, 0.5, 1)
+    missing: float
+    #: the newest image of the slot in the window (b"" if none), for the status bits
+    image: bytes = b""
+    #: the newest position in the window (None if none)
+    position: int | None = None
+
+
+class StationLog:
+    """The frame log of one station; the master feeds it, the cycle asks it.
+
+    Thread-safe: the master's receive thread feeds it while the cycle thread asks.
+
+    :param latch_bound: the longest a slot's frames may end after the SYNC (s) for the
+        sample to count as latched at the SYNC (rule 2 of the module docstring)
+    :raises ValueError: ``latch_bound`` not > 0
+    """
+
+    def __init__(self, latch_bound: float, history: int = 2) -> None:
+        if not latch_bound > 0:
+            raise ValueError(f"latch_bound {latch_bound} s must be > 0")
+        if history < 1:
+            raise ValueError(f"history {history} must be >= 1 window")
+        self.latch_bound = latch_bound
+        #: windows before the SYNC that must show the station in step (rule 3)
+        self.history = history
+        self._lock = threading.Lock()
+        #: wire times of every SYNC on the bus (own and foreign), ascending
+        self._syncs: list[float] = []
+        #: the master's own SYNCs: sequence number -> wire time
+        self._own: dict[int, float] = {}
+        self._own_order: deque[int] = deque()
+        self._frames: dict[int, deque[Frame]] = {}
+        #: foreign SYNCs seen (the master counts them too; kept here for the tests' view)
+        self.foreign_syncs = 0
+
+    # -- the master's side (client.samples.FrameSink) ---------------------------------------
+    def sync(self, seq: int, t: float) -> None:
+        """The master's SYNC number ``seq`` is (or, called again, was exactly) at wire time ``t``."""
+        with self._lock:
+            old = self._own.get(seq)
+            if old is not None:
+                i = bisect_left(self._syncs, old)
+                if i < len(self._syncs) and self._syncs[i] == old:
+                    del self._syncs[i]
+            else:
+                self._own_order.append(seq)
+                if len(self._own_order) > KEEP_SYNCS:
+                    self._own.pop(self._own_order.popleft(), None)
+            self._own[seq] = t
+            self._insert(t)
+
+    def foreign_sync(self, t: float) -> None:
+        """Another producer's SYNC ended on the wire at ``t``: it opens a window too."""
+        with self._lock:
+            self.foreign_syncs += 1
+            self._insert(t)
+
+    def image(self, slot: int, t: float, data: bytes, count: int) -> None:
+        """A process input image of ``slot`` ended on the wire at ``t``."""
+        self._add(slot, Frame(IMAGE, t, bytes(data), 0, count))
+
+    def position(self, slot: int, t: float, value: int) -> None:
+        """A position (REG_SSI_POS) of ``slot`` ended on the wire at ``t``."""
+        self._add(slot, Frame(POSITION, t, b"", value, 0))
+
+    def _insert(self, t: float) -> None:
+        syncs = self._syncs
+        if not syncs or t >= syncs[-1]:
+            syncs.append(t)
+        else:
+            insort(syncs, t)
+        if len(syncs) > KEEP_SYNCS:
+            del syncs[: len(syncs) - KEEP_SYNCS]
+
+    def _add(self, slot: int, frame: Frame) -> None:
+        with self._lock:
+            frames = self._frames.get(slot)
+            if frames is None:
+                frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
+            frames.append(frame)
+
+    # -- the cycle's side -------------------------------------------------------------------
+    def sync_time(self, seq: int) -> float | None:
+        """The wire time of the master's SYNC ``seq`` (None: not in the log)."""
+        with self._lock:
+            return self._own.get(seq)
+
+    def verdict(self, slot: int, seq: int) -> Verdict:
+        """Whether ``slot``'s sample of the master's SYNC ``seq`` is vouched for (see module)."""
+        with self._lock:
+            t_k = self._own.get(seq)
+            if t_k is None:
+                return Verdict(None, UNKNOWN_SYNC, 1.0)
+            syncs = self._syncs
+            i = bisect_left(syncs, t_k)
+            t_next = syncs[i + 1] if i + 1 < len(syncs) else None
+            back = self.history
+            # the windows before k: bounds[j] .. bounds[j + 1], the last one ending at t_k
+            bounds = syncs[max(i - back, 0): i + 1]
+            counts = [[0, 0, float("inf")] for _ in range(len(bounds) - 1)]
+            images: list[Frame] = []
+            positions: list[Frame] = []
+            for f in reversed(self._frames.get(slot, ())):
+                if f.t >= t_k:
+                    if t_next is None or f.t < t_next:
+                        (images if f.kind == IMAGE else positions).append(f)
+                    continue
+                if f.t < bounds[0]:
+                    break
+                w = counts[bisect_right(bounds, f.t) - 1]
+                w[f.kind] += 1
+                w[2] = min(w[2], f.t)
+        in_step = len(counts) == back and all(
+            n_img == 1 and n_pos == 1 and first - t0 <= self.latch_bound
+            for (n_img, n_pos, first), t0 in zip(counts, bounds))
+        return self._judge(slot, t_k, in_step, images, positions)
+
+    def _judge(self, slot: int, t_k: float, in_step: bool, images: list[Frame],
+               positions: list[Frame]) -> Verdict:
+        """Rules 1-3 on one slot's frames around SYNC ``t_k`` (newest first in the lists)."""
+        missing = ((not images) + (not positions)) / 2
+        image = images[0].image if images else b""
+        position = positions[0].position if positions else None
+        if missing == 1.0:
+            return Verdict(None, NO_ANSWER, missing)
+        if missing:
+            return Verdict(None, PARTIAL, missing, image, position)
+        if len(images) > 1 or len(positions) > 1:
+            return Verdict(None, SURPLUS, 0.0, image, position)
+        img, pos = images[0], positions[0]
+        delay = min(img.t, pos.t) - t_k
+        if delay > self.latch_bound:
+            return Verdict(None, LATE, 0.0, image, position)
+        if not in_step:
+            return Verdict(None, UNSETTLED, 0.0, image, position)
+        return Verdict(VouchedSample(slot, pos.position, img.image, t_k, img.count, delay), "",
+                       0.0, image, position)
+
+    def settled(self, slot: int, seq: int) -> tuple[float, float] | None:
+        """(wire time, share of the slot's answer not vouched) of the master's SYNC ``seq``,
+        judged again now that its window is over; None when the SYNC is not in the log.
+
+        What the joint's health counts: a SYNC whose answer was on the wire in time counts as
+        answered however late the master handled it; one set aside counts as lost.
+        """
+        v = self.verdict(slot, seq)
+        t = self.sync_time(seq)
+        if t is None:
+            return None
+        return t, (0.0 if v.sample is not None else (v.missing or 1.0))
+
+
+__all__ = ["IMAGE", "KEEP_FRAMES", "KEEP_SYNCS", "LATE", "NO_ANSWER", "PARTIAL", "POSITION",
+           "REASONS", "SURPLUS", "UNKNOWN_SYNC", "UNSETTLED", "Frame", "StationLog",
+           "Verdict", "VouchedSample"]
