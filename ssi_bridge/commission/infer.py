@@ -4,15 +4,18 @@ Pure: it sees only the raw frames the module clocked (REG_SSI_FRAME, 000 "Regist
 and meaning": "Complete frame read from SSI encoder", bit 0 = the last bit clocked) in the
 order they were latched. Rules (docs/commissioning.md):
 
-* a bit that changes between two frames *moves*; the position's LSB is the lowest moving bit
-  that is not a check bit (004 §2.3: error and special bits follow the position's LSB);
+* a bit that changes between two frames *moves*; the position's LSB is the bottom of a run
+  of moving bits, the lowest one that decodes continuously (004 §2.3: error and special
+  bits follow the position's LSB); moving bits under it are check bits. A binary count
+  moves every bit under its highest moving one, so binary is ruled out for an LSB with a
+  constant bit above it (the TR check sum under the zero fill of the step field,
+  001 §5.2.4.2); Gray moves its high bits once per 2**k steps and may leave gaps;
 * a moving bit that always equals the even parity of all other bits is a parity bit
   (001 §5.5.7), not position;
 * the code is the one whose decoding of the bits from the LSB up is *continuous*: steps of
   one sign and similar size between frames. Gray read as binary jumps by 2^k at random
-  (004 §2.4: Gray changes one bit per step), binary read as Gray steps back and forth. A
-  window whose lowest bits move erratically (the TR check sum, 001 §5.2.4.2) is tried one
-  bit higher, up to :data:`MAX_CHECK_BITS`;
+  (004 §2.4: Gray changes one bit per step), binary read as Gray steps back and forth.
+  Runs are tried from the lowest up, at most :data:`MAX_CHECK_BITS` bits above it;
 * direction: the sign of the net travel when at least :data:`MIN_CONSISTENT` of the steps
   have that sign; fewer than :data:`MIN_DISTINCT` distinct positions is too slow to tell.
 """
@@ -88,6 +91,17 @@ def parity_bits(frames: list[int], stats: BitStats) -> int:
     if all(((f >> b) & 1) == (bin(f & ~(1 << b)).count("1") & 1) for f in frames):
         return 1 << b
     return 0
+
+
+def run_bottoms(moving: int) -> list[int]:
+    """The lowest bit of each run of adjacent moving bits, lowest run first."""
+    return [b for b in range(moving.bit_length())
+            if moving >> b & 1 and (b == 0 or not moving >> (b - 1) & 1)]
+
+
+def contiguous(mask: int) -> bool:
+    """``mask`` is one run of set bits starting at bit 0 (2**k - 1)."""
+    return mask > 0 and not mask & (mask + 1)
 
 
 def _signed(d: int, width: int) -> int:
@@ -175,18 +189,17 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
     if not moving:
         return Motion(MotionState.STILL, parity=parity,
                       evidence=(f"no frame bit moved in {stats.samples} frames",))
-    lowest = (moving & -moving).bit_length() - 1
+    bottoms = run_bottoms(moving)
+    lowest = bottoms[0]
     tried: list[str] = []
-    for lsb in range(lowest, min(lowest + MAX_CHECK_BITS, frame_len)):
-        if not moving >> lsb:
-            break
-        if lsb > lowest and not moving >> lsb & 1:
-            continue
+    for lsb in [b for b in bottoms if b < lowest + MAX_CHECK_BITS]:
         width = frame_len - lsb
         fits = {}
         for name, gray in (("binary", False), ("gray", True)):
             values = decode_window(frames, lsb, width, gray)
             fits[name] = (continuity(values, width), values)
+        if not contiguous(moving >> lsb):  # a binary count moves every bit under its top
+            fits["binary"] = (Continuity(0.0, fits["binary"][0].steps), fits["binary"][1])
         best = max(fits, key=lambda n: fits[n][0].score)
         other = "gray" if best == "binary" else "binary"
         cont, values = fits[best]
@@ -203,7 +216,7 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
                   f"({cont.score:.0%} of the steps), as {other} only "
                   f"{fits[other][0].score:.0%}", words]
             if check:
-                ev.append(f"moving bits {bit_list(check)} below the LSB: check bits")
+                ev.append(f"moving bits {bit_list(check)} under a constant bit: check bits")
             return Motion(MotionState.MOVING, lsb, best, direction, parity, check, values,
                           width, travel, tuple(ev))
         tried.append(f"LSB {lsb}: binary {fits['binary'][0].score:.0%}, "
