@@ -34,6 +34,8 @@ MAX_CHECK_BITS = 16
 MIN_CONSISTENT = 0.9
 #: distinct decoded positions needed before the code or the direction is told
 MIN_DISTINCT = 4
+#: distinct frames needed before a bit is taken for parity (a chance fit is 2**-n)
+MIN_PARITY_FRAMES = 16
 #: a step larger than this many times the median step is a jump, not motion
 JUMP_FACTOR = 4.0
 
@@ -85,7 +87,7 @@ def parity_bits(frames: list[int], stats: BitStats) -> int:
     A parity bit is the last special bit (001 §5.5.7), so only the lowest moving bit can be
     one: in a frame of even parity *every* bit is the parity of the others.
     """
-    if not stats.moving:
+    if not stats.moving or len(set(frames)) < MIN_PARITY_FRAMES:
         return 0
     b = (stats.moving & -stats.moving).bit_length() - 1
     if all(((f >> b) & 1) == (bin(f & ~(1 << b)).count("1") & 1) for f in frames):

@@ -24,6 +24,9 @@ from ssi_bridge.protocol.registers import Reg
 
 logger = logging.getLogger(__name__)
 
+#: samples per slot the sampling waits for beyond ``seconds`` (up to twice as long): fewer
+#: tell a code or a direction poorly (a busy host, many slots)
+MIN_SAMPLES = 30
 #: one handshake step (s): a few SDO round trips and a module cycle
 STEP_TIMEOUT = 0.5
 
@@ -136,6 +139,9 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
            progress: Callable[[str], None] | None = None) -> list[SlotSamples]:
     """Sample every (port, node id, slot) for ``seconds``: one SYNC per round for all.
 
+    Past ``seconds`` sampling goes on, up to twice as long, until every slot has
+    :data:`MIN_SAMPLES` samples.
+
     REG_RD_ADR of each slot is set to REG_SSI_FRAME first and set back at the end (also
     when sampling fails). A slot whose gateway stops answering is noted, not fatal.
     """
@@ -151,7 +157,8 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
     start = time.monotonic()
     last_note = 0.0
     try:
-        while (now := time.monotonic()) - start < seconds and any(live):
+        while any(live) and ((now := time.monotonic()) - start < seconds or (
+                now - start < 2 * seconds and _short(results, live))):
             try:
                 send_sync()
             except BusError as err:
@@ -173,6 +180,11 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
             except BusError as err:
                 results[i].errors.append(f"REG_RD_ADR not set back: {err}")
     return results
+
+
+def _short(results: list[SlotSamples], live: list[bool]) -> bool:
+    """A live slot has fewer than :data:`MIN_SAMPLES` samples yet."""
+    return any(ok and len(r.samples) < MIN_SAMPLES for r, ok in zip(results, live))
 
 
 def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:

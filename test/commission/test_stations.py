@@ -60,7 +60,8 @@ def check_against(truth: Truth, result: Result) -> None:
             frame_len = Para1.decode(joint.para1).ssi_frame_len
             truth_lsb = layout_of(joint.config, frame_len).lsb
             for fit in top:  # a tie only where the frame cannot tell the layouts apart
-                assert layout_of(fit.config, frame_len).lsb == truth_lsb, (where, fit.family)
+                assert layout_of(fit.config, frame_len).lsb == truth_lsb, \
+                    (where, family, fit.family, res.samples, res.motion)
             motion = res.motion
             assert motion is not None and motion.state is MotionState.MOVING, \
                 (where, family, motion)
