@@ -27,8 +27,9 @@ from ssi_bridge.protocol.settings import (JOINT_DEFAULTS, BusConfig, JointSettin
 
 from .conftest import VARIANTS, Truth, random_layout
 
-#: sampling time of a run (s): enough for >= 30 cycles of 8 slots on a busy machine
-SECONDS = 1.5
+#: sampling time of a run (s); the tool samples on, up to twice as long, until each slot has
+#: 30 samples (sample.MIN_SAMPLES)
+SECONDS = 1.0
 
 
 def run(truth: Truth, seconds: float = SECONDS) -> Result:
