@@ -21,6 +21,7 @@ import pytest
 from ssi_bridge.base.buses import open_python_can
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
+from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.simulation import FaultKind
 from ssi_bridge.tools.commission import EXIT_OK, EXIT_OTHER_MASTER, main
@@ -128,8 +129,11 @@ def test_listen_only_watches_a_running_master_and_sends_nothing(stations, bus_ch
     seen = report["observed"]["6/1"]
     assert seen["state"] == "moving" and seen["code"] == joint.settings.code
     assert seen["direction"] == joint.direction
-    # the only SDO requests on the bus are the running master's own (none after its set-up)
     assert report["gateways"] == [] and "SDO scan" not in err
+    # while it watched, nobody asked the station anything: the running master had finished
+    # its set-up, and the tool sent nothing (no SDO request 0x600 + id, no NMT command)
+    assert sent_by_others and not [c for c in sent_by_others
+                                   if c == 0x000 or 0x600 < c <= 0x67F], sent_by_others
 
 
 def _other_device(channel: str, node_id: int) -> canopen.Network:
@@ -180,3 +184,24 @@ def test_garbage_a_foreign_device_and_slots_without_a_working_encoder_are_report
     assert slots[3]["joint"] is None and "ERR_SSI" in slots[3]["problem"]
     assert slots[3]["diagnostics"]["err_ssi"] > 0.9
     assert "joints: [node20_slot1]" in report["params"]
+
+
+def test_a_code_contradicting_para1_is_corrected_in_the_file_and_written_only_on_configure(
+        stations, bus_channel, capsys):
+    """000 Table 19: the frames are Gray but SSI_CODE_G/D says binary."""
+    rng = random.Random(11)
+    joint = true_joint(rng, 8, 1, "AHM36_MULTI", {})
+    truth = stations({8: [joint]})
+    module = truth.stations[8].sim.modules[0]
+    binary = Para1(ssi_frame_len=27, ssi_bit_rate=2).encode()
+    gray = Para1(ssi_frame_len=27, ssi_bit_rate=2, ssi_code_gray=True).encode()
+    wrong, right = (binary, gray) if joint.settings.code == "gray" else (gray, binary)
+    module.write_para1(wrong)
+    assert main(_cli(bus_channel, "--seconds", "1", "--dry-run")) == EXIT_OK
+    out, _ = capsys.readouterr()
+    assert f"para1: 0x{right:08X}   # corrected from the 0x{wrong:08X} read" in out, out
+    assert module.para1.encode() == wrong  # nothing written without --configure
+    assert main(_cli(bus_channel, "--seconds", "1", "--configure")) == EXIT_OK
+    out, _ = capsys.readouterr()
+    assert f"REG_PARA1 0x{right:08X} written" in out, out
+    assert module.para1.encode() == right

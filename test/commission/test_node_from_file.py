@@ -12,13 +12,11 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import statistics
 import subprocess
 from pathlib import Path
 
 import canopen
-import yaml
 from sensor_msgs.msg import JointState
 
 from ssi_bridge.base.buses import open_python_can
@@ -28,6 +26,8 @@ from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.settings import BusConfig
 
 from ..ros.conftest import domain_id, installed_executable, probe, start_node  # noqa: F401
+from ..ros.test_node_real_station import _start_station as start_station
+from ..ros.test_node_real_station import _stop_station as stop_station
 
 NODE_ID = 7
 #: rev/s of the simulated shaft
@@ -37,19 +37,11 @@ PARA1 = Para1(ssi_frame_len=30, ssi_bit_rate=2, ssi_code_gray=True).encode()
 
 
 def _station(tmp_path: Path, channel: str) -> subprocess.Popen:
-    params = {"joints": ["shaft"], "shaft.family": "AFM60_MULTI", "shaft.code": "gray",
-              "shaft.steps_per_rev": 32768, "shaft.motion.kind": "constant",
-              "shaft.motion.velocity": SPEED, "shaft.motion.start": 10.0,
-              "bus.interface": "udp_multicast", "bus.channel": channel,
-              "bus.node_id": NODE_ID}
-    pfile = tmp_path / "hidden_station.yaml"
-    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    proc = subprocess.Popen([str(installed_executable("station")), "--params-file", str(pfile)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
-    line = proc.stdout.readline().decode()
-    assert line.startswith("station ready"), (line, proc.stderr.read().decode()[-2000:])
-    return proc
+    return start_station(tmp_path, {
+        "joints": ["shaft"], "shaft.family": "AFM60_MULTI", "shaft.code": "gray",
+        "shaft.steps_per_rev": 32768, "shaft.motion.kind": "constant",
+        "shaft.motion.velocity": SPEED, "shaft.motion.start": 10.0,
+        "bus.interface": "udp_multicast", "bus.channel": channel, "bus.node_id": NODE_ID})
 
 
 def _leave_para1(channel: str) -> None:
@@ -69,7 +61,7 @@ def test_the_node_runs_from_the_generated_file_in_the_right_units(tmp_path, star
     station = _station(tmp_path, channel)
     try:
         _leave_para1(channel)
-        out_file = tmp_path / "station.yaml"
+        out_file = tmp_path / "commissioned.yaml"
         done = subprocess.run([str(installed_executable("commission")), "--interface",
                                "udp_multicast", "--channel", channel, "--node-ids", "1-20",
                                "--seconds", "2", "-o", str(out_file)],
@@ -87,9 +79,4 @@ def test_the_node_runs_from_the_generated_file_in_the_right_units(tmp_path, star
         assert math.isclose(velocity, 2 * math.pi * SPEED, rel_tol=0.03), velocity
         assert node.stop() == 0
     finally:
-        station.send_signal(signal.SIGINT)
-        try:
-            station.wait(10)
-        except subprocess.TimeoutExpired:
-            station.kill()
-            station.wait(5)
+        stop_station(station)
