@@ -21,7 +21,7 @@ Families whose best layouts score alike are tied: the frame cannot tell them apa
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ssi_bridge.commission.infer import BitStats, Motion, MotionState, bit_list
@@ -63,7 +63,7 @@ class Layout:
 
 def layout_of(cfg: EncoderConfig, frame_len: int) -> Layout:
     """The masks of ``cfg``'s frame as a module clocking ``frame_len`` bits sees them."""
-    binary = cfg if cfg.code is Code.BINARY else _with(cfg, code=Code.BINARY)
+    binary = cfg if cfg.code is Code.BINARY else replace(cfg, code=Code.BINARY)
     area = 0
     top = binary.range_steps - 1 + binary.origin
     for k in range(max(top, 1).bit_length()):
@@ -94,11 +94,6 @@ def layout_of(cfg: EncoderConfig, frame_len: int) -> Layout:
     return Layout(v, moved(allowed), moved(movable),
                   {b: p + shift for b, p in specials.items() if 0 <= p + shift < frame_len},
                   lsb, shift)
-
-
-def _with(cfg: EncoderConfig, **changes: Any) -> EncoderConfig:
-    from dataclasses import replace
-    return replace(cfg, **changes)
 
 
 @dataclass(frozen=True)
@@ -136,8 +131,8 @@ def _candidates(family: str, code: str | None) -> list[tuple[dict[str, Any],
     return out
 
 
-def _score(cfg: EncoderConfig, frame_len: int, stats: BitStats, motion: Motion,
-           frames: list[int]) -> tuple[int, list[str]] | None:
+def _score(cfg: EncoderConfig, frame_len: int, stats: BitStats,
+           motion: Motion) -> tuple[int, list[str]] | None:
     """Score of a layout, with the evidence; None when the frames rule it out."""
     f = cfg.frame_bits
     if f > frame_len and (f <= XN_MAX_FRAME_BITS or frame_len != XN_MAX_FRAME_BITS):
@@ -174,11 +169,9 @@ def _score(cfg: EncoderConfig, frame_len: int, stats: BitStats, motion: Motion,
             if motion.parity >> pos & 1:
                 score += 3
                 ev.append(f"bit {pos} is even parity in every frame")
-    if motion.values and motion.lsb == lay.lsb:
-        top = max(motion.values)
-        limit = cfg.range_steps if cfg.alignment is not Alignment.TANNENBAUM else top + 1
-        if cfg.alignment is Alignment.RIGHT and top >= limit + cfg.origin:
-            return None
+    if (motion.values and motion.lsb == lay.lsb and cfg.alignment is Alignment.RIGHT
+            and cfg.origin == 0 and max(motion.values) >= cfg.range_steps):
+        return None  # a position beyond the layout's range
     consts = [p for b, p in lay.specials.items() if b not in MOVABLE_SPECIALS]
     if consts:
         on = [p for p in consts if stats.always_one >> p & 1]
@@ -197,7 +190,7 @@ def rank_families(frames: list[int], frame_len: int, motion: Motion,
             continue
         best: tuple[tuple[int, int, int], Fit] | None = None
         for overrides, cfg in _candidates(family, motion.code):
-            scored = _score(cfg, frame_len, stats, motion, frames)
+            scored = _score(cfg, frame_len, stats, motion)
             if scored is None:
                 continue
             score, ev = scored

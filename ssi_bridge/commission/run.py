@@ -23,8 +23,7 @@ from ssi_bridge.client.sdo import SdoAccess
 from ssi_bridge.commission.analyze import SlotResult, analyze
 from ssi_bridge.commission.discover import (Heard, Identity, SlotProbe, find_slots, identify,
                                             listen, note, scan)
-from ssi_bridge.commission.sample import (STEP_TIMEOUT, SdoImagePort, SlotSamples,
-                                          read_register, sample)
+from ssi_bridge.commission.sample import STEP_TIMEOUT, SdoImagePort, read_register, sample
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.registers import Reg
@@ -216,4 +215,4 @@ def _configure(targets: list[tuple[SdoImagePort, int, int]], result: Result,
                                   f"written: {err}")
 
 
-__all__ = ["Options", "Result", "SlotSamples", "StationResult", "commission"]
+__all__ = ["Options", "Result", "StationResult", "commission"]

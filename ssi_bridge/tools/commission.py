@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     progress = _Progress()
     try:
         result = commission(config, options, progress)
-    except SsiBridgeError as err:
+    except (SsiBridgeError, OSError) as err:  # the bus could not be opened, or failed
         progress.close()
         print(f"commission: {err}", file=sys.stderr)
         return EXIT_BUS

@@ -30,8 +30,8 @@ from ..ros.test_node_real_station import _start_station as start_station
 from ..ros.test_node_real_station import _stop_station as stop_station
 
 NODE_ID = 7
-#: rev/s of the simulated shaft
-SPEED = 0.25
+#: rev/s of the simulated shaft (not the 0.25 of a node's own simulated default station)
+SPEED = 0.4
 #: 30-bit Gray frame at 250 kbit/s (000 Table 19)
 PARA1 = Para1(ssi_frame_len=30, ssi_bit_rate=2, ssi_code_gray=True).encode()
 
