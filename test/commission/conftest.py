@@ -15,9 +15,12 @@ import random
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
+import canopen
 import pytest
 
+from ssi_bridge.base.buses import open_python_can
 from ssi_bridge.base.udp_bus import derive_channel
+from ssi_bridge.protocol.dictionary import PROCESS_OUTPUT
 from ssi_bridge.protocol.codes import Code
 from ssi_bridge.protocol.encoder_config import EncoderConfig
 from ssi_bridge.protocol.family_rules import FAMILY_CODES
@@ -129,6 +132,28 @@ def random_layout(rng: random.Random, variants: list[tuple[str, dict]],
         for slot, (family, extra) in zip(slots, share):
             layout[node_id].append(true_joint(rng, node_id, slot, family, extra))
     return {n: j for n, j in layout.items() if j}
+
+
+def leave_outputs(truth: Truth, read_address: int) -> None:
+    """Leave REG_RD_ADR = ``read_address`` in every slot's process output image (0x2100), as
+    a master that ran before would have (its idle read)."""
+    network = canopen.Network(open_python_can(BusConfig("udp_multicast", truth.channel)))
+    network.connect()
+    try:
+        for node_id, modules in truth.modules.items():
+            node = network.add_node(node_id, canopen.ObjectDictionary())
+            for slot in range(1, modules + 1):
+                node.sdo.download(PROCESS_OUTPUT, slot, bytes((0, 0, 0, 0, read_address,
+                                                               0, 0, 0)))
+    finally:
+        network.disconnect()
+
+
+def read_addresses(truth: Truth) -> dict[tuple[int, int], int]:
+    """REG_RD_ADR (output byte 4) each slot's module holds now, by (node id, slot)."""
+    return {(node_id, slot + 1): out[4]
+            for node_id, station in truth.stations.items()
+            for slot, out in enumerate(station.gateway.objects.outputs)}
 
 
 @pytest.fixture

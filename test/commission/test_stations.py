@@ -6,7 +6,8 @@ truth: every gateway and XN-1SSI module found, REG_PARA1 exactly as the module h
 (000 Table 19), the true family first where the frame tells the families apart and among the
 first-ranked elsewhere (a tie only between layouts whose position LSB sits at the same frame
 bit), the code and the count direction of the moving encoder, and a params file whose joints
-the node's own parameter reader accepts with the family the tool chose.
+the node's own parameter reader accepts with the family the tool chose; REG_RD_ADR is back
+at what a previous master left in every output image (000 "Internal registers").
 """
 
 from __future__ import annotations
@@ -25,11 +26,13 @@ from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.settings import (JOINT_DEFAULTS, BusConfig, JointSettings,
                                           joint_from_values, load_params_file)
 
-from .conftest import VARIANTS, Truth, random_layout
+from .conftest import VARIANTS, Truth, leave_outputs, random_layout, read_addresses
 
 #: sampling time of a run (s); the tool samples on, up to twice as long, until each slot has
 #: 30 samples (sample.MIN_SAMPLES)
 SECONDS = 1.0
+#: REG_RD_ADR a previous master left in the output images (REG_SW_VER)
+READ_ADDRESS = 3
 
 
 def run(truth: Truth, seconds: float = SECONDS) -> Result:
@@ -102,7 +105,11 @@ def test_every_family_of_the_manuals_on_random_slots_and_node_ids(stations, seed
     chunk = {1: variants[:8], 2: variants[8:16], 3: variants[16:]}[seed]
     # two gateways hold at most 8 joints each; the first 16 variants fill two runs
     truth = stations(random_layout(rng, chunk, gateways))
-    check_against(truth, run(truth))
+    leave_outputs(truth, READ_ADDRESS)
+    result = run(truth)
+    check_against(truth, result)
+    # the read handshake set REG_RD_ADR back to what the previous master had left
+    assert set(read_addresses(truth).values()) == {READ_ADDRESS}
 
 
 @pytest.mark.parametrize("seed", range(10, 20))
