@@ -43,6 +43,9 @@ class SlotResult:
     warnings: list[str] = field(default_factory=list)
     #: REG_PARA1 the joint should run with (the read one, or a corrected one)
     para1_joint: int | None = None
+    #: the module's diagnostics byte after sampling (0x5804 = REG_DIAG1, 000 Table 27), in
+    #: the manual's words; None when it could not be read
+    diag_now: list[str] | None = None
 
     @property
     def joint(self) -> bool:

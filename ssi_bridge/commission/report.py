@@ -31,7 +31,7 @@ def _slot(res: SlotResult) -> dict[str, Any]:
         "para1_joint": None if res.para1_joint is None else f"0x{res.para1_joint:08X}",
         "diagnostics": {"samples": res.samples, "frames": res.frames,
                         "err_para": round(res.err_para, 3), "err_ssi": round(res.err_ssi, 3),
-                        "ssi_diag": round(res.ssi_diag, 3)},
+                        "ssi_diag": round(res.ssi_diag, 3), "now": res.diag_now},
         "problem": res.problem, "warnings": res.warnings, "bits": res.bits,
     }
     m = res.motion
@@ -144,8 +144,9 @@ def _slot_text(res: SlotResult) -> list[str]:
     head = f"  slot {res.slot}: XN-1SSI"
     if p is not None:
         head += f", REG_PARA1 0x{p.encode():08X} ({describe_para1(p)})"
+    now = ("not read" if res.diag_now is None else ", ".join(res.diag_now) or "none")
     out = [head, f"    diagnostics: ERR_PARA {res.err_para:.0%}, ERR_SSI {res.err_ssi:.0%}, "
-                 f"SSI_DIAG {res.ssi_diag:.0%} of {res.samples} cycles"]
+                 f"SSI_DIAG {res.ssi_diag:.0%} of {res.samples} cycles; now (0x5804): {now}"]
     if res.problem:
         out.append(f"    no joint: {res.problem}")
         return out

@@ -25,11 +25,14 @@ from ssi_bridge.commission.discover import (Heard, Identity, SlotProbe, find_slo
                                             listen, note, scan)
 from ssi_bridge.commission.sample import STEP_TIMEOUT, SdoImagePort, read_register, sample
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
+from ssi_bridge.protocol.diagnostics import DIAG_TEXT, Diag
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.protocol.settings import BusConfig
 
 logger = logging.getLogger(__name__)
+#: Encoder Diag: the diagnostics byte of each slot (000 Table 27)
+ENCODER_DIAG = 0x5804
 Progress = Callable[[str], None]
 
 
@@ -188,11 +191,23 @@ def _run(network: MasterNetwork, heard: Heard, answered: set[int], options: Opti
         found = sample(targets, send_sync, options.seconds, say)
     else:
         found = []
-    for got in found:
+    for (port, _, _), got in zip(targets, found):
         station, para1, para1_object = where[(got.node_id, got.slot)]
-        station.slots.append(analyze(got, para1, para1_object))
+        res = analyze(got, para1, para1_object)
+        res.diag_now = diagnostics_now(port.sdo, got.slot)
+        station.slots.append(res)
     if options.configure:
         _configure(targets, result, send_sync)
+
+
+def diagnostics_now(sdo: SdoAccess, slot: int) -> list[str] | None:
+    """The slot's diagnostics byte (object 0x5804 = REG_DIAG1, 000 Table 27) in the manual's
+    words ([] when none is set, None when it cannot be read)."""
+    try:
+        value = int.from_bytes(sdo.upload(ENCODER_DIAG, slot)[:1] or b"\0", "little")
+    except SsiBridgeError:
+        return None
+    return [DIAG_TEXT[bit] for bit in Diag if value & bit]
 
 
 def _configure(targets: list[tuple[SdoImagePort, int, int]], result: Result,
@@ -215,4 +230,4 @@ def _configure(targets: list[tuple[SdoImagePort, int, int]], result: Result,
                                   f"written: {err}")
 
 
-__all__ = ["Options", "Result", "StationResult", "commission"]
+__all__ = ["ENCODER_DIAG", "Options", "Result", "StationResult", "commission", "diagnostics_now"]

@@ -183,6 +183,8 @@ def test_garbage_a_foreign_device_and_slots_without_a_working_encoder_are_report
     assert slots[2]["joint"] is None and "every frame is 0" in slots[2]["problem"]
     assert slots[3]["joint"] is None and "ERR_SSI" in slots[3]["problem"]
     assert slots[3]["diagnostics"]["err_ssi"] > 0.9
+    assert slots[3]["diagnostics"]["now"] == ["Wire-break"]   # 000 Table 27, bit 1
+    assert slots[1]["diagnostics"]["now"] == []
     assert "joints: [node20_slot1]" in report["params"]
 
 
