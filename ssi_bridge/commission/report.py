@@ -63,8 +63,11 @@ def decisions(result: Result) -> list[str]:
         elif best is not None and best.default_resolution:
             out.append(f"{name}: the resolution (steps per revolution): the family's default "
                        "was assumed")
-        out.append(f"{name}: the sign (direction) and, for a linear axis driven by a rotary "
-                   "encoder, the gear ratio")
+        if best is not None and best.config.linear:
+            out.append(f"{name}: the sign (direction) against the count")
+        else:
+            out.append(f"{name}: the sign (direction) against the count, and the gear ratio "
+                       "if it drives a linear axis")
     return out
 
 
