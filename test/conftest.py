@@ -183,6 +183,8 @@ SLOW = {
         "stress: 1000 service calls at once",
     "test/ros/test_node_snapshot.py::test_memory_stays_bounded_with_snapshots_over_ten_minutes":
         "soak: 10 minutes at 500 Hz with fault snapshots, RSS watched",
+    "test/commission/test_stations.py::test_random_stations_sweep":
+        "sweep: ten random stations of 1-8 joints commissioned, about 5 s each",
 }
 #: node tests that check the install path (the installed executables start and answer), not
 #: the logic again: .ci/run's workspace step runs only these (``-m smoke``)
