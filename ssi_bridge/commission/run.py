@@ -155,9 +155,8 @@ def _run(network: MasterNetwork, heard: Heard, answered: set[int], options: Opti
     targets: list[tuple[SdoImagePort, int, int]] = []
     where: dict[tuple[int, int], tuple[StationResult, int | None, int | None]] = {}
     for node_id in sorted(answered | set(heard.heartbeats)):
-        node = canopen.RemoteNode(node_id, canopen.ObjectDictionary())
-        network.add_node(node)
-        sdo = SdoAccess(node, options.sdo_timeout)
+        sdo = SdoAccess(node_id, canopen.ObjectDictionary(), options.sdo_timeout)
+        network.add_node(sdo.node)
         try:
             ident = identify(sdo)
         except SsiBridgeError as err:
