@@ -1,4 +1,4 @@
-"""A params file the node cannot run is refused before anything is started (issue #34).
+"""A params file the node cannot run is refused before anything is started.
 
 A REG_PARA1 the module would refuse with ERR_PARA (000 Table 19: SSI_FRAME_LEN 1..32, a
 reserved SSI_BIT_RATE, INVALID_BITS_MSB + INVALID_BITS_LSB < SSI_FRAME_LEN, reserved bits 0),

@@ -3,7 +3,7 @@
 A shipped example is what a user copies: a warning at every start teaches them to ignore
 warnings. config/ssi_bridge_two_stations.yaml ran its SSI lines at 500 kbit/s over the
 default 10 m cable, which 004 §2.7's table puts below 400 kHz (< 50 m), and warned twice at
-every start (issue #34).
+every start.
 """
 
 from __future__ import annotations
