@@ -179,7 +179,9 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "slot": (0, _describe("XN-1SSI module slot in the station (1-8, the object subindex); "
                           "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
     "family": ("GENERIC", _describe(
-        "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
+        "Encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...): the simulated encoder, and "
+        "the layout the frame checks and max_speed follow; an unknown name is refused at "
+        "start-up", read_only=True)),
     "code": ("", _describe(
         "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
         "SSI_CODE_G/D must match it; a code the family's manual does not offer is refused at "
