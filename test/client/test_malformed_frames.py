@@ -15,7 +15,6 @@ multicast (loopback), the frames sent by a third node on the same bus.
 from __future__ import annotations
 
 import logging
-import os
 import random
 import struct
 import time
@@ -23,14 +22,11 @@ import time
 import can
 import pytest
 
-from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus
+from ssi_bridge.base.udp_bus import open_udp_bus
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
-from ssi_bridge.protocol.settings import BusConfig, station_settings
-from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
-from ssi_bridge.sim.gateway.station import Station
 
-from .conftest import run_cycles
+from .conftest import run_cycles, wait_until
 
 NODE = 1
 #: the abort a segment outside a transfer gets: 0x80, multiplexer 0, code 0x05040001
@@ -38,35 +34,36 @@ ABORT_INVALID_COMMAND = struct.pack("<BHBL", 0x80, 0, 0, 0x0504_0001)
 
 
 @pytest.fixture
-def bus_pair(request: pytest.FixtureRequest):
-    """A simulated station, its connected master and a third node, on a private group."""
-    channel = derive_channel(f"malformed-{os.getpid()}-{request.node.name}")
-    station = Station(station_settings({"joints": ["j"], "j.slot": 1,
-                                        "bus.interface": "udp_multicast",
-                                        "bus.channel": channel}))
-    station.start()
-    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), NODE, 1,
-                          opener=wire_bus)
+def bus_pair(udp_station):
+    """The station and master of ``udp_station``, and a third node on their bus."""
+    channel, station, client = udp_station
     tool = open_udp_bus(channel)
     try:
-        client.connect()
         yield station, client, tool
     finally:
         tool.shutdown()
-        client.close()
-        station.stop()
 
 
 def _send(bus: can.BusABC, can_id: int, data: bytes) -> None:
     bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
 
 
-def _wait(condition, what: str, timeout: float = 3.0) -> None:
+def _drain(tool: can.BusABC) -> None:
+    """Forget what the third node heard so far (the master's configuration since it joined)."""
+    end = time.monotonic() + 2.0
+    while tool.recv(0.05) is not None and time.monotonic() < end:
+        pass
+
+
+def _answers(tool: can.BusABC, n: int, timeout: float = 3.0) -> list[bytes]:
+    """The next ``n`` SDO answers of the station (0x580 + id) the third node hears."""
+    answers: list[bytes] = []
     end = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > end:
-            pytest.fail(what)
-        time.sleep(0.005)
+    while len(answers) < n and time.monotonic() < end:
+        msg = tool.recv(0.1)
+        if msg is not None and msg.arbitration_id == 0x580 + NODE:
+            answers.append(bytes(msg.data))
+    return answers
 
 
 def _read(client: BridgeClient, index: int = 0x1000, subindex: int = 0) -> int:
@@ -101,7 +98,7 @@ def test_the_master_counts_an_empty_heartbeat_a_short_emcy_and_sdo(bus_pair, cap
               (0x580 + NODE, b"\x43\x00\x10")]      # an SDO response is 8 bytes
     for can_id, data in frames:
         _send(tool, can_id, data)
-    _wait(lambda: client.counters.malformed_frames == len(frames),
+    wait_until(lambda: client.counters.malformed_frames == len(frames),
           f"malformed frames counted: {client.counters.malformed_frames} of {len(frames)}")
     assert client.counters.callback_errors == 0 and client.counters.emergencies == 0
     lines = [r.getMessage() for r in caplog.records if "malformed so far" in r.getMessage()
@@ -119,10 +116,7 @@ def test_the_station_refuses_stray_sdo_segments_and_short_requests(bus_pair, cap
     station, client, tool = bus_pair
     caplog.set_level(logging.WARNING)
     listener = station.gateway.listener
-    answers: list[bytes] = []
-    drain_end = time.monotonic() + 2.0  # the master's configuration, heard since it joined
-    while tool.recv(0.05) is not None and time.monotonic() < drain_end:
-        pass
+    _drain(tool)
     frames = [bytes([0x00]) + bytes(7),             # download segment, no transfer: 'extend'
               bytes([0x60]) + bytes(7),             # upload segment, no transfer
               bytes([0xE0, 0x00, 0x10, 0x00]) + bytes(4),   # specifier 7: none of CiA 301's
@@ -131,13 +125,9 @@ def test_the_station_refuses_stray_sdo_segments_and_short_requests(bus_pair, cap
     for data in frames:
         _send(tool, 0x600 + NODE, data)
     _send(tool, 0x000, b"\x81")                     # an NMT command is 2 bytes
-    _wait(lambda: listener.faults["malformed_frames"] == len(frames) + 1,
+    wait_until(lambda: listener.faults["malformed_frames"] == len(frames) + 1,
           f"station counted {dict(listener.faults)}")
-    deadline = time.monotonic() + 2.0
-    while len(answers) < 3 and time.monotonic() < deadline:
-        msg = tool.recv(0.1)
-        if msg is not None and msg.arbitration_id == 0x580 + NODE:
-            answers.append(bytes(msg.data))
+    answers = _answers(tool, 3)
     assert answers[:2] == [ABORT_INVALID_COMMAND] * 2, answers
     assert answers[2] == struct.pack("<BHBL", 0x80, 0x1000, 0, 0x0504_0001), answers
     assert listener.faults["callback_errors"] == 0, dict(listener.faults)
@@ -179,17 +169,9 @@ def test_a_stray_segment_after_a_segmented_download_writes_nothing(bus_pair, cap
     caplog.set_level(logging.WARNING)
     client.node.sdo.download(0x6C01, 1, struct.pack("<i", -77), force_segment=True)
     assert station.gateway.node.sdo.segments is None
-    drain_end = time.monotonic() + 2.0
-    while tool.recv(0.05) is not None and time.monotonic() < drain_end:
-        pass
+    _drain(tool)
     _send(tool, 0x600 + NODE, bytes([0x01, 1, 2, 3, 4, 5, 6, 7]))
-    end = time.monotonic() + 3.0
-    answer = None
-    while answer is None and time.monotonic() < end:
-        msg = tool.recv(0.1)
-        if msg is not None and msg.arbitration_id == 0x580 + NODE:
-            answer = bytes(msg.data)
-    assert answer == ABORT_INVALID_COMMAND, answer
+    assert _answers(tool, 1) == [ABORT_INVALID_COMMAND]
     assert station.gateway.listener.faults["malformed_frames"] == 1
     assert _read(client, 0x6C01, 1) == -77
     _no_tracebacks(caplog)
