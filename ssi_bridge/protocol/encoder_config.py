@@ -204,7 +204,8 @@ class EncoderConfig:
     monoflop_s: float | None = None
     #: cam switch (on, off) points in output steps, up to four (001 §5.4.1)
     cams: tuple[tuple[int, int], ...] = ()
-    #: overspeed limit (1/min, 10..6000, 001 §5.4.2)
+    #: the speed monitor's threshold (1/min, 10..6000, 001 §5.4.2): above it the overspeed
+    #: special bit is set (§5.5.2); no limit of the shaft
     overspeed_rpm: float = 6000.0
     #: going up/down cleared after this long without a step (001 §5.5.3: 50 ms)
     standstill_s: float = 0.05

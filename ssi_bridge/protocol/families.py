@@ -182,11 +182,11 @@ FAMILIES["ATM90"] = FAMILIES["ATM60"]
 
 
 #: the fastest shaft (1/min) assumed where a rotary family's manual states no speed: none of
-#: them does. 004 and 003 give none; 001 neither: its technical data are in the TR series'
-#: product data sheets (001 §1 "Other applicable documents", not among the manuals here), and
-#: its 10-6000 1/min (§5.4.2) is only the range of the speed monitor's adjustable threshold,
-#: which a faster shaft exceeds and reports with the overspeed bit (§5.5.2): no limit of the
-#: shaft. 12000 1/min is about the mechanical limit of the fastest industrial SSI encoders
+#: them does. 004 and 003 give none; 001 neither: it leaves technical data to the series'
+#: "Product data sheets" ("The following documentation therefore also applies"; not among
+#: the manuals here), and its 10-6000 1/min (§5.4.2) is only the range of the speed
+#: monitor's adjustable threshold, which a faster shaft exceeds and reports with the
+#: overspeed bit (§5.5.2): no limit of the shaft. 12000 1/min is about the mechanical limit of the fastest industrial SSI encoders
 #: (common ones are built for 6000-12000 1/min), so no real motion is flagged while a misread
 #: frame's jump is. A limit from the SSI frame itself would mean nothing: the counts of one
 #: frame at the highest REG_PARA1 bit rate can represent a change of the whole range per
