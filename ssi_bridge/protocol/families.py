@@ -186,11 +186,11 @@ FAMILIES["ATM90"] = FAMILIES["ATM60"]
 #: "Product data sheets" ("The following documentation therefore also applies"; not among
 #: the manuals here), and its 10-6000 1/min (§5.4.2) is only the range of the speed
 #: monitor's adjustable threshold, which a faster shaft exceeds and reports with the
-#: overspeed bit (§5.5.2): no limit of the shaft. 12000 1/min is about the mechanical limit of the fastest industrial SSI encoders
-#: (common ones are built for 6000-12000 1/min), so no real motion is flagged while a misread
-#: frame's jump is. A limit from the SSI frame itself would mean nothing: the counts of one
-#: frame at the highest REG_PARA1 bit rate can represent a change of the whole range per
-#: frame (docs/node.md)
+#: overspeed bit (§5.5.2): no limit of the shaft. 12000 1/min is about the mechanical limit
+#: of the fastest industrial SSI encoders (common ones are built for 6000-12000 1/min), so
+#: no real motion is flagged while a misread frame's jump is. A limit from the SSI frame
+#: itself would mean nothing: the counts of one frame at the highest REG_PARA1 bit rate can
+#: represent a change of the whole range per frame (docs/node.md)
 DEFAULT_MAX_RPM = 12000.0
 #: the fastest travel (m/s) assumed for a linear family: 004 §3.6/§3.7 state none (§3.7 only
 #: names KH53's "max. traversing speed"); about the fastest linear axes and tape/linear
