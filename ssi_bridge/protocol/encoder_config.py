@@ -250,7 +250,8 @@ class EncoderConfig:
             if self.code not in (Code.BINARY, Code.GRAY):
                 bad("Tannenbaum format sends binary or Gray only (004 §3.4)")
             if int(spr).bit_length() - 1 > self.field_bits - self.turn_bits:
-                bad(f"{int(spr)} steps do not fit {self.field_bits - self.turn_bits} singleturn bits")
+                bad(f"{int(spr)} steps do not fit {self.field_bits - self.turn_bits} singleturn "
+                    "bits")
             if self.range_steps > int(spr) << self.turn_bits:
                 bad(f"{self.range_steps} steps need more than {self.turn_bits} revolution bits")
         if self.origin < 0 and self.alignment is not Alignment.RIGHT:

@@ -214,9 +214,9 @@ def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
 
     No family's manual states a shaft speed (the TR overspeed of 001 §5.4.2 is a monitor's
     threshold, see :data:`DEFAULT_MAX_RPM`), so every rotary family (GENERIC and TR
-    included) takes :data:`DEFAULT_MAX_RPM`, linear ones :data:`DEFAULT_MAX_LINEAR_SPEED`. ``linear`` overrides the family's own kind (a joint
-    whose layout is unknown is linear when it has a measuring step); an unknown family is
-    taken as GENERIC.
+    included) takes :data:`DEFAULT_MAX_RPM`, linear ones :data:`DEFAULT_MAX_LINEAR_SPEED`.
+    ``linear`` overrides the family's own kind (a joint whose layout is unknown is linear
+    when it has a measuring step); an unknown family is taken as GENERIC.
     """
     key = family.upper()
     base = FAMILIES.get(key)

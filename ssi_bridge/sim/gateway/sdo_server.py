@@ -9,10 +9,10 @@ transfer from the frames it answers (CiA 301 SDO protocol: initiate, segments, t
 flagged, or an abort) and answers a segment outside one with the abort 0x05040001 "command
 specifier not valid or unknown", reported as a malformed frame (``base/rx_guard``) instead of
 passing it on. A request with command specifier 7 (none of CiA 301's) gets the same abort and
-report; a block download (optional in CiA 301, not served) the abort alone, without the
-ERROR line canopen logs for it (canopen's own abort of specifier 7 raised while no transfer
-had set its multiplexer yet). Frames of another length than 8 bytes never get here: the station's listener
-drops them (``protocol/frame_rules.py``).
+report (canopen's own abort of it raised while no transfer had set its multiplexer yet); a
+block download (optional in CiA 301, not served) the abort alone, without the ERROR line
+canopen logs for it. Frames of another length than 8 bytes never get here: the station's
+listener drops them (``protocol/frame_rules.py``).
 """
 
 from __future__ import annotations
