@@ -66,6 +66,9 @@ class ClientCounters:
     undecodable_frames: int = 0
     #: TPDOs on the master's COB-IDs whose length differs from their mapping, not decoded
     malformed_pdos: int = 0
+    #: frames on a station's heartbeat, EMCY or SDO response COB-ID whose length CiA 301 does
+    #: not give that service (``protocol/frame_rules.py``), not decoded
+    malformed_frames: int = 0
     #: errors of the bus's receive call (the receive path went on)
     receive_errors: int = 0
     #: exceptions raised by a handler of a received frame (the receive path went on)

@@ -184,7 +184,9 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "slot": (0, _describe("XN-1SSI module slot in the station (1-8, the object subindex); "
                           "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
     "family": ("GENERIC", _describe(
-        "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
+        "Encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...): the simulated encoder, and "
+        "the layout the frame checks and max_speed follow; an unknown name is refused at "
+        "start-up", read_only=True)),
     "code": ("", _describe(
         "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
         "SSI_CODE_G/D must match it; a code the family's manual does not offer is refused at "
@@ -214,10 +216,11 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "max_speed": (-1.0, _describe(
         "Plausibility limit in rad/s (rotary) or m/s (linear): a sample whose step from the "
         "previous one is faster is flagged in diagnostics and its velocity is NaN; 0: off; "
-        "-1 (default, on for every family): the family's physical limit (TR: overspeed "
-        "6000 1/min = 628 rad/s, 001 §5.4.2; families whose manual states none, GENERIC "
-        "included: 12000 1/min = 1257 rad/s, a typical mechanical limit of fast SSI encoders, "
-        "or 10 m/s for linear ones; docs/node.md). Changes at run time",
+        "-1 (default, on for every family): no family's manual states a shaft speed (the "
+        "TR 10-6000 1/min of 001 §5.4.2 is the speed monitor's threshold, not a limit), so "
+        "12000 1/min = 1257 rad/s, a typical mechanical limit of fast SSI encoders, for "
+        "every rotary family (GENERIC and TR included), or 10 m/s for linear ones; "
+        "docs/node.md. Changes at run time",
         float_range=(-1.0, 1e6))),
     "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
                                           read_only=True)),

@@ -15,6 +15,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.protocol.joint_encoder import joint_config
 from ssi_bridge.ros.param_table import JOINT_PARAMETERS, NODE_PARAMETERS
 from ssi_bridge.ros.qos_overrides import stray_overrides
 
@@ -213,9 +214,7 @@ def declare_parameters(node: Node) -> NodeSettings:
         if values[flag] and values["simulation"]:
             raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
                               "this node to drive its bus")
-    for line in unknown_overrides(node):
-        node.get_logger().warning(line)
-    return NodeSettings(
+    settings = NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
         simulation=values["simulation"],
@@ -238,3 +237,27 @@ def declare_parameters(node: Node) -> NodeSettings:
         foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip(),
         foxglove_services=values["foxglove.services"],
         foxglove_parameters=values["foxglove.parameters"])
+    check_simulated_layouts(settings)
+    for line in unknown_overrides(node):  # warnings only once the settings can run
+        node.get_logger().warning(line)
+    return settings
+
+
+def check_simulated_layouts(settings: NodeSettings) -> None:
+    """With a simulated station, every joint's encoder layout must be one it can simulate.
+
+    The station builds each joint's encoder from the family preset and the overrides
+    (:func:`~ssi_bridge.protocol.joint_encoder.joint_config`) and refuses to start otherwise;
+    checked here, the refusal comes before the station is started or the bus opened. A real
+    station only loses the frame checks of such a joint (a warning at start-up).
+
+    Raises ConfigError naming the joint and the rule.
+    """
+    if not settings.simulation:
+        return
+    for joint in settings.joints:
+        try:
+            joint_config(joint)
+        except ConfigError as err:
+            raise ConfigError(f"{joint.name}: the simulated station cannot build its encoder: "
+                              f"{err}") from None
