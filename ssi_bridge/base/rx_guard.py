@@ -114,7 +114,7 @@ class GuardedListener(WireTimeListener):
                                     err, raised_at(err))
         network.scanner.on_message_received(can_id)
 
-    def malformed(self, can_id: int, data: bytes, why: str) -> None:
+    def malformed(self, can_id: int, data: bytes | bytearray, why: str) -> None:
         """A frame its service does not allow (receive thread): counted as :data:`MALFORMED`
         and logged (at most once per second), never decoded."""
         self.count(MALFORMED)
