@@ -15,7 +15,9 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.ros.param_table import JOINT_PARAMETERS, NODE_PARAMETERS
+from ssi_bridge.ros.param_table import (
+    JOINT_PARAMETERS, NODE_PARAMETERS, RENAMED, nesting_clashes,
+)
 from ssi_bridge.ros.qos_overrides import stray_overrides
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
@@ -35,6 +37,7 @@ class NodeSettings:
     publish_rate: float = 100.0
     diagnostics_period: float = 1.0
     frame_id: str = ""
+    #: simulation.enabled: the node starts and drives a simulated station of its own
     simulation: bool = True
     #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
     simulation_transport: str = "udp_multicast"
@@ -162,8 +165,34 @@ def unknown_overrides(node: Node) -> list[str]:
     return out
 
 
+def renamed_overrides(node: Node) -> None:
+    """ConfigError for a parameter given (params file, ``-p``) under its old name
+    (:data:`~ssi_bridge.ros.param_table.RENAMED`), naming the new one."""
+    given = getattr(node, "_parameter_overrides", {})
+    for old, new in RENAMED.items():
+        if old in given:
+            raise ConfigError(f"parameter '{old}' is now '{new}' (a name that is also the prefix "
+                              f"of others breaks 'ros2 param dump'): set {new} instead")
+
+
+def _joint_name_clashes(node: Node, names: list[str]) -> None:
+    """ConfigError when a joint's parameters would make a name both a value and a prefix
+    (a joint named ``publish_rate``: ``publish_rate`` and ``publish_rate.slot``)."""
+    declared = set(node.list_parameters([], 0).names)
+    per_joint = {f"{joint}.{key}" for joint in names for key in JOINT_PARAMETERS}
+    for value, longer in nesting_clashes(declared | per_joint):
+        if value in per_joint or longer in per_joint:
+            raise ConfigError(f"joints {_echo(names)}: parameter '{_echo(value)[1:-1]}' would "
+                              f"also be the prefix of '{_echo(longer)[1:-1]}' (params files and "
+                              "'ros2 param dump' nest names on '.'): name the joint otherwise")
+
+
 def declare_parameters(node: Node) -> NodeSettings:
-    """Declare every parameter on ``node`` and return the validated settings."""
+    """Declare every parameter on ``node`` and return the validated settings.
+
+    Raises ConfigError, before anything is opened, for an old parameter name, a joint name
+    that clashes with a parameter name, or a value out of place."""
+    renamed_overrides(node)
     values = {name: _declare(node, name, d, desc) for name, (d, desc) in NODE_PARAMETERS.items()}
     if not values["joints"]:
         # an empty YAML list has no element type, so ROS hands it over as "not set"
@@ -171,6 +200,7 @@ def declare_parameters(node: Node) -> NodeSettings:
                           "channel (e.g. joints: [joint1])")
     names = [str(j) for j in values["joints"]]
     check_joint_names(names, _echo(names))
+    _joint_name_clashes(node, names)
     stations = _stations(values["stations"], values["bus.node_id"])
     joints = []
     per_station: dict[int, int] = {}
@@ -207,15 +237,15 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError(f"simulation.transport {values['simulation.transport']!r}: one of "
                           f"{TRANSPORTS}")
     for flag in ("bus.listen_only", "replay.can_log"):
-        if values[flag] and values["simulation"]:
-            raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
-                              "this node to drive its bus")
+        if values[flag] and values["simulation.enabled"]:
+            raise ConfigError(f"{flag} needs simulation.enabled:=false: the simulated station "
+                              "needs this node to drive its bus")
     for line in unknown_overrides(node):
         node.get_logger().warning(line)
     return NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
-        simulation=values["simulation"],
+        simulation=values["simulation.enabled"],
         simulation_transport=values["simulation.transport"],
         simulation_start_timeout=values["simulation.start_timeout"],
         simulation_station_priority=values["simulation.station_priority"],
