@@ -56,8 +56,9 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "simulation.transport": ("udp_multicast", _describe(
         "How the node reaches its simulated station, always over CAN only: udp_multicast "
         "(the station runs as a child process on python-can's udp_multicast bus on loopback, "
-        "group and port derived from bus.channel, the node's name and ROS_DOMAIN_ID) or virtual (the station runs in the node's "
-        "process on the virtual bus; also the fallback without multicast on loopback)",
+        "group and port derived from bus.channel, the node's name and ROS_DOMAIN_ID) or "
+        "virtual (the station runs in the node's process on the virtual bus; also the "
+        "fallback without multicast on loopback)",
         read_only=True)),
     "simulation.start_timeout": (30.0, _describe(
         "Seconds the node waits for the simulated station's boot-up message at start, and "
