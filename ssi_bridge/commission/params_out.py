@@ -17,7 +17,7 @@ from ssi_bridge.protocol.para1 import BIT_RATES_HZ, Para1
 
 #: the node parameter that selects a simulated station, and the value a real station needs.
 #: One place, so a rename of the parameter is a one-line change here.
-SIMULATION_KEY = "simulation"
+SIMULATION_KEY = "simulation.enabled"
 SIMULATION_OFF = "false"
 
 

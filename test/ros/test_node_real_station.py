@@ -1,7 +1,7 @@
 """One node for simulated and real stations (docs/architecture.md "Three layers").
 
-A node with ``simulation: false`` drives a separately started ``station`` program as it would
-drive real hardware: it loads nothing of ``ssi_bridge.sim``, and it knows a joint only from
+A node with ``simulation.enabled: false`` drives a separately started ``station`` program as it
+would drive real hardware: it loads nothing of ``ssi_bridge.sim``, and it knows a joint only from
 its parameters and the bus. So the rules that depend on the encoder are the same code as in
 the simulated default: a REG_PARA1 with invalid LSB bits (000 Table 19) changes the scale of
 REG_SSI_POS and joint_states follows it; a linear family (TTK70, 004 §3.6) is published in m.
@@ -82,7 +82,7 @@ def test_a_node_on_real_hardware_loads_nothing_of_the_simulator(tmp_path, domain
     station = _start_station(tmp_path, {"joints": ["joint1"], **bus,
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     modules = tmp_path / "modules_real.txt"
-    node = _start_probed_node(tmp_path, domain_id, {"simulation": False, **bus}, modules)
+    node = _start_probed_node(tmp_path, domain_id, {"simulation.enabled": False, **bus}, modules)
     try:
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 20, 30.0, "joint_states from the station", node)
@@ -96,7 +96,7 @@ def test_a_node_on_real_hardware_loads_nothing_of_the_simulator(tmp_path, domain
 
 
 def test_the_simulated_default_loads_the_supervisor(tmp_path, domain_id, probe):
-    """The control of the probe above: with simulation: true the supervisor is loaded."""
+    """The control of the probe above: with simulation.enabled: true the supervisor is loaded."""
     modules = tmp_path / "modules_sim.txt"
     node = _start_probed_node(tmp_path, domain_id, {
         "bus.channel": f"probe_{domain_id}", "storage_path": str(tmp_path / "bank.json")},
@@ -144,7 +144,7 @@ def test_invalid_lsb_bits_keep_the_position_on_a_real_station(tmp_path, domain_i
     station = _start_station(tmp_path, {"joints": ["joint1"], **bus, **still,
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     try:
-        node = start_node({"simulation": False, **bus})
+        node = start_node({"simulation.enabled": False, **bus})
         _invalid_lsb_keeps_the_position(node, probe)
     finally:
         _stop_station(station)
@@ -172,7 +172,7 @@ def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
         _ready(station)
     try:
-        node = start_node({"simulation": simulation, **(bus if not simulation else {})},
+        node = start_node({"simulation.enabled": simulation, **(bus if not simulation else {})},
                           params_file=config)
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 150, 30.0, "joint_states", node)

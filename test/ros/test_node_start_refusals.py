@@ -40,7 +40,7 @@ def test_a_bad_joint_is_refused_in_one_line_before_any_side_effect(start_node, t
 def test_a_bad_para1_is_refused_on_real_hardware_too(start_node):
     # simulation off: no station to start, but the master would have opened the bus and
     # configured the gateway before refusing; nobody serves this channel
-    node = start_node({"simulation": False, "joint1.para1": 0x21010000})
+    node = start_node({"simulation.enabled": False, "joint1.para1": 0x21010000})
     assert node.proc.wait(60) == 1, node.log()
     lines = [line for line in node.log().splitlines() if line.strip()]
     assert len(lines) == 1 and "SSI_FRAME_LEN = 33" in lines[0], node.log()
