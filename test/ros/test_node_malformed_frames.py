@@ -17,9 +17,9 @@ import time
 import can
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus
+from ssi_bridge.base.udp_bus import open_udp_bus
 
-from .conftest import latest_status, wait_for_level
+from .conftest import station_channel, latest_status, wait_for_level
 from .test_node_station_process import _gone, _station_of
 
 PERIOD = 0.5
@@ -36,7 +36,7 @@ def test_malformed_frames_are_counted_in_the_bus_diagnostics(running, probe, dom
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 20.0)
     station = _station_of(node)
-    other = open_udp_bus(derive_channel(name))  # another node on the bus
+    other = open_udp_bus(station_channel(name, domain_id))  # another node on the bus
     try:
         for _ in range(HEARTBEATS):
             other.send(can.Message(arbitration_id=0x701, data=b"", is_extended_id=False))

@@ -26,7 +26,7 @@ from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.registers import Reg
 
-from .conftest import REPO, NodeProcess, dds_env, installed_executable
+from .conftest import REPO, NodeProcess, dds_env, installed_executable, joint_of
 from .test_node_station_process import _ready
 from .test_node_station_process import _start_station as start_station_process
 
@@ -176,18 +176,17 @@ def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
                           params_file=config)
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 150, 30.0, "joint_states", node)
-        msgs = [m for _, m in joints[-100:]]
-        k = list(msgs[-1].name).index("carriage")
-        velocities = [m.velocity[k] for m in msgs if math.isfinite(m.velocity[k])]
+        carriage = [(m, v) for _, m in joints[-100:]
+                    if (v := joint_of(m, "carriage")) is not None]
+        velocities = [v for _m, (_p, v) in carriage if math.isfinite(v)]
         assert velocities, "no finite carriage velocity"
         mean = sum(velocities) / len(velocities)
         assert abs(mean - 0.01) < 0.001, f"carriage at {mean} (m/s expected: 0.01)"
-        # between fresh samples (finite velocity): a station process starved beside burners
-        # makes the joint STALE for a while, and a STALE message holds the last position
-        fresh = [m for m in msgs if math.isfinite(m.velocity[k])]
-        span = fresh[-1].header.stamp.sec + fresh[-1].header.stamp.nanosec * 1e-9 - (
-            fresh[0].header.stamp.sec + fresh[0].header.stamp.nanosec * 1e-9)
-        moved = fresh[-1].position[k] - fresh[0].position[k]
+        # between samples with a finite velocity (a left-out stretch restarts the estimate)
+        fresh = [(m, pv) for m, pv in carriage if math.isfinite(pv[1])]
+        span = fresh[-1][0].header.stamp.sec + fresh[-1][0].header.stamp.nanosec * 1e-9 - (
+            fresh[0][0].header.stamp.sec + fresh[0][0].header.stamp.nanosec * 1e-9)
+        moved = fresh[-1][1][0] - fresh[0][1][0]
         # metres, not radians (the bug this guards against was a factor of ~700): within 10 %
         # of the motion, which a station process starved beside burners keeps (7 % seen)
         assert abs(moved - 0.01 * span) < 0.001 * span, f"carriage moved {moved} m in {span:.2f} s"
