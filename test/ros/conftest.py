@@ -397,7 +397,7 @@ def shared_node(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPat
         _stop_and_report(node)
 
 
-# -- the simulated station's bus --------------------------------------------------------------------
+# -- the simulated station's bus -------------------------------------------------------------------
 def station_channel(bus_channel: str, domain_id: int) -> str:
     """The udp_multicast channel a default-named node with ``bus.channel`` = ``bus_channel`` in
     DDS domain ``domain_id`` shares with its simulated station child (the node's own rule)."""
