@@ -11,7 +11,11 @@ wrapper). Behaviour (000 chapter 4, CiA 301):
   cycle at ``clock()``; EMCYs follow the diagnostics edges; in OPERATIONAL the synchronous
   RPDOs are applied first and the due TPDOs are sent after the cycle;
 * heartbeat producer per 0x1017 (canopen's ``NmtSlave``);
-* ``silent = True`` mutes everything the station sends (fault "gateway silent").
+* ``silent = True`` mutes everything the station sends (fault "gateway silent");
+* frames reach it through its CAN controller's receive FIFO (``controller.py``): a few frames
+  deep, a stalled gateway loses the rest (EMCY 0x8110 once per overrun episode) and latches a
+  SYNC when it handles it; ``queue_backlog = True`` keeps every frame instead (fault
+  QUEUE_BACKLOG: every queued SYNC answered, latched at its own wire time).
 
 All bus callbacks run on the network's notifier thread and take the gateway lock, so the
 modules are only ever touched by one thread at a time.
@@ -31,9 +35,9 @@ from canopen.sdo import SdoAbortedError, SdoServer
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
-from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, LossyBus, take_bus
+from ssi_bridge.sim.gateway.controller import ControllerListener, RxFifo, grace_for
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.sim.gateway.emergency import Emergencies
 from ssi_bridge.sim.gateway.objects import EncoderObjects
@@ -118,6 +122,11 @@ class XnGateway:
         self.network: BridgeNetwork | None = None
         self._sync_cob: int | None = None
         self._answering: float | None = None  # wire time of the SYNC being answered
+        #: the CAN controller's receive FIFO (frames lost to overruns, late handling)
+        self.rx_fifo = RxFifo()
+        #: the FIFO's handling grace (s) from :meth:`start` on; None: by the bus
+        #: (``controller.grace_for``: unbounded in-process, 20 ms for a station process)
+        self.stall_grace: float | None = None
         #: SYNC cycles run so far
         self.cycles = 0
 
@@ -129,11 +138,14 @@ class XnGateway:
         inner = take_bus(self._source, "this gateway")
         if not isinstance(self._source, BusConfig):
             self._source = None  # a handed-over bus is taken once
+        self.rx_fifo.grace = grace_for(inner) if self.stall_grace is None else self.stall_grace
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        # subscribers get each frame's wire time: a SYNC latches where it was on the wire
-        # and no undecodable datagram, receive error or raising callback stops the station
-        listener = GuardedListener(self.network, f"gateway node {self.node_id}")
+        # subscribers get each frame's handling time through the controller's receive FIFO
+        # (a SYNC latches then) and no undecodable datagram, receive error or raising
+        # callback stops the station
+        listener = ControllerListener(self.network, f"gateway node {self.node_id}",
+                                      self.rx_fifo, self._on_overrun)
         self.network.listeners[:] = [listener]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
@@ -180,6 +192,17 @@ class XnGateway:
         if self.bus is None:
             raise BusError("gateway not started")
         self.bus.muted = bool(value)
+
+    @property
+    def queue_backlog(self) -> bool:
+        """True while the gateway queues every received frame and answers every SYNC
+        (fault QUEUE_BACKLOG) instead of holding what its controller's FIFO holds."""
+        return self.rx_fifo.queueing
+
+    @queue_backlog.setter
+    def queue_backlog(self, value: bool) -> None:
+        with self._lock:
+            self.rx_fifo.set_queueing(value)
 
     @property
     def nmt_state(self) -> str:
@@ -239,6 +262,14 @@ class XnGateway:
             except can.CanError as err:
                 logger.warning("gateway could not send EMCY: %s", err)
 
+    def _on_overrun(self, lost: int) -> None:
+        """The controller's FIFO lost a frame, the first of an overrun episode (receive
+        thread): EMCY 0x8110 where the NMT state allows EMCY (CiA 301: not in STOPPED)."""
+        logger.warning("gateway node %d: CAN overrun, frames lost (%d so far)", self.node_id,
+                       lost)
+        with self._lock:
+            self.emergencies.overrun(lost, may_send=self.node.nmt.state in _SDO_STATES)
+
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) < 2 or data[1] not in (0, self.node_id):
             return
@@ -248,16 +279,18 @@ class XnGateway:
                 self._boot(reset_application=data[0] == NMT_CMD_RESET_NODE)
 
     def _acquisition_time(self, timestamp: float) -> float:
-        """Model time at which the SYNC frame was on the wire: every module latches then.
+        """Model time at which the gateway handles the SYNC: every module latches then.
 
-        A real XN-1SSI latches on the SYNC's arrival. ``timestamp`` is the wire time its last
-        bit was on the wire (``WireTimeListener``: on udp_multicast the sender's end of frame,
-        not the receive time, which is late by however long the sender slept past it; on
-        socketcan the kernel's receive time), so the latch is that instant in the model
-        clock: one subtraction of a constant, no clock read, whenever this thread gets to run. (It used
-        to read the model clock and ``time.time()`` in two statements: a thread switch between
-        them moved the latch back by the switch, into the previous burst's monoflop time, and
-        the module saw a line held low: a false ERR_SSI.) Without a timestamp: now.
+        A real gateway latches its modules when its firmware handles the SYNC. ``timestamp``
+        is that instant as the controller model gives it (``controller.py``): the SYNC's wire
+        time when the station's thread got to it within the grace (on udp_multicast the
+        sender's end of frame, not the receive time, which is late by however long the
+        sender slept past it), the wire time at which the thread handled it after a stall,
+        and under QUEUE_BACKLOG always the SYNC's wire time. The latch is that instant in the
+        model clock: one subtraction of a constant, no clock read here. (It used to read the
+        model clock and ``time.time()`` in two statements: a thread switch between them moved
+        the latch back by the switch, into the previous burst's monoflop time, and the module
+        saw a line held low: a false ERR_SSI.) Without a timestamp: now.
         """
         return self.clock.at(timestamp) if timestamp else self.clock()
 
@@ -274,10 +307,14 @@ class XnGateway:
             except Exception:  # a module bug must not kill the notifier thread
                 logger.exception("module cycle failed")
             self.cycles += 1
-            self.emergencies.update([m.diag for m in self.modules], may_send=True)
+            emergencies = self.emergencies
+            if emergencies.overrun_active:
+                emergencies.overrun_over(may_send=True)  # the FIFO took this SYNC
+            emergencies.update([m.diag for m in self.modules], may_send=True)
             if operational:
-                # synchronous TPDOs answer this SYNC only: not once a newer one is on the wire
-                self._answering = timestamp or None
+                # synchronous TPDOs answer this SYNC only: not once a newer one is on the
+                # wire; a queueing device answers every SYNC it queued, however late
+                self._answering = None if self.rx_fifo.queueing else (timestamp or None)
                 try:
                     self.pdo.on_sync()
                 finally:
