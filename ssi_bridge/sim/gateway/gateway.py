@@ -54,6 +54,12 @@ NMT_CMD_RESET_COMM = 0x82
 NMT_CMD_PRE_OPERATIONAL = 0x80
 SYNC_COB_OBJECT = 0x1005
 _SDO_STATES = ("PRE-OPERATIONAL", "OPERATIONAL")
+#: rest (s) after a cycle's last SSI clock burst before the next cycle may latch: longer than
+#: any encoder's monoflop time (15-25 us SICK, 004 §2.2; 9-41 us TR, 001 §5.2.3; 150 us ATM60),
+#: so SYNCs a stalled gateway handles back to back read the line one after the other, as one
+#: firmware does, instead of clocking an encoder that still holds its line low. SYNCs on time
+#: are further apart (1 ms at 1 kHz) and latch at their wire time, untouched
+SSI_REST_S = 200e-6
 
 
 class _StationSdo(SdoServer):
@@ -129,6 +135,8 @@ class XnGateway:
         self.stall_grace: float | None = None
         #: SYNC cycles run so far
         self.cycles = 0
+        # model time before which no new cycle latches: the last SSI reads and their rest
+        self._next_latch = -float("inf")
 
     # -- life cycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -302,10 +310,15 @@ class XnGateway:
             operational = state == "OPERATIONAL"
             if operational:
                 self.pdo.apply_pending()
+            t = self._acquisition_time(timestamp)
+            if t < self._next_latch:
+                t = self._next_latch  # the previous cycle's SSI reads still run
             try:
-                self.objects.cycle(self._acquisition_time(timestamp))
+                self.objects.cycle(t)
             except Exception:  # a module bug must not kill the notifier thread
                 logger.exception("module cycle failed")
+            self._next_latch = max((r.end_time for m in self.modules
+                                    if (r := m.last_readout) is not None), default=t) + SSI_REST_S
             self.cycles += 1
             emergencies = self.emergencies
             if emergencies.overrun_active:
