@@ -39,6 +39,7 @@ it on the gateway's receive path.
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 from collections.abc import Callable
 
@@ -47,8 +48,11 @@ import canopen
 
 from can.interfaces.virtual import VirtualBus
 
+from ssi_bridge.base.realtime import fifo_this_thread
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import wire_now
+
+logger = logging.getLogger(__name__)
 
 #: frames the controller's receive FIFO holds (bxCAN: 3 mailboxes per FIFO)
 RX_FIFO_DEPTH = 3
@@ -153,18 +157,28 @@ class ControllerListener(GuardedListener):
 
     Subscribers get each frame with its firmware handling time (a SYNC latches then); a frame
     the FIFO lost reaches none. ``on_overrun(lost)`` is called (receive thread) with the
-    total of lost frames at the first loss of each episode.
+    total of lost frames at the first loss of each episode. ``priority``: the receive thread
+    (which answers SYNCs) takes SCHED_FIFO ``priority`` with its first frame, as a station
+    process's threads do (``simulation.station_priority``); it is the simulated firmware,
+    and its delays put the station's answers late on the wire.
     """
 
     def __init__(self, network: canopen.Network, name: str, fifo: RxFifo,
-                 on_overrun: Callable[[int], None], clock: Callable[[], float] = wire_now
-                 ) -> None:
+                 on_overrun: Callable[[int], None], clock: Callable[[], float] = wire_now,
+                 priority: int = 0) -> None:
         super().__init__(network, name)
         self.fifo = fifo
         self._on_overrun = on_overrun
         self._clock = clock
+        # SCHED_FIFO priority the receive thread takes with its first frame (0: none)
+        self._priority = priority
 
     def handling_time(self, msg: can.Message, wire_t: float) -> float | None:
+        if self._priority:
+            priority, self._priority = self._priority, 0
+            if not fifo_this_thread(priority):
+                logger.info("%s: SCHED_FIFO %d not permitted, receiving normally", self.name,
+                            priority)
         now = self._clock()
         stamp = msg.timestamp
         if not wire_t:

@@ -133,6 +133,9 @@ class XnGateway:
         #: the FIFO's handling grace (s) from :meth:`start` on; None: by the bus
         #: (``controller.grace_for``: unbounded in-process, 20 ms for a station process)
         self.stall_grace: float | None = None
+        #: SCHED_FIFO priority of the receive thread from :meth:`start` on (0: none); the
+        #: node's in-process station gets ``simulation.station_priority``
+        self.rx_priority = 0
         #: SYNC cycles run so far
         self.cycles = 0
         # model time before which no new cycle latches: the last SSI reads and their rest
@@ -153,7 +156,8 @@ class XnGateway:
         # (a SYNC latches then) and no undecodable datagram, receive error or raising
         # callback stops the station
         listener = ControllerListener(self.network, f"gateway node {self.node_id}",
-                                      self.rx_fifo, self._on_overrun)
+                                      self.rx_fifo, self._on_overrun,
+                                      priority=self.rx_priority)
         self.network.listeners[:] = [listener]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()
@@ -176,7 +180,10 @@ class XnGateway:
             self._sync_cob = None
         network.disconnect()
         self.bus = None
-        logger.info("gateway node %d stopped", self.node_id)
+        fifo = self.rx_fifo
+        logger.info("gateway node %d stopped; receive FIFO: %d frame(s) lost in %d overrun(s), "
+                    "%d taken after a stall, longest delay %.1f ms", self.node_id, fifo.lost,
+                    fifo.overruns, fifo.late, fifo.worst_delay * 1000.0)
 
     def __enter__(self) -> XnGateway:
         self.start()
