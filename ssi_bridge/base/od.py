@@ -15,7 +15,7 @@ from ssi_bridge.base.canopen_compat import set_eds_default
 from ssi_bridge.protocol.dictionary import (
     DEVICE_NAME, DEVICE_TYPE, ENCODER_OBJECTS, ERROR_HISTORY, IDENTITY_COMMENT, MAP_ENTRIES,
     MAX_SLOTS, N_PDOS, PROCESS_INPUT, PROCESS_OUTPUT, PRODUCT_CODE, REVISION, RPDO_COM,
-    RPDO_MAP, SERIAL, SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE, SIMULATION,
+    RPDO_MAP, SERIAL, SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_EPOCH, SIM_RATE, SIMULATION,
     TPDO_COM, TPDO_MAP, TRANS_EVENT, VENDOR_ID, PDO_INVALID, rpdo_cob_base, tpdo_cob_base,
 )
 from ssi_bridge.protocol.dictionary import DataType as dt
@@ -90,11 +90,15 @@ SIMULATION_OBJECTS: tuple[tuple[int, str, int, str, str], ...] = (
      "to inject"),
     (SIM_ACTIVE, "SIM faults active", dt.UNSIGNED32, "ro",
      "bit k set while a fault of kind k is in force"),
+    (SIM_EPOCH, "SIM motion epoch us", dt.UNSIGNED64, "ro",
+     "wire time (CLOCK_REALTIME, microseconds since 1970) at which the simulated encoders' "
+     "motion time is 0"),
 )
 
 
 def _simulation_objects(d: od.ObjectDictionary) -> None:
-    """0x4000-0x4003: fault injection of the simulated station (simulation only)."""
+    """0x4000-0x4004: fault injection and motion epoch of the simulated station (simulation
+    only)."""
     for index, name, data_type, access, _text in SIMULATION_OBJECTS:
         var = _var(name, index, 0, data_type, access, 0.0 if data_type == dt.REAL32 else 0)
         if data_type == dt.REAL32:
@@ -159,9 +163,9 @@ def write_eds(path: str, slots: int = MAX_SLOTS) -> None:
     d = build_dictionary(1, slots)
     sim = "".join(f"0x{index:04X} {name} ({access}): {text}\n"
                   for index, name, _t, access, text in SIMULATION_OBJECTS)
-    d.comments = ("Objects 0x4000-0x4003 exist only in the simulated station (ssi_bridge): "
-                  "fault injection.\nA real XN-GW-CANOPEN aborts access to them "
-                  "(0x06020000, object does not exist).\n" + sim + IDENTITY_COMMENT +
+    d.comments = ("Objects 0x4000-0x4004 exist only in the simulated station (ssi_bridge): "
+                  "fault injection and the motion epoch.\nA real XN-GW-CANOPEN aborts access to "
+                  "them (0x06020000, object does not exist).\n" + sim + IDENTITY_COMMENT +
                   "\n0x6800-0x6FFF: the CiA 406 encoder profile as the gateway's second logical "
                   "device (CiA 406 index + 0x800; 0x6FFF = 0x000A0196).")
     stamp = {"CreationDate": "01-01-2025", "CreationTime": "12:00AM",

@@ -102,7 +102,9 @@ class GuardedListener(WireTimeListener):
             return
         callbacks = subscribers(network, can_id)
         if callbacks:
-            wire_t = frame_wire_time(msg)
+            wire_t = self.handling_time(msg, frame_wire_time(msg))
+            if wire_t is None:
+                return  # not handled (a receiver that models its controller lost it)
             for callback in callbacks:  # as canopen's notify (no copy per frame)
                 try:
                     callback(can_id, msg.data, wire_t)
@@ -121,6 +123,13 @@ class GuardedListener(WireTimeListener):
         self._log.warning(MALFORMED, "%s: frame 0x%03X [%s] with %d byte(s) is %s: dropped "
                           "(%d malformed so far)", self.name, can_id, bytes(data).hex(" "),
                           len(data), why, self.faults[MALFORMED])
+
+    def handling_time(self, msg: can.Message, wire_t: float) -> float | None:
+        """The time handed to the subscribers of ``msg`` (a frame someone subscribed to, on
+        the wire at ``wire_t``): ``wire_t`` itself. A subclass that models a receiver's
+        controller returns when its firmware handles the frame, or None for a frame it lost
+        (the subscribers do not get it)."""
+        return wire_t
 
     def on_error(self, exc: Exception) -> None:
         """A receive error (receive thread): counted and logged; receiving goes on."""

@@ -16,8 +16,8 @@ Layout (see ``docs/canopen.md``):
   image of each slot, image byte k in bits 8k..8k+7 (the CAN payload is the image in order);
 * the encoder objects of Table 16 as ARRAYs (sub 0 = number of slots), the data types,
   access and PDO mapping of description Tables 17-49;
-* 0x4000-0x4003: simulation only, fault injection into the simulated station (not in the
-  manual; a real gateway has no such objects).
+* 0x4000-0x4004: simulation only, fault injection into the simulated station and its motion
+  epoch (not in the manual; a real gateway has no such objects).
 """
 
 from __future__ import annotations
@@ -104,6 +104,9 @@ TPDO_COM, TPDO_MAP, RPDO_COM, RPDO_MAP = 0x1800, 0x1A00, 0x1400, 0x1600
 #: rate (REAL32 0-1), duration (ms, 0 = until cleared), command (kind | slot << 8) and the
 #: kinds in force (bit mask); served by sim/gateway/simulation.py
 SIM_RATE, SIM_DURATION, SIM_COMMAND, SIM_ACTIVE = 0x4000, 0x4001, 0x4002, 0x4003
+#: simulation-only: the station's motion epoch, the wire time (CLOCK_REALTIME) at which every
+#: simulated encoder's motion time is 0, in whole microseconds (UNSIGNED64, read-only)
+SIM_EPOCH = 0x4004
 PROCESS_INPUT, PROCESS_OUTPUT = 0x2000, 0x2100
 
 

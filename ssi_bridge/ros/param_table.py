@@ -65,9 +65,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "again for its first SDO answer (a station process on a busy machine may be late)",
         read_only=True, float_range=(0.5, 120.0))),
     "simulation.station_priority": (10, _describe(
-        "simulation.transport udp_multicast: SCHED_FIFO priority of the station child process, "
-        "which stands in for hardware that never waits for a CPU (0: normal scheduling; needs "
-        "CAP_SYS_NICE or an rtprio limit, else the node says so and schedules it normally)",
+        "SCHED_FIFO priority of the simulated station: the child process (udp_multicast) or "
+        "the in-process station's receive thread (virtual), which stand in for hardware that "
+        "never waits for a CPU (0: normal scheduling; needs CAP_SYS_NICE or an rtprio limit, "
+        "else the node says so and schedules it normally)",
         read_only=True, int_range=(0, 99))),
     "bus.interface": ("virtual", _describe(
         "python-can interface (virtual, socketcan, pcan, kvaser, ...)", read_only=True)),

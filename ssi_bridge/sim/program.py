@@ -45,7 +45,7 @@ Buses (python-can interfaces):
   socketcan      channel can0, vcan0, ...: a real or virtual SocketCAN interface
 
 Fault injection reaches the station over the bus: simulation-only SDO objects
-0x4000-0x4003 (see docs/canopen.md).
+0x4000-0x4003, and 0x4004 holds the motion epoch (see docs/canopen.md).
 
 Stop with Ctrl-C or SIGTERM (exit 0). Exit 2: bad parameters; exit 1: the bus cannot be
 opened.

@@ -1,4 +1,5 @@
-"""The simulated station's fault objects 0x4000-0x4003, driven over SDO by our master.
+"""The simulated station's objects 0x4000-0x4004 (faults, motion epoch), driven over SDO by our
+master.
 
 One control path: a fault reaches the station the way every other request does, as SDO
 writes on the bus (docs/canopen.md, "Simulation-only objects"). What a fault does is checked
@@ -19,7 +20,9 @@ from ssi_bridge.exceptions import GatewayUnavailable, SdoAbortError
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.bus import open_bus
-from ssi_bridge.protocol.dictionary import SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE
+from ssi_bridge.protocol.dictionary import (
+    SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_EPOCH, SIM_RATE,
+)
 from ssi_bridge.protocol.settings import station_settings
 from ssi_bridge.sim.gateway.simulation import FaultKind, command_word
 from ssi_bridge.sim.gateway.station import Station
@@ -135,3 +138,18 @@ def test_a_duration_ends_only_its_own_fault(rig) -> None:
         (FaultKind.DATA_WIRE_BREAK, 2)]
     assert not station.sim.channels["a"].line.faults.data_break
     assert station.sim.channels["b"].line.faults.data_break
+
+
+def test_the_motion_epoch_is_readable_and_places_every_shaft(rig) -> None:
+    # 0x4004: the wire time (us) at which the encoders' motion time is 0. A SYNC at wire time
+    # t latches each shaft at motion time t - epoch (000 "Process data": acquired on the SYNC)
+    station, client = rig
+    epoch_us = client.read_object(SIM_EPOCH)
+    assert isinstance(epoch_us, int)
+    assert epoch_us == round(station.model_clock.epoch * 1e6)
+    t = client.sync()
+    wait_for(lambda: (s := client.latest(1)) is not None and s.sync_time >= t, "no TPDO")
+    channel = station.sim.channels["a"]
+    assert channel.line.last_frame.latch_time == pytest.approx(t - epoch_us / 1e6, abs=2e-6)
+    with pytest.raises(SdoAbortError):  # read-only (CiA 301 abort 0x06010002)
+        client.write_object(SIM_EPOCH, 0, 0)

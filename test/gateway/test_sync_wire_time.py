@@ -1,4 +1,5 @@
-"""A SYNC between processes latches at its wire time, not at its (late) arrival.
+"""A SYNC between processes latches at its wire time, not at its (late) arrival; answers are
+stamped when really sent.
 
 On udp_multicast a frame reaches the other process when its sender's thread gets to send it:
 the sender stamps the frame's end on the simulated wire, sleeps until then and sends, and
@@ -132,60 +133,57 @@ def test_a_station_latches_on_the_syncs_wire_time_not_on_its_late_arrival(channe
         station.stop()
 
 
-def test_a_late_stations_tpdos_answer_on_the_syncs_wire_time_line(channel: str) -> None:
-    # CiA 301: synchronous TPDOs go out inside their SYNC's cycle. A station that gets to the
-    # SYNC late (a starved process) still puts them right after that SYNC on the wire, so a
-    # master counts them for it, not for a newer SYNC sent meanwhile (client/samples.py)
+def test_a_late_syncs_answer_is_stamped_when_it_is_really_sent(channel: str) -> None:
+    # The SYNC's datagram goes out LATE after its end on the wire (its sender woke late). The
+    # station hears it only then: it latches at the SYNC's wire time (its own thread was on
+    # time, docs/canopen.md "Stalls"), and its TPDOs go on the wire when they are really sent,
+    # never at a wire time before that: a receiver that has seen the wire up to some instant
+    # never gets a frame claiming an earlier one (a CAN frame is on the wire when it is sent)
     from ssi_bridge.client.master import BridgeClient
-    from ssi_bridge.protocol.wire import frame_bits
 
     settings = station_settings({"joints": ["j"], "j.slot": 1,
                                  "bus.interface": "udp_multicast", "bus.channel": channel})
     station = Station(settings)
     station.start()
-    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1, opener=wire_bus)
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1,
+                          opener=wire_bus)
     master = open_udp_bus(channel)
     try:
         client.connect()  # OPERATIONAL, TPDO1 (image) and TPDO9 (positions) on SYNC
-        # the station's heartbeat thread goes on sending (at its own "now"), also between the
-        # SYNC's end and the moment the station gets to the SYNC
-        client.write_object(0x1017, 0, 5)
         client.close()
         time.sleep(3 * LATE)
         sync_wire = wire_now() - LATE
+        sent = wire_now()  # the datagram leaves now
         master.send(can.Message(arbitration_id=0x080, is_extended_id=False,
                                 timestamp=sync_wire))
         got = [_recv(master, 0x181), _recv(master, 0x1E1)]
-        ends = sorted(frame_wire_time(m) for m in got)
-        # back to back from the SYNC's end: each frame its own length at the bit rate
-        first_len = min(frame_bits(m.arbitration_id, m.data) for m in got) / 500_000
-        assert ends[0] >= sync_wire + first_len - 1e-9
-        assert ends[-1] - sync_wire < 0.002  # not LATE after it, where the thread ran
+        assert min(frame_wire_time(m) for m in got) > sent
+        module = station.sim.modules[0]
+        assert module.latch_time == pytest.approx(station.model_clock.at(sync_wire), abs=1e-9)
     finally:
         master.shutdown()
         client.close()
         station.stop()
 
 
-def test_an_answer_goes_in_the_first_gap_after_its_sync() -> None:
+def test_an_answer_goes_on_the_wire_when_it_is_ready_never_before() -> None:
     # a heartbeat this process put on the wire 5 ms after the SYNC, before the station got
-    # to the SYNC: the answer fits in before it; where it does not fit, it goes after it
+    # to the SYNC: the answer goes after it, at its own ready time, not in a gap before it
     from ssi_bridge.sim.gateway.bus import Wire
     from ssi_bridge.protocol.wire import frame_bits
 
     wire = Wire(500_000)
     sync_end = 100.0
-    wire.observe(sync_end, sync=True, length=frame_bits(0x080, b"") / 500_000)
+    wire.observe(sync_end, sync=True)
     hb_end = wire.claim(frame_bits(0x701, b"\x05"), sync_end + 0.005)
     tpdo = can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False)
-    assert wire.claim_all([tpdo], sync_end, answering=sync_end)
-    assert tpdo.timestamp == pytest.approx(sync_end + frame_bits(0x181, bytes(8)) / 500_000)
-    assert wire.busy_until == hb_end  # the wire's end is still the heartbeat's
-    # a gap too short for a burst of 100 frames: it goes after the heartbeat
-    burst = [can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False)
-             for _ in range(100)]
-    assert wire.claim_all(burst, sync_end, answering=sync_end)
-    assert burst[0].timestamp > hb_end
+    length = frame_bits(0x181, bytes(8)) / 500_000
+    assert wire.claim_all([tpdo], sync_end + 0.001, answering=sync_end)
+    assert tpdo.timestamp == pytest.approx(hb_end + length)  # behind the heartbeat
+    ready = hb_end + 0.010
+    late = can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False)
+    assert wire.claim_all([late], ready, answering=sync_end)
+    assert late.timestamp == pytest.approx(ready + length)  # at its ready time, not earlier
     # a newer SYNC on the wire: no answer to the older one (CiA 301 synchronous window)
-    wire.observe(hb_end + 0.5, sync=True)
-    assert not wire.claim_all([tpdo], sync_end, answering=sync_end)
+    wire.observe(ready + 0.5, sync=True)
+    assert not wire.claim_all([tpdo], ready + 0.6, answering=sync_end)

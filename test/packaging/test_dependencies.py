@@ -57,8 +57,11 @@ def third_party(found: dict[str, set[str]], local: set[str]) -> dict[str, set[st
 
 
 def local_test_modules() -> set[str]:
-    """Modules a test imports from its own folder (``conftest``, helper scripts)."""
-    return {p.stem for p in (REPO / "test").rglob("*.py")}
+    """Modules a test imports from its own folder (``conftest``, helper scripts) and the
+    test-side packages (``support``)."""
+    tests = REPO / "test"
+    return ({p.stem for p in tests.rglob("*.py")}
+            | {p.parent.name for p in tests.rglob("__init__.py")})
 
 
 @cache

@@ -10,6 +10,8 @@ REG_PARA1 paths in test_node_live.py.
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from ssi_bridge_msgs.msg import Event, Status
 from ssi_bridge_msgs.srv import ReadRegister, SdoRead, SdoWrite
@@ -50,6 +52,26 @@ def test_sdo_read_of_a_missing_object_gives_the_abort_and_its_meaning(shared_nod
     # an object of the EDS with a subindex the station does not have
     sub = _read(shared_probe, node, index=0x6820, subindex=9)
     assert not sub.success and sub.abort_code == 0x0609_0011, sub.message
+
+
+def test_the_motion_epoch_reads_as_unsigned64_and_places_every_published_position(
+        shared_node, shared_probe):
+    # 0x4004 (docs/canopen.md): the wire time in us at which the simulated shafts' motion time
+    # is 0; with it and the node's parameters the truth oracle knows where the encoder was at
+    # each stamp (header.stamp = the SYNC latch, docs/node.md)
+    from sensor_msgs.msg import JointState
+    from support.truth import TruthOracle, samples_from_joint_states
+
+    node = shared_node()
+    res = _read(shared_probe, node, index=0x4004)
+    assert res.success and res.data_type == "UNSIGNED64", res.message
+    epoch = res.unsigned_value / 1e6
+    assert time.time() - 600 < epoch < time.time(), epoch
+    seen = shared_probe.subscribe(JointState, node.topic("joint_states"))
+    shared_probe.wait_for(lambda: len(seen) >= 50, 20.0, "50 joint_states", node)
+    oracle = TruthOracle.from_params({"joints": ["joint1"]}, epoch)  # the node's defaults
+    report = oracle.check(samples_from_joint_states(m for _, m in list(seen)[:50]))
+    assert report.checked == 50 and report.ok, report.summary()
 
 
 @pytest.mark.parametrize("fields, words", [

@@ -11,7 +11,11 @@ wrapper). Behaviour (000 chapter 4, CiA 301):
   cycle at ``clock()``; EMCYs follow the diagnostics edges; in OPERATIONAL the synchronous
   RPDOs are applied first and the due TPDOs are sent after the cycle;
 * heartbeat producer per 0x1017 (canopen's ``NmtSlave``);
-* ``silent = True`` mutes everything the station sends (fault "gateway silent").
+* ``silent = True`` mutes everything the station sends (fault "gateway silent");
+* frames reach it through its CAN controller's receive FIFO (``controller.py``): a few frames
+  deep, a stalled gateway loses the rest (EMCY 0x8110 once per overrun episode) and latches a
+  SYNC when it handles it; ``queue_backlog = True`` keeps every frame instead (fault
+  QUEUE_BACKLOG: every queued SYNC answered, latched at its own wire time).
 
 All bus callbacks run on the network's notifier thread and take the gateway lock, so the
 modules are only ever touched by one thread at a time.
@@ -35,6 +39,7 @@ from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.frame_rules import station_rules
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, LossyBus, take_bus
+from ssi_bridge.sim.gateway.controller import ControllerListener, RxFifo, grace_for
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.sim.gateway.emergency import Emergencies
 from ssi_bridge.sim.gateway.objects import EncoderObjects
@@ -52,6 +57,12 @@ NMT_CMD_RESET_COMM = 0x82
 NMT_CMD_PRE_OPERATIONAL = 0x80
 SYNC_COB_OBJECT = 0x1005
 _SDO_STATES = ("PRE-OPERATIONAL", "OPERATIONAL")
+#: rest (s) after a cycle's last SSI clock burst before the next cycle may latch: longer than
+#: any encoder's monoflop time (15-25 us SICK, 004 §2.2; 9-41 us TR, 001 §5.2.3; 150 us ATM60),
+#: so SYNCs a stalled gateway handles back to back read the line one after the other, as one
+#: firmware does, instead of clocking an encoder that still holds its line low. SYNCs on time
+#: are further apart (1 ms at 1 kHz) and latch at their wire time, untouched
+SSI_REST_S = 200e-6
 
 
 class _StationNode(canopen.LocalNode):
@@ -108,8 +119,18 @@ class XnGateway:
         self.listener: GuardedListener | None = None
         self._sync_cob: int | None = None
         self._answering: float | None = None  # wire time of the SYNC being answered
+        #: the CAN controller's receive FIFO (frames lost to overruns, late handling)
+        self.rx_fifo = RxFifo()
+        #: the FIFO's handling grace (s) from :meth:`start` on; None: by the bus
+        #: (``controller.grace_for``: unbounded in-process, 20 ms for a station process)
+        self.stall_grace: float | None = None
+        #: SCHED_FIFO priority of the receive thread from :meth:`start` on (0: none); the
+        #: node's in-process station gets ``simulation.station_priority``
+        self.rx_priority = 0
         #: SYNC cycles run so far
         self.cycles = 0
+        # model time before which no new cycle latches: the last SSI reads and their rest
+        self._next_latch = -float("inf")
 
     # -- life cycle -------------------------------------------------------------------------
     def start(self) -> None:
@@ -119,11 +140,15 @@ class XnGateway:
         inner = take_bus(self._source, "this gateway")
         if not isinstance(self._source, BusConfig):
             self._source = None  # a handed-over bus is taken once
+        self.rx_fifo.grace = grace_for(inner) if self.stall_grace is None else self.stall_grace
         self.bus = LossyBus(inner)
         self.network = BridgeNetwork(self.bus)
-        # subscribers get each frame's wire time: a SYNC latches where it was on the wire
-        # and no undecodable datagram, receive error or raising callback stops the station
-        listener = GuardedListener(self.network, f"gateway node {self.node_id}")
+        # subscribers get each frame's handling time through the controller's receive FIFO
+        # (a SYNC latches then) and no undecodable datagram, receive error or raising
+        # callback stops the station
+        listener = ControllerListener(self.network, f"gateway node {self.node_id}",
+                                      self.rx_fifo, self._on_overrun,
+                                      priority=self.rx_priority)
         # an NMT command or SDO request of another length, or an SDO segment outside a
         # transfer, is counted and logged as malformed, never decoded (protocol/frame_rules)
         listener.rules.update(station_rules(self.node_id))
@@ -152,7 +177,10 @@ class XnGateway:
             self._sync_cob = None
         network.disconnect()
         self.bus = None
-        logger.info("gateway node %d stopped", self.node_id)
+        fifo = self.rx_fifo
+        logger.info("gateway node %d stopped; receive FIFO: %d frame(s) lost in %d overrun(s), "
+                    "%d taken after a stall, longest delay %.1f ms", self.node_id, fifo.lost,
+                    fifo.overruns, fifo.late, fifo.worst_delay * 1000.0)
 
     def __enter__(self) -> XnGateway:
         self.start()
@@ -176,6 +204,17 @@ class XnGateway:
         if self.bus is None:
             raise BusError("gateway not started")
         self.bus.muted = bool(value)
+
+    @property
+    def queue_backlog(self) -> bool:
+        """True while the gateway queues every received frame and answers every SYNC
+        (fault QUEUE_BACKLOG) instead of holding what its controller's FIFO holds."""
+        return self.rx_fifo.queueing
+
+    @queue_backlog.setter
+    def queue_backlog(self, value: bool) -> None:
+        with self._lock:
+            self.rx_fifo.set_queueing(value)
 
     @property
     def nmt_state(self) -> str:
@@ -235,6 +274,14 @@ class XnGateway:
             except can.CanError as err:
                 logger.warning("gateway could not send EMCY: %s", err)
 
+    def _on_overrun(self, lost: int) -> None:
+        """The controller's FIFO lost a frame, the first of an overrun episode (receive
+        thread): EMCY 0x8110 where the NMT state allows EMCY (CiA 301: not in STOPPED)."""
+        logger.warning("gateway node %d: CAN overrun, frames lost (%d so far)", self.node_id,
+                       lost)
+        with self._lock:
+            self.emergencies.overrun(lost, may_send=self.node.nmt.state in _SDO_STATES)
+
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) < 2 or data[1] not in (0, self.node_id):
             return
@@ -244,16 +291,18 @@ class XnGateway:
                 self._boot(reset_application=data[0] == NMT_CMD_RESET_NODE)
 
     def _acquisition_time(self, timestamp: float) -> float:
-        """Model time at which the SYNC frame was on the wire: every module latches then.
+        """Model time at which the gateway handles the SYNC: every module latches then.
 
-        A real XN-1SSI latches on the SYNC's arrival. ``timestamp`` is the wire time its last
-        bit was on the wire (``WireTimeListener``: on udp_multicast the sender's end of frame,
-        not the receive time, which is late by however long the sender slept past it; on
-        socketcan the kernel's receive time), so the latch is that instant in the model
-        clock: one subtraction of a constant, no clock read, whenever this thread gets to run. (It used
-        to read the model clock and ``time.time()`` in two statements: a thread switch between
-        them moved the latch back by the switch, into the previous burst's monoflop time, and
-        the module saw a line held low: a false ERR_SSI.) Without a timestamp: now.
+        A real gateway latches its modules when its firmware handles the SYNC. ``timestamp``
+        is that instant as the controller model gives it (``controller.py``): the SYNC's wire
+        time when the station's thread got to it within the grace (on udp_multicast the
+        sender's end of frame, not the receive time, which is late by however long the
+        sender slept past it), the wire time at which the thread handled it after a stall,
+        and under QUEUE_BACKLOG always the SYNC's wire time. The latch is that instant in the
+        model clock: one subtraction of a constant, no clock read here. (It used to read the
+        model clock and ``time.time()`` in two statements: a thread switch between them moved
+        the latch back by the switch, into the previous burst's monoflop time, and the module
+        saw a line held low: a false ERR_SSI.) Without a timestamp: now.
         """
         return self.clock.at(timestamp) if timestamp else self.clock()
 
@@ -265,15 +314,24 @@ class XnGateway:
             operational = state == "OPERATIONAL"
             if operational:
                 self.pdo.apply_pending()
+            t = self._acquisition_time(timestamp)
+            if t < self._next_latch:
+                t = self._next_latch  # the previous cycle's SSI reads still run
             try:
-                self.objects.cycle(self._acquisition_time(timestamp))
+                self.objects.cycle(t)
             except Exception:  # a module bug must not kill the notifier thread
                 logger.exception("module cycle failed")
+            self._next_latch = max((r.end_time for m in self.modules
+                                    if (r := m.last_readout) is not None), default=t) + SSI_REST_S
             self.cycles += 1
-            self.emergencies.update([m.diag for m in self.modules], may_send=True)
+            emergencies = self.emergencies
+            if emergencies.overrun_active:
+                emergencies.overrun_over(may_send=True)  # the FIFO took this SYNC
+            emergencies.update([m.diag for m in self.modules], may_send=True)
             if operational:
-                # synchronous TPDOs answer this SYNC only: not once a newer one is on the wire
-                self._answering = timestamp or None
+                # synchronous TPDOs answer this SYNC only: not once a newer one is on the
+                # wire; a queueing device answers every SYNC it queued, however late
+                self._answering = None if self.rx_fifo.queueing else (timestamp or None)
                 try:
                     self.pdo.on_sync()
                 finally:

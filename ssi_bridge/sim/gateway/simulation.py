@@ -2,11 +2,15 @@
 
 A master injects a fault by writing 0x4000 (rate), 0x4001 (duration in ms) and then
 0x4002 (command: kind in bits 0-7, slot in bits 8-15, slot 0 = the bus); 0x4003 reads the
-kinds in force as a bit mask. Each fault acts where a real one would: a broken wire or noise
+kinds in force as a bit mask. 0x4004 reads the station's motion epoch (``epoch_us``): the wire
+time in microseconds at which its encoders' motion time is 0, so a checker outside the
+station knows where every shaft was at any wire time without fitting it. Each fault acts where a real one would: a broken wire or noise
 on a slot's SSI line, an error or power-failure bit in its encoder, an invalid REG_PARA1 set
 at its module's parameter interface (ERR_PARA), lost CAN frames or a silent gateway on the
 bus, the error frames of a master's controller gone bus-off (the station then silent, as a
-bus-off controller hears nothing) or error passive (``error_frames.py``). Objects in
+bus-off controller hears nothing) or error passive (``error_frames.py``), a gateway that
+queues every received frame and answers every SYNC however late (QUEUE_BACKLOG: some real
+devices queue; ``controller.py``). Objects in
 ``docs/canopen.md`` and ``config/xn_gw_canopen.eds``.
 
 The station keeps the time itself: a fault with a duration is cleared on the station's clock,
@@ -31,7 +35,9 @@ from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.protocol.aborts import SdoAbort
 from ssi_bridge.sim.gateway.error_frames import report_error_frames
-from ssi_bridge.protocol.dictionary import SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_RATE
+from ssi_bridge.protocol.dictionary import (
+    SIM_ACTIVE, SIM_COMMAND, SIM_DURATION, SIM_EPOCH, SIM_RATE,
+)
 
 if TYPE_CHECKING:
     from ssi_bridge.sim.gateway.gateway import XnGateway
@@ -53,15 +59,21 @@ class FaultKind(IntEnum):
     INVALID_PARA1 = 8
     BUS_OFF = 9
     ERROR_PASSIVE = 10
+    QUEUE_BACKLOG = 11
 
 
 #: faults of the bus or gateway (slot 0 in the command)
 BUS_FAULTS = (FaultKind.CAN_FRAME_LOSS, FaultKind.GATEWAY_SILENT, FaultKind.BUS_OFF,
-              FaultKind.ERROR_PASSIVE)
+              FaultKind.ERROR_PASSIVE, FaultKind.QUEUE_BACKLOG)
 #: faults under which the station sends nothing (only CLEAR_ALL reaches it)
 MUTING_FAULTS = (FaultKind.GATEWAY_SILENT, FaultKind.BUS_OFF)
 #: faults that need a rate in (0, 1]
 RATE_FAULTS = (FaultKind.BIT_NOISE, FaultKind.CAN_FRAME_LOSS)
+
+
+def epoch_us(epoch: float) -> int:
+    """The 0x4004 value of a motion epoch (wire time, s): whole microseconds, rounded."""
+    return round(epoch * 1_000_000)
 
 
 def command_word(kind: int, slot: int) -> int:
@@ -87,7 +99,7 @@ class Channels(Protocol):
 
 
 class SimulationControl:
-    """Serves 0x4000-0x4003 on a gateway and applies the faults to its station's channels."""
+    """Serves 0x4000-0x4004 on a gateway and applies the faults to its station's channels."""
 
     def __init__(self, sim: Channels, gateway: XnGateway,
                  clock: object = time.monotonic) -> None:
@@ -128,6 +140,8 @@ class SimulationControl:
             return self._rate
         if index == SIM_DURATION:
             return self._duration_ms
+        if index == SIM_EPOCH:
+            return epoch_us(self._gateway.clock.epoch)
         return None
 
     def _on_write(self, index: int, subindex: int, od: object, data: bytes) -> None:
@@ -246,6 +260,8 @@ class SimulationControl:
         elif kind is FaultKind.CAN_FRAME_LOSS:
             if gateway.bus is not None:
                 gateway.bus.loss_rate = fault.rate if on else 0.0
+        elif kind is FaultKind.QUEUE_BACKLOG:
+            gateway.queue_backlog = on or any(f.kind is kind for f in self.active)
         elif channel is None:
             return
         elif kind is FaultKind.DATA_WIRE_BREAK:

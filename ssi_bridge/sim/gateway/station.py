@@ -3,9 +3,10 @@ all behind an XN-GW-CANOPEN gateway on a CAN bus.
 
 :class:`SimStation` wires the stages left of the gateway from the joints' settings (slots
 without a joint hold a module with nothing connected). :class:`Station` adds the gateway and
-the simulation-only fault objects (0x4000-0x4003, :mod:`ssi_bridge.sim.gateway.simulation`), so a
-master reaches it only over the bus, like real hardware, whether it runs in the master's
-process or in one of its own (``station`` executable, :mod:`ssi_bridge.sim.program`).
+the simulation-only objects (faults and motion epoch, 0x4000-0x4004,
+:mod:`ssi_bridge.sim.gateway.simulation`), so a master reaches it only over the bus, like real
+hardware, whether it runs in the master's process or in one of its own (``station``
+executable, :mod:`ssi_bridge.sim.program`).
 """
 
 from __future__ import annotations

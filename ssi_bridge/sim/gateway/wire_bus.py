@@ -33,8 +33,6 @@ logger = logging.getLogger(__name__)
 
 #: python-can interfaces that are simulated wires: they get :class:`WireBus` (frame timing)
 SIMULATED_INTERFACES = ("virtual", "udp_multicast")
-#: frames a wire remembers (start, end) to fit a late answer in behind its SYNC
-_RECENT_FRAMES = 64
 #: how long (s) a periodic frame that is due but not sent yet holds a receiver's view of the
 #: wire back (:meth:`Wire.owe`): longer than any starvation seen on a loaded machine, short
 #: enough that a producer thread that hangs is still noticed
@@ -77,8 +75,6 @@ class Wire:
         # frames on the wire not yet handed to the receivers (id -> end): a sender thread
         # that stalls after its frame ended delays the frame, not the wire's time line
         self._pending: dict[int, float] = {}
-        # (start, end) of the newest frames known here: where an answer to a SYNC fits
-        self._recent: deque[tuple[float, float]] = deque(maxlen=_RECENT_FRAMES)
         # periodic producers of this process (key -> wire time their next frame is due)
         self._owed: dict[int, float] = {}
 
@@ -88,53 +84,36 @@ class Wire:
             start = ready if ready > self.busy_until else self.busy_until
             end = start + bits / self.bitrate
             self.busy_until = end
-            self._recent.append((start, end))
             return end
-
-    def _first_gap(self, ready: float, length: float) -> float:
-        """The earliest start at or after ``ready`` where ``length`` s fit between the frames
-        known here (call under the lock)."""
-        start = ready
-        for s, e in sorted(self._recent):
-            if e <= start:
-                continue
-            if s >= start + length:
-                break
-            start = e
-        return start
 
     def claim_all(self, frames: Sequence[can.Message], ready: float,
                   answering: float | None = None) -> bool:
-        """Stamp ``frames`` back to back from ``ready`` with their ends; all or nothing.
+        """Stamp ``frames`` back to back from ``ready`` (or the end of the wire's last frame,
+        whichever is later) with their ends; all or nothing.
 
+        ``ready`` is the wire time at which the sender hands them over (:func:`wire_now` when
+        they are really sent): no frame is ever stamped earlier than that, so a receiver that
+        has seen the wire up to some instant never gets a frame claiming an earlier one.
         ``answering`` is the wire time of the SYNC these frames answer: when a newer SYNC is
-        already on the wire they are not sent (False). A CANopen device sends synchronous
-        TPDOs inside the cycle of their SYNC (CiA 301 synchronous window), so a master can
-        tell which SYNC a TPDO belongs to by its order on the wire. Such frames go in the
-        first gap after their SYNC long enough for them, not behind every frame known: a
-        station process that gets to its SYNCs late (starved) answers each where it would
-        have, before the heartbeat its other thread sent meanwhile, instead of behind it and
-        so inside a newer SYNC's cycle.
+        already on the wire as far as this process knows, they are not sent (False): a
+        device sends a SYNC's synchronous TPDOs inside that SYNC's cycle, before the next
+        SYNC (CiA 301 synchronous window), and a later answer would be taken for the newer
+        SYNC's.
         """
         rate = self.bitrate
-        lengths = [frame_bits(m.arbitration_id, m.data, m.is_remote_frame, m.dlc) / rate
-                   for m in frames]
         with self.lock:
-            if answering is not None:
-                if self.last_sync > answering:
-                    return False
-                at = self._first_gap(ready, sum(lengths))
-            else:
-                at = ready if ready > self.busy_until else self.busy_until
-            for msg, length in zip(frames, lengths):
-                self._recent.append((at, at + length))
-                at += length
+            if answering is not None and self.last_sync > answering:
+                return False
+            at = ready if ready > self.busy_until else self.busy_until
+            pending = self._pending
+            for msg in frames:
+                at += frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame,
+                                 msg.dlc) / rate
                 msg.timestamp = at
-                self._pending[id(msg)] = at
+                pending[id(msg)] = at
                 if msg.arbitration_id == SYNC_COB_ID:
                     self.last_sync = at
-            if at > self.busy_until:
-                self.busy_until = at
+            self.busy_until = at
             return True
 
     def delivered(self, msg: can.Message) -> None:
@@ -169,16 +148,14 @@ class Wire:
                         oldest = due
             return oldest
 
-    def observe(self, end: float, sync: bool = False, length: float = 0.0) -> None:
-        """A frame of another process (``length`` s long) ended at ``end``: the wire was busy
-        until then."""
+    def observe(self, end: float, sync: bool = False) -> None:
+        """A frame of another process ended at ``end``: the wire was busy until then."""
         if sync and end > self.last_sync:
             self.last_sync = end
         if end > self.busy_until:
             with self.lock:
                 if end > self.busy_until:
                     self.busy_until = end
-                    self._recent.append((end - length, end))
 
 
 _wires: dict[tuple[str, str, int], Wire] = {}
@@ -212,6 +189,9 @@ class WireBus(can.BusABC):
         self._inner = inner
         self.wire = wire
         self._inner_steps = steps_itself(inner)
+        # frames read ahead by :meth:`catch_up` (already observed), handed out first
+        self._ahead: deque[can.Message] = deque()
+        self._ahead_error: can.CanError | None = None
         super().__init__(channel=getattr(inner, "channel_info", "wire"))
         self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
 
@@ -225,15 +205,14 @@ class WireBus(can.BusABC):
 
         ``answering``: the wire time of the SYNC they answer; if a newer SYNC is already on
         the wire the frames are not sent and False is returned (see :meth:`Wire.claim_all`).
-        Otherwise they are ready at that SYNC's end, not when this thread got to them: the
-        simulated device answers on the wire's time line (in the first gap after its SYNC),
-        as a real one does inside its SYNC's cycle. A sending thread that ran late (a station
-        process starved under load) then neither stamps its answer into the next SYNC's
-        cycle (where the master would count it) nor sleeps again for frames already over.
+        The frames are ready now, when this thread really hands them over: a sending thread
+        that ran late (a station process starved or stopped) puts them on the wire late, as
+        a late device does, and never claims a wire time in the past.
         """
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
-        ready = wire_now() if answering is None else answering
-        if not self.wire.claim_all(ordered, ready, answering):
+        if answering is not None:
+            self.catch_up()
+        if not self.wire.claim_all(ordered, wire_now(), answering):
             return False
         delivered = self.wire.delivered
         try:
@@ -251,22 +230,43 @@ class WireBus(can.BusABC):
                 delivered(msg)
         return True
 
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+    def catch_up(self) -> None:
+        """Read every frame already waiting for this bus (without waiting) and learn its place
+        on the wire, so a newer SYNC that has reached this process is known before an answer
+        to an older one is claimed (:meth:`Wire.claim_all`); :meth:`recv` hands them out in
+        order. Call it from the thread that receives (the gateway answers a SYNC on it)."""
+        if self._ahead_error is not None:
+            return
+        while True:
+            try:
+                msg = self._step(0.0)
+            except can.CanError as err:  # handed to the receiver in turn, as recv would
+                self._ahead_error = err
+                return
+            if msg is None:
+                return
+            self._ahead.append(msg)
+
+    def _step(self, timeout: float | None) -> can.Message | None:
+        """One frame from the wrapped bus (observed on the wire), or None after ``timeout``."""
         if self._inner_steps:
             msg = recv_step(self._inner, timeout)
-            if msg is None:
-                return None, False
         else:
             msg = self._inner.recv(timeout)
         if msg is not None:
             end = frame_wire_time(msg)
-            if end > self.wire.busy_until:  # a frame of another process: its place in time
-                self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID, frame_bits(
-                    msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
-                    / self.wire.bitrate)
-            elif end:
+            if end:  # a frame of another process: the wire was busy until its end
                 self.wire.observe(end, msg.arbitration_id == SYNC_COB_ID)
-        return msg, False
+        return msg
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._ahead:
+            return self._ahead.popleft(), False
+        err = self._ahead_error
+        if err is not None:
+            self._ahead_error = None
+            raise err
+        return self._step(timeout), False
 
     def shutdown(self) -> None:
         """Shut the wrapped bus down too."""

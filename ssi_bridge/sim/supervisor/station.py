@@ -238,6 +238,9 @@ class InProcessStation:
         self.bus = bus
         self.station = Station(StationSettings(joints=s.joints, bus=bus,
                                                storage_path=s.storage_path))
+        # its receive thread answers the SYNCs: above the node's cycle threads, as the child
+        # process would be (docs/node.md "Scheduling")
+        self.station.gateway.rx_priority = s.simulation_station_priority
         self.pid: int | None = None
         self.start_time = 0.0
 
