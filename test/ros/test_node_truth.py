@@ -13,6 +13,7 @@ joint is published again afterwards.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import threading
@@ -34,6 +35,8 @@ from .conftest import inject, latest_status, station_pid, wait_for_level
 
 K = InjectFault.Request
 RATE = 200.0
+#: bench/bench_truth.py sets this: each case appends its figures there as a JSON line
+REPORT_ENV = "SSI_BRIDGE_TRUTH_REPORT"
 SIM_EPOCH = 0x4004  # simulation only: the station's motion epoch, UNSIGNED64 us
 
 
@@ -70,12 +73,36 @@ class Run:
                        "latch_bound_s on the bus status", self.node)
         self.bound = float(_bus_values(self.diags)["latch_bound_s"])
 
-    def check(self) -> None:
-        """Every sample received so far holds the rule; it is a failure listing the worst."""
+    def check(self, case: str = "", t0: float | None = None) -> None:
+        """Every sample received so far holds the rule; it is a failure listing the worst.
+
+        ``case``/``t0``: the disturbance's name and start (monotonic), for the bench's figures.
+        """
         samples = samples_from_joint_states(m for _, m in self.joints)
         report = self.oracle.check(samples, self.bound)
+        self._report(case, t0, report)
         assert report.checked > 0
         assert report.ok, report.summary()
+
+    def _report(self, case: str, t0: float | None, report: Any) -> None:
+        path = os.environ.get(REPORT_ENV)
+        if not path or not case:
+            return
+        seen = [t for t, arr in self.diags if t0 is not None and t >= t0 for st in arr.status
+                if st.name in ("/ssi_bridge: joint1", "/ssi_bridge: bus")
+                and st.level > DiagnosticStatus.OK]
+        set_aside = max((ch.set_aside for _, m in self.status for ch in m.channels),
+                        default=0)
+        left_out = sum(1 for _, m in self.status for ch in m.channels if not ch.published)
+        with open(path, "a", encoding="utf-8") as out:
+            out.write(json.dumps({
+                "case": case, "checked": report.checked,
+                "worst_residual_counts": report.worst_residual_counts,
+                "worst_velocity_error": report.worst_velocity_error,
+                "violations": len(report.violations), "set_aside": set_aside,
+                "left_out_cycles": left_out,
+                "diagnostics_after_s": (min(seen) - t0) if seen and t0 is not None else None,
+                "latch_bound_s": self.bound}) + "\n")
 
     def set_aside_during(self, t0: float, t1: float) -> set[str]:
         """The reasons ~/status gave for joint1 left out of cycles received in [t0, t1]."""
@@ -114,7 +141,7 @@ def test_a_stalled_station_never_publishes_an_old_latch(running, probe, channel,
     t1 = time.monotonic()
     run.published_again(t1 + 0.5)
     time.sleep(1.0)
-    run.check()
+    run.check(f"stall_{seconds:g}s", t0)
     assert run.set_aside_during(t0, t1) & {"no answer"}, "~/status says why during the stall"
     assert run.worst_level_during(t0, t1 + 0.5) > DiagnosticStatus.OK
 
@@ -127,6 +154,7 @@ def test_a_queueing_station_answering_its_backlog_never_publishes_an_old_latch(
     inject(probe, run.node, kind=K.QUEUE_BACKLOG)
     time.sleep(0.5)
     station = station_pid(run.node)
+    t0 = time.monotonic()
     os.kill(station, signal.SIGSTOP)
     try:
         time.sleep(1.0)
@@ -135,7 +163,7 @@ def test_a_queueing_station_answering_its_backlog_never_publishes_an_old_latch(
     t1 = time.monotonic()
     run.published_again(t1 + 0.5)
     time.sleep(1.0)
-    run.check()
+    run.check("queue_backlog_stall_1s", t0)
     reasons = run.set_aside_during(t1, t1 + 1.0)
     assert reasons, "the backlog's cycles are set aside"
 
@@ -172,7 +200,7 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     assert sent >= 0.8 * rate * seconds
     run.published_again(t1 + 0.5)
     time.sleep(0.5)
-    run.check()
+    run.check(f"foreign_sync_{rate:g}hz", t0)
     probe.wait_for(lambda: int(_bus_values(run.diags).get("foreign_syncs", "0")) > 0, 5.0,
                    "foreign_syncs counted", run.node)
     warned = [st.message for t, arr in run.diags if t0 <= t <= t1 + 1.0 for st in arr.status
@@ -183,12 +211,13 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
 def test_one_stray_sync_is_set_aside_for_the_cycles_it_touches(running, probe, channel):
     run = Run(running, probe, _params(channel))
     bus = open_udp_bus(derive_channel(channel))
+    t0 = time.monotonic()
     try:
         bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
     finally:
         bus.shutdown()
     time.sleep(1.0)
-    run.check()
+    run.check("one_stray_sync", t0)
 
 
 @pytest.mark.parametrize("rate", [0.1])
@@ -197,5 +226,5 @@ def test_can_frame_loss_never_publishes_an_old_latch(running, probe, channel, ra
     inject(probe, run.node, kind=K.CAN_FRAME_LOSS, rate=rate, duration=2.0)
     t0 = time.monotonic()
     time.sleep(2.5)
-    run.check()
+    run.check(f"frame_loss_{rate:g}", t0)
     assert run.set_aside_during(t0, t0 + 2.0), "lost frames leave cycles out"
