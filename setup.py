@@ -31,6 +31,7 @@ setup(
             f"replay = {PACKAGE}.tools.replay:main",
             f"plot = {PACKAGE}.tools.plot:main",
             f"monitor = {PACKAGE}.tools.monitor:main",
+            f"commission = {PACKAGE}.tools.commission:main",
             f"station = {PACKAGE}.sim.program:main",
         ],
     },

@@ -159,6 +159,53 @@ def fill_up(directory: Path) -> Path:
     return filler
 
 
+# -- bags in log-time order ------------------------------------------------------------------
+def log_time_disorder(root: Path) -> list[str]:
+    """Messages of the MCAP files under ``root`` (a file or a directory) logged before the
+    message before them in the same file, any topic (``~/events`` too): ``mcap doctor
+    --strict-message-order``'s rule, read in file order with mcap's stream reader. One line
+    per message out of order; a file cut short (a crash test's) or not MCAP at all (a test of
+    the readers' refusals) is checked as far as it reads.
+    """
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+
+    files = [root] if root.is_file() else sorted(root.rglob("*.mcap"))
+    out = []
+    for path in files:
+        topics: dict[int, str] = {}
+        last: tuple[int, str] | None = None
+        with open(path, "rb") as f:
+            try:
+                for record in StreamReader(f).records:
+                    if isinstance(record, Channel):
+                        topics[record.id] = record.topic
+                    elif isinstance(record, Message):
+                        topic = topics.get(record.channel_id, f"channel {record.channel_id}")
+                        if last is not None and record.log_time < last[0]:
+                            out.append(f"{path}: {topic} logged at {record.log_time}, "
+                                       f"{(last[0] - record.log_time) / 1e6:.3f} ms before "
+                                       f"the {last[1]} message before it")
+                        last = (record.log_time, topic)
+            except (McapError, EOFError, struct.error):
+                pass  # cut short or foreign: what was read is checked
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _bags_in_log_time_order(request: pytest.FixtureRequest) -> Iterator[None]:
+    """After every test with a ``tmp_path``: each bag it wrote there (a node's sessions and
+    snapshots, the recorder's own) has its messages in non-decreasing log time per file."""
+    tmp = request.getfixturevalue("tmp_path") if "tmp_path" in request.fixturenames else None
+    yield
+    if tmp is not None and tmp.exists():
+        disorder = log_time_disorder(tmp)
+        assert not disorder, "messages out of log-time order:\n" + "\n".join(disorder[:10])
+
+
 # -- test tiers: the markers come from here, not from each file ------------------------------
 #: a test with a DDS domain of its own starts a ROS node as a subprocess (the bridge, the
 #: managed node or a ROS tool) and talks to it: ``node``
@@ -183,6 +230,8 @@ SLOW = {
         "stress: 1000 service calls at once",
     "test/ros/test_node_snapshot.py::test_memory_stays_bounded_with_snapshots_over_ten_minutes":
         "soak: 10 minutes at 500 Hz with fault snapshots, RSS watched",
+    "test/commission/test_stations.py::test_random_stations_sweep":
+        "sweep: ten random stations of 1-8 joints commissioned, about 5 s each",
 }
 #: node tests that check the install path (the installed executables start and answer), not
 #: the logic again: .ci/run's workspace step runs only these (``-m smoke``)

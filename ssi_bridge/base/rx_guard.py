@@ -8,6 +8,11 @@ subscriber that raises (a malformed frame on a COB-ID it handles) stops the othe
 of that frame. :class:`GuardedListener` is the one listener of the master's and the station's
 networks, and:
 
+* drops a frame on a COB-ID of :attr:`GuardedListener.rules` whose length its CiA 301
+  service does not have (``protocol/frame_rules.py``: an empty heartbeat, a short SDO) before
+  any subscriber decodes it (kind :data:`MALFORMED`); an owner reports a frame of the right
+  length that its protocol still refuses (an SDO segment outside a transfer) through
+  :meth:`GuardedListener.malformed` too;
 * calls every subscriber of a frame on its own, so one that raises neither stops the others
   nor the receive path (kind :data:`CALLBACK_ERROR`);
 * handles every receive error in ``on_error`` (kind :data:`UNDECODABLE` for a datagram that
@@ -33,6 +38,7 @@ from ssi_bridge.base.canopen_compat import subscribers
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
 from ssi_bridge.base.udp_bus import UndecodableFrame
+from ssi_bridge.protocol.frame_rules import FrameRule
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +48,8 @@ UNDECODABLE = "undecodable_frames"
 RECEIVE_ERROR = "receive_errors"
 #: an exception raised by a subscriber of a received frame
 CALLBACK_ERROR = "callback_errors"
+#: a frame its CiA 301 service does not allow (a length, a sequence), dropped undecoded
+MALFORMED = "malformed_frames"
 #: the receive thread rests this long (s) after a receive error before it calls recv again
 ERROR_PAUSE = 0.005
 
@@ -70,8 +78,12 @@ class GuardedListener(WireTimeListener):
     def __init__(self, network: canopen.Network, name: str = "receive path") -> None:
         super().__init__(network)
         self.name = name
-        #: faults by kind (:data:`UNDECODABLE`, :data:`RECEIVE_ERROR`, :data:`CALLBACK_ERROR`)
+        #: faults by kind (:data:`UNDECODABLE`, :data:`RECEIVE_ERROR`, :data:`CALLBACK_ERROR`,
+        #: :data:`MALFORMED`)
         self.faults: Counter[str] = Counter()
+        #: COB-ID -> the length its service's frames have (``protocol/frame_rules.py``); the
+        #: owner fills it with the COB-IDs it consumes
+        self.rules: dict[int, FrameRule] = {}
         self._log = RateLimitedLog(logger)
 
     def count(self, kind: str) -> None:
@@ -84,6 +96,10 @@ class GuardedListener(WireTimeListener):
             return
         network = self.network
         can_id = msg.arbitration_id
+        rule = self.rules.get(can_id)
+        if rule is not None and len(msg.data) != rule.length:
+            self.malformed(can_id, msg.data, rule.problem(len(msg.data)) or "")
+            return
         callbacks = subscribers(network, can_id)
         if callbacks:
             wire_t = frame_wire_time(msg)
@@ -97,6 +113,14 @@ class GuardedListener(WireTimeListener):
                                     msg.data.hex(" "), getattr(callback, "__qualname__", callback),
                                     err, raised_at(err))
         network.scanner.on_message_received(can_id)
+
+    def malformed(self, can_id: int, data: bytes | bytearray, why: str) -> None:
+        """A frame its service does not allow (receive thread): counted as :data:`MALFORMED`
+        and logged (at most once per second), never decoded."""
+        self.count(MALFORMED)
+        self._log.warning(MALFORMED, "%s: frame 0x%03X [%s] with %d byte(s) is %s: dropped "
+                          "(%d malformed so far)", self.name, can_id, bytes(data).hex(" "),
+                          len(data), why, self.faults[MALFORMED])
 
     def on_error(self, exc: Exception) -> None:
         """A receive error (receive thread): counted and logged; receiving goes on."""
@@ -114,5 +138,5 @@ class GuardedListener(WireTimeListener):
         time.sleep(ERROR_PAUSE)
 
 
-__all__ = ["CALLBACK_ERROR", "ERROR_PAUSE", "GuardedListener", "RECEIVE_ERROR", "UNDECODABLE",
-           "raised_at", "receive_error_kind"]
+__all__ = ["CALLBACK_ERROR", "ERROR_PAUSE", "GuardedListener", "MALFORMED", "RECEIVE_ERROR",
+           "UNDECODABLE", "raised_at", "receive_error_kind"]

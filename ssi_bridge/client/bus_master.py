@@ -27,6 +27,7 @@ from ssi_bridge.client.bus import (
     NOTIFIER_CYCLE, BusOpener, MasterNetwork, ReceiveWatch, open_bus, take_bus,
 )
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
+from ssi_bridge.protocol.frame_rules import master_rules
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.base.timebase import wire_now
 
@@ -94,6 +95,8 @@ class CanMaster:
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self._listener.foreign.on_sync = self._on_foreign_sync
+        for client in self.clients:
+            self._listener.rules.update(master_rules(client.node_id))
         self._listener.error_frames = self.error_frames
         self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
@@ -113,6 +116,8 @@ class CanMaster:
             self.clients.append(client)
         if self._listener is not None:
             self._listener.foreign.watch(client.node_id)
+            # heartbeat, EMCY and SDO responses of another length are dropped as malformed
+            self._listener.rules.update(master_rules(client.node_id))
         self._count_faults_for(client, True)
 
     def _count_faults_for(self, client: Attached, on: bool) -> None:
@@ -128,6 +133,9 @@ class CanMaster:
         if client in self.clients:
             self.clients.remove(client)
         self._count_faults_for(client, False)
+        if self._listener is not None:
+            for cob_id in master_rules(client.node_id):
+                self._listener.rules.pop(cob_id, None)
         if self.network is not None:
             self.network.nodes.pop(client.node_id, None)
 

@@ -38,6 +38,7 @@ from ssi_bridge.exceptions import BusError
 from ssi_bridge.client.bus import take_bus
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.protocol.dictionary import MAX_SLOTS
+from ssi_bridge.protocol.frame_rules import master_rules
 from ssi_bridge.base.timebase import frame_wire_time, wire_now
 
 logger = logging.getLogger(__name__)
@@ -93,6 +94,9 @@ class ListenOnlyClient(can.Listener):
                                   self._on_malformed).routes
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
+        #: the heartbeat's and EMCY's lengths (protocol/frame_rules.py): others are malformed
+        self._rules = {cob: rule for cob, rule in master_rules(node_id).items()
+                       if cob in (self._heartbeat_id, self._emcy_id)}
         self._emcy_log = EmcySummary(logger, f"gateway node {node_id} ")
         self._last_seen = -float("inf")  # wire time of the gateway's last frame (a stamp)
         self._last_seen_at = -float("inf")  # monotonic time it was handled (the interval)
@@ -236,13 +240,20 @@ class ListenOnlyClient(can.Listener):
             if self._open is not None and self.table.cycle_complete():
                 self._report(*self._open, True)
             return
-        if can_id == self._heartbeat_id and msg.dlc >= 1:
+        rule = self._rules.get(can_id)
+        if rule is not None and len(msg.data) != rule.length:
+            counters.malformed_frames += 1
+            self._log.warning("malformed_frame", "gateway node %d: frame 0x%03X [%s] with %d "
+                              "byte(s) is %s: dropped", self.node_id, can_id,
+                              bytes(msg.data).hex(" "), len(msg.data),
+                              rule.problem(len(msg.data)))
+            return
+        if can_id == self._heartbeat_id:
             self._last_seen, self._last_seen_at = stamp, time.monotonic()
             self.nmt_state = msg.data[0] & 0x7F
         elif can_id == self._emcy_id:
             counters.emergencies += 1
-            if msg.dlc >= 3:
-                self._emcy_log.on_emcy(msg.data[0] | msg.data[1] << 8, bytes(msg.data[3:8]))
+            self._emcy_log.on_emcy(msg.data[0] | msg.data[1] << 8, bytes(msg.data[3:8]))
 
     def on_error(self, exc: Exception) -> None:
         """A receive error of the bus (a datagram that is no CAN frame, an interface gone

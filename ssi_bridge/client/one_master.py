@@ -1,14 +1,14 @@
 """One master per bus: before this master sends anything, nobody else may be driving the bus.
 
 CiA 301 has one NMT master and one SYNC producer per network. Two bridges given the same bus
-(two nodes with ``simulation: false`` on one interface, or two simulated nodes given the same
-udp_multicast channel) would each SYNC, reset and configure the same stations. So before its
-first frame the node listens :data:`MASTER_CHECK_S` on its bus for what only a master sends
-(``client/foreign.py``: SYNC on 0x080, NMT commands on 0x000, SDO requests to its stations on
-0x600 + node id); a node that hears any of it does not start, and says in one line what it
-heard and on which COB-ID. A master that SYNCs at 4 Hz or more (``publish_rate`` is 100 Hz by
-default) is always heard. Listening changes nothing on the bus, so the master already running
-goes on undisturbed.
+(two nodes with ``simulation.enabled: false`` on one interface, or two simulated nodes given
+the same udp_multicast channel) would each SYNC, reset and configure the same stations. So
+before its first frame the node listens :data:`MASTER_CHECK_S` on its bus for what only a
+master sends (``client/foreign.py``: SYNC on 0x080, NMT commands on 0x000, SDO requests to its
+stations on 0x600 + node id); a node that hears any of it does not start, and says in one line
+what it heard and on which COB-ID. A master that SYNCs at 4 Hz or more (``publish_rate`` is
+100 Hz by default) is always heard. Listening changes nothing on the bus, so the master
+already running goes on undisturbed.
 """
 
 from __future__ import annotations

@@ -11,9 +11,9 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
 
 from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.client.frame_sink import FrameSink
 from ssi_bridge.protocol.images import ProcessInput
 
 #: two Integer32 positions in one encoder default PDO (000 Table 15, object 0x6820)
@@ -22,27 +22,6 @@ POSITION_PAIR = struct.Struct("<ii")
 _KEEP_SYNC_TIMES = 64
 #: bits of SlotState.answered: which of a slot's two TPDOs answered a SYNC
 IMAGE, POSITION = 1, 2
-
-
-class FrameSink(Protocol):
-    """Where a slot table hands every SYNC and TPDO it sees, with its wire time: the cycle's
-    frame log (``core/cycle_log.StationLog``), which decides which SYNC a sample answers.
-
-    Called under the table's lock, from the receive thread (frames, foreign SYNCs) and the
-    cycle thread (own SYNCs); an implementation must be quick and must not call back.
-    """
-
-    def sync(self, seq: int, t: float) -> None:
-        """The master's SYNC ``seq`` at wire time ``t`` (again, once its exact time is known)."""
-
-    def foreign_sync(self, t: float) -> None:
-        """Another producer's SYNC at wire time ``t``."""
-
-    def image(self, slot: int, t: float, data: bytes, count: int) -> None:
-        """A process input image of ``slot`` (the ``count``-th) at wire time ``t``."""
-
-    def position(self, slot: int, t: float, value: int) -> None:
-        """A position of ``slot`` at wire time ``t``."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +66,9 @@ class ClientCounters:
     undecodable_frames: int = 0
     #: TPDOs on the master's COB-IDs whose length differs from their mapping, not decoded
     malformed_pdos: int = 0
+    #: frames on a station's heartbeat, EMCY or SDO response COB-ID whose length CiA 301 does
+    #: not give that service (``protocol/frame_rules.py``), not decoded
+    malformed_frames: int = 0
     #: errors of the bus's receive call (the receive path went on)
     receive_errors: int = 0
     #: exceptions raised by a handler of a received frame (the receive path went on)

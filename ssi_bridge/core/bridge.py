@@ -236,7 +236,7 @@ class Bridge:
     def inject_fault(self, joint: Joint, kind: int, rate: float, duration: float) -> str:
         """A fault in the simulated station; ConfigError on real hardware."""
         if self.faults is None:
-            raise ConfigError("fault injection needs simulation:=true; this node drives "
+            raise ConfigError("fault injection needs simulation.enabled:=true; this node drives "
                               "real hardware")
         message = self.faults.inject(kind, joint.name, rate, duration)
         if kind == ENCODER_ERROR:

@@ -1,9 +1,9 @@
 """One cycle of the bridge, ROS-free: for each joint, publish a vouched sample or set it aside.
 
 The node's cycle thread sends SYNC ``seq`` at wire time ``t_sync``, waits for the TPDOs and
-calls :meth:`Cycle.run`. For every joint the station's :class:`~ssi_bridge.core.cycle_log.StationLog`
-says whether the joint's sample is the encoder's position at ``t_sync`` (rules in
-``core/cycle_log.py``); the joint's core (``core/joint.py``) turns a vouched sample into
+calls :meth:`Cycle.run`. For every joint the station's frame log
+(:class:`~ssi_bridge.core.cycle_log.StationLog`) says whether the joint's sample is the
+encoder's position at ``t_sync`` (rules in ``core/cycle_log.py``); the joint's core (``core/joint.py``) turns a vouched sample into
 position and velocity, and counts one that is set aside as a stale cycle. The result says
 per joint what to publish (or that it is left out, and why): the ROS layer only turns it into
 messages. No joint is ever published under a stamp its sample was not latched at (docs/node.md,

@@ -130,7 +130,7 @@ class StationLog:
 
     # -- the master's side (client.samples.FrameSink) ---------------------------------------
     def sync(self, seq: int, t: float) -> None:
-        """The master's SYNC number ``seq`` is (or, called again, was exactly) at wire time ``t``."""
+        """The master's SYNC ``seq`` is (or, called again, was exactly) at wire time ``t``."""
         with self._lock:
             old = self._own.get(seq)
             if old is not None:

@@ -43,9 +43,10 @@ ERRORS = int(ModuleStatus.ERR_SSI | ModuleStatus.ERR_PARA)
 def spec_max_speed(family: str, linear: bool | None = None) -> float:
     """The physical speed limit (rad/s or m/s) of a family, what ``max_speed: -1`` means.
 
-    Never off: the TR encoders' overspeed limit, at most 6000 1/min (001 §5.4.2); every other
-    family, whose manual states no speed, the documented default (12000 1/min rotary, 10 m/s
-    linear; :func:`~ssi_bridge.protocol.families.family_max_speed`, docs/node.md).
+    Never off: no family's manual states a shaft speed (the TR overspeed of 001 §5.4.2 is
+    the speed monitor's threshold), so each takes the documented default (12000 1/min
+    rotary, 10 m/s linear; :func:`~ssi_bridge.protocol.families.family_max_speed`,
+    docs/node.md).
     ``linear``: the joint's kind where it differs from the family's.
     """
     return family_max_speed(family, linear).limit

@@ -5,14 +5,18 @@ One frozen dataclass describes any encoder the project simulates; the named pres
 
 Frame layout (MSB first on the wire)::
 
-    | position area: data_bits (+ trailing_zero_bits) | special bits, in order | zero fill |
+    | position area: field_bits (+ trailing_zero_bits) | special bits, in order | zero fill |
 
 * ``Alignment.RIGHT``: value right-justified in ``data_bits`` (leading zeros, 001 §5.2.4.1).
 * ``Alignment.LEFT``: value MSB-justified, non-assigned LSBs 0 (004 §3.1 AHS/AHM36).
 * ``Alignment.TANNENBAUM``: ``turn_bits`` of revolutions right-justified, the rest of
-  ``data_bits`` holds the step within the revolution MSB-justified (004 §3.4, Figures 17/18).
+  the field holds the step within the revolution MSB-justified (004 §3.4, Figures 17/18).
 * ``shift_right`` drops the LSB of the position area and sends a 0 first (004 §3.4
   SSI-SHIFT-RIGHT); RIGHT with one ``trailing_zero_bits`` is "right aligned on the 24th bit".
+
+The field on the wire (``field_bits``) is ``data_bits`` wide, except in the TR check sum
+format: its field is always 28 bits while its Number of data bits is exactly what the total
+number of steps needs (001 §5.2.1, §5.2.4.2).
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ class FrameFormat(Enum):
 
     PLAIN = "no_special_format"
     REPEAT_26 = "26bit_repeat"
-    #: 001 §5.2.4.2: 28 data bits (12 revolutions + 16 steps) + 15 checksum bits, 43 clocks
+    #: 001 §5.2.4.2: a 28-bit field (12 revolutions + 16 steps) + 15 checksum bits, 43 clocks
     CHECKSUM = "check_sum"
 
 
@@ -122,8 +126,11 @@ ERROR_BITS = frozenset({
     SpecialBit.ERR_TEMPERATURE, SpecialBit.ENCODER_ERROR,
 })
 PARITY_BITS = frozenset({SpecialBit.EVEN_PARITY, SpecialBit.EVEN_ERROR_PARITY})
-#: checksum bits after the 28 data bits of the TR "Check sum" format (001 §5.2.4.2)
+#: checksum bits after the 28-bit field of the TR "Check sum" format (001 §5.2.4.2)
 CHECKSUM_BITS = 15
+#: the "Check sum" format's field on the wire: 12 bits number of revolutions + 16 bits steps
+#: per revolution, whatever the Number of data bits (001 §5.2.4.2)
+CHECKSUM_TURN_BITS, CHECKSUM_FIELD_BITS = 12, 28
 CAM_BITS = (SpecialBit.CAM1, SpecialBit.CAM2, SpecialBit.CAM3, SpecialBit.CAM4)
 
 
@@ -157,7 +164,9 @@ class EncoderConfig:
     total_steps: int = 0
     #: transmit code of the position value
     code: Code = Code.BINARY
-    #: width of the position field on the wire (TR "Number of data bits", 001 §5.2.1)
+    #: TR "Number of data bits" (001 §5.2.1): the width of the position field on the wire;
+    #: in the check sum format exactly the bits the total number of steps needs, inside the
+    #: format's fixed 28-bit field (:attr:`field_bits`, 001 §5.2.4.2)
     data_bits: int = 25
     alignment: Alignment = Alignment.RIGHT
     #: Tannenbaum only: width of the revolutions field (12 or 13, 004 §3.4)
@@ -195,7 +204,8 @@ class EncoderConfig:
     monoflop_s: float | None = None
     #: cam switch (on, off) points in output steps, up to four (001 §5.4.1)
     cams: tuple[tuple[int, int], ...] = ()
-    #: overspeed limit (1/min, 10..6000, 001 §5.4.2)
+    #: the speed monitor's threshold (1/min, 10..6000, 001 §5.4.2): above it the overspeed
+    #: special bit is set (§5.5.2); no limit of the shaft
     overspeed_rpm: float = 6000.0
     #: going up/down cleared after this long without a step (001 §5.5.3: 50 ms)
     standstill_s: float = 0.05
@@ -239,8 +249,9 @@ class EncoderConfig:
                 bad("Tannenbaum format needs a binary (2**n) rotary resolution (004 §3.4)")
             if self.code not in (Code.BINARY, Code.GRAY):
                 bad("Tannenbaum format sends binary or Gray only (004 §3.4)")
-            if int(spr).bit_length() - 1 > self.data_bits - self.turn_bits:
-                bad(f"{int(spr)} steps do not fit {self.data_bits - self.turn_bits} singleturn bits")
+            if int(spr).bit_length() - 1 > self.field_bits - self.turn_bits:
+                bad(f"{int(spr)} steps do not fit {self.field_bits - self.turn_bits} singleturn "
+                    "bits")
             if self.range_steps > int(spr) << self.turn_bits:
                 bad(f"{self.range_steps} steps need more than {self.turn_bits} revolution bits")
         if self.origin < 0 and self.alignment is not Alignment.RIGHT:
@@ -279,12 +290,21 @@ class EncoderConfig:
 
     def _check_checksum_format(self, bad: Callable[[str], None]) -> None:
         """001 §5.2.4.2 / §5.2.1 rules of the "Check sum" format."""
-        if self.linear or self.alignment is not Alignment.TANNENBAUM or self.turn_bits != 12 \
-                or self.data_bits != 28:
+        if self.linear or self.alignment is not Alignment.TANNENBAUM \
+                or self.turn_bits != CHECKSUM_TURN_BITS:
             bad("check sum format: 12 bits revolutions + 16 bits steps per revolution "
-                "(data_bits 28, turn_bits 12, Tannenbaum placement; 001 §5.2.4.2)")
+                "(turn_bits 12, Tannenbaum placement; 001 §5.2.4.2)")
         if int(self.steps_per_rev) > 65536 or self.revolutions_numerator > 4096:
             bad("check sum format: at most 65536 steps x 4096 revolutions (001 §5.2.4.2)")
+        if self.data_bits > CHECKSUM_FIELD_BITS:
+            bad(f"check sum format: data_bits {self.data_bits}, but max. number of data bits "
+                f"<= {CHECKSUM_FIELD_BITS} (001 §5.2.1)")
+        if self.data_bits != self.value_bits:
+            bad(f"check sum format: data_bits {self.data_bits}, but the total number of steps "
+                f"{self.range_steps} needs exactly {self.value_bits}: 'the Number of data bits "
+                "required for the programmed Total number of steps must be typed in exactly' "
+                f"(001 §5.2.1, §5.2.4.2; the field on the wire is {CHECKSUM_FIELD_BITS} bits "
+                "whatever the number)")
         if self.code is not Code.BINARY:
             bad("check sum format: the transmit code must be binary (001 §5.2.4.2)")
         if self.special_bits:
@@ -331,9 +351,19 @@ class EncoderConfig:
         return max(low, top).bit_length() + 1
 
     @property
+    def field_bits(self) -> int:
+        """Width of the position field on the wire: ``data_bits``, except in the check sum
+        format, whose field is always 12 revolution + 16 step bits while its Number of data
+        bits counts only the bits the total number of steps needs (001 §5.2.1, §5.2.4.2:
+        4096 x 1024 steps = 22 data bits in the 28-bit field)."""
+        if self.frame_format is FrameFormat.CHECKSUM:
+            return CHECKSUM_FIELD_BITS
+        return self.data_bits
+
+    @property
     def position_bits(self) -> int:
-        """Width of the position area: data bits plus trailing zero bits."""
-        return self.data_bits + self.trailing_zero_bits
+        """Width of the position area: the field on the wire plus trailing zero bits."""
+        return self.field_bits + self.trailing_zero_bits
 
     @property
     def frame_bits(self) -> int:

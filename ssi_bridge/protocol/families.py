@@ -22,7 +22,7 @@ from typing import Any
 
 from ssi_bridge.protocol.codes import Code
 from ssi_bridge.protocol.encoder_config import (Alignment, EncoderConfig, ErrorOutput, FrameFormat,
-                                       SpecialBit, SsiMode, SyncReference)
+                                       SpecialBit, SsiMode, SyncReference, round_half_up)
 from ssi_bridge.exceptions import ConfigError
 
 SICK3 = (SpecialBit.ERRDIG, SpecialBit.ERRSI, SpecialBit.ERRSYNC)   # 004 §3.2
@@ -67,6 +67,16 @@ def _atm60_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
         if cfg.ssi_mode is SsiMode.SYNC:
             out.update(monoflop_s=200e-6, min_pause_s=200e-6)
     return out
+
+
+def _exact_data_bits(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
+    """Check sum format: the Number of data bits the total number of steps needs, "typed in
+    exactly" (001 §5.2.1; §5.2.4.2: 4096 x 1024 steps = 22 data bits)."""
+    if "data_bits" in given:
+        return {}
+    total = cfg.total_steps or round_half_up(cfg.steps_per_rev * cfg.revolutions_numerator
+                                             / cfg.revolutions_divisor)
+    return {"data_bits": max(cfg.origin + total - 1, 1).bit_length()}
 
 
 def _ars60_layout(cfg: Any, given: dict[str, Any]) -> dict[str, Any]:
@@ -161,20 +171,26 @@ FAMILIES: dict[str, Family] = {
              special_bits=(SpecialBit.ENCODER_ERROR, SpecialBit.EVEN_PARITY)),
         doc="001 §5.5.6/§5.5.7: 24 data bits + encoder error + even parity (26 bits)"),
     "TR_CHECKSUM": Family(
-        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=28, turn_bits=12,
+        dict(steps_per_rev=4096, revolutions_numerator=4096, data_bits=24, turn_bits=12,
              alignment=Alignment.TANNENBAUM, frame_format=FrameFormat.CHECKSUM),
+        fixes=(_exact_data_bits,),
         doc="001 §5.2.4.2: 12 revolution + 16 step bits + 15-bit checksum (43 clocks); "
-            "CRC-15 polynomial is a simulation choice (protocol/checksum.py)"),
+            "data_bits = the bits of the total number of steps (001 §5.2.1); CRC-15 "
+            "polynomial is a simulation choice (protocol/checksum.py)"),
 }
 FAMILIES["ATM90"] = FAMILIES["ATM60"]
 
 
-#: the fastest shaft (1/min) assumed where a rotary family's manual states no speed: 004 and
-#: 003 give none. 12000 1/min is about the mechanical limit of the fastest industrial SSI
-#: encoders (common ones are built for 6000-12000 1/min; the TR overspeed monitor stops at
-#: 6000, 001 §5.4.2), so no real motion is flagged while a misread frame's jump is. A limit
-#: from the SSI frame itself would mean nothing: the counts of one frame at the highest
-#: REG_PARA1 bit rate can represent a change of the whole range per frame (docs/node.md)
+#: the fastest shaft (1/min) assumed where a rotary family's manual states no speed: none of
+#: them does. 004 and 003 give none; 001 neither: it leaves technical data to the series'
+#: "Product data sheets" ("The following documentation therefore also applies"; not among
+#: the manuals here), and its 10-6000 1/min (§5.4.2) is only the range of the speed
+#: monitor's adjustable threshold, which a faster shaft exceeds and reports with the
+#: overspeed bit (§5.5.2): no limit of the shaft. 12000 1/min is about the mechanical limit
+#: of the fastest industrial SSI encoders (common ones are built for 6000-12000 1/min), so
+#: no real motion is flagged while a misread frame's jump is. A limit from the SSI frame
+#: itself would mean nothing: the counts of one frame at the highest REG_PARA1 bit rate can
+#: represent a change of the whole range per frame (docs/node.md)
 DEFAULT_MAX_RPM = 12000.0
 #: the fastest travel (m/s) assumed for a linear family: 004 §3.6/§3.7 state none (§3.7 only
 #: names KH53's "max. traversing speed"); about the fastest linear axes and tape/linear
@@ -196,11 +212,11 @@ class SpeedSpec:
 def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
     """The speed a joint of ``family`` cannot exceed (``<joint>.max_speed: -1``).
 
-    The TR encoders: their overspeed limit, at most 6000 1/min (001 §5.4.2). Every other
-    rotary family (GENERIC included) :data:`DEFAULT_MAX_RPM`, linear ones
-    :data:`DEFAULT_MAX_LINEAR_SPEED`. ``linear`` overrides the family's own kind (a joint
-    whose layout is unknown is linear when it has a measuring step); an unknown family is
-    taken as GENERIC.
+    No family's manual states a shaft speed (the TR overspeed of 001 §5.4.2 is a monitor's
+    threshold, see :data:`DEFAULT_MAX_RPM`), so every rotary family (GENERIC and TR
+    included) takes :data:`DEFAULT_MAX_RPM`, linear ones :data:`DEFAULT_MAX_LINEAR_SPEED`.
+    ``linear`` overrides the family's own kind (a joint whose layout is unknown is linear
+    when it has a measuring step); an unknown family is taken as GENERIC.
     """
     key = family.upper()
     base = FAMILIES.get(key)
@@ -210,9 +226,12 @@ def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
         return SpeedSpec(DEFAULT_MAX_LINEAR_SPEED, True,
                          f"{DEFAULT_MAX_LINEAR_SPEED:g} m/s: no speed in the family's manual, "
                          "the default for linear encoders (docs/node.md)")
-    if cfg is not None and key.startswith("TR_"):
-        return SpeedSpec(cfg.overspeed_rpm / 60.0 * 2.0 * math.pi, False,
-                         f"overspeed {cfg.overspeed_rpm:g} 1/min (001 §5.4.2)")
+    if key.startswith("TR_"):
+        return SpeedSpec(DEFAULT_MAX_RPM / 60.0 * 2.0 * math.pi, False,
+                         f"{DEFAULT_MAX_RPM:g} 1/min: 001 states no shaft speed (10-6000 1/min, "
+                         "001 §5.4.2, is the speed monitor's threshold, whose excess sets the "
+                         "overspeed bit, §5.5.2), the default for rotary encoders "
+                         "(docs/node.md)")
     return SpeedSpec(DEFAULT_MAX_RPM / 60.0 * 2.0 * math.pi, False,
                      f"{DEFAULT_MAX_RPM:g} 1/min: no speed in the family's manual, the "
                      "default for rotary encoders (docs/node.md)")
@@ -231,7 +250,11 @@ def family_config(family: str, **overrides: Any) -> EncoderConfig:
     # the fix-ups need the resolution and mode, so build once permissively, then fix
     probe = SimpleNamespace(steps_per_rev=fields.get("steps_per_rev", 8192.0),
                             ssi_mode=fields.get("ssi_mode", SsiMode.ASYNC),
-                            code=fields.get("code", Code.BINARY))
+                            code=fields.get("code", Code.BINARY),
+                            revolutions_numerator=fields.get("revolutions_numerator", 4096),
+                            revolutions_divisor=fields.get("revolutions_divisor", 1),
+                            total_steps=fields.get("total_steps", 0),
+                            origin=fields.get("origin", 0))
     for fix in fam.fixes:
         for k, v in fix(probe, overrides).items():
             if k not in overrides:

@@ -51,7 +51,7 @@ class FrameVerdict(NamedTuple):
 
 def _area_mask(cfg: EncoderConfig) -> int:
     """Bits of the position area a value can set (the rest are filler, always 0)."""
-    db, w = cfg.data_bits, cfg.value_bits
+    db, w = cfg.field_bits, cfg.value_bits
     if cfg.origin < 0:
         word = (1 << db) - 1                      # sign / complement may use every bit
     elif cfg.alignment is Alignment.TANNENBAUM:

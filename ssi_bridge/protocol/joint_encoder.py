@@ -55,7 +55,7 @@ def count_factor(cfg: EncoderConfig, para1: int) -> float:
     p = Para1.decode(para1)
     lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
     if cfg.alignment is Alignment.TANNENBAUM and cfg.origin >= 0:
-        lsb += cfg.data_bits - cfg.turn_bits - (int(cfg.steps_per_rev).bit_length() - 1)
+        lsb += cfg.field_bits - cfg.turn_bits - (int(cfg.steps_per_rev).bit_length() - 1)
     return 2.0 ** (p.ssi_frame_len - cfg.frame_bits + lsb - p.invalid_bits_lsb)
 
 

@@ -42,7 +42,7 @@ def _decode_magnitude(cfg: EncoderConfig, word: int) -> int:
 
 def _encode_negative_capable(cfg: EncoderConfig, value: int) -> int:
     """Right-justified word of a value that may be negative (001 §5.2.5)."""
-    db = cfg.data_bits
+    db = cfg.field_bits
     if value >= 0:
         return _code_magnitude(cfg, value)
     if cfg.negative is Negative.SIGN_VALUE:
@@ -54,7 +54,7 @@ def _encode_negative_capable(cfg: EncoderConfig, value: int) -> int:
 
 
 def _decode_negative_capable(cfg: EncoderConfig, word: int) -> int:
-    db = cfg.data_bits
+    db = cfg.field_bits
     if cfg.negative is Negative.SIGN_VALUE:
         sign = (word >> (db - 1)) & 1
         mag = _decode_magnitude(cfg, word & ~(1 << (db - 1)))
@@ -69,7 +69,7 @@ def _decode_negative_capable(cfg: EncoderConfig, word: int) -> int:
 
 def _tannenbaum_bits(cfg: EncoderConfig) -> tuple[int, int]:
     """(singleturn field width, singleturn resolution bits n) of a Tannenbaum layout."""
-    return cfg.data_bits - cfg.turn_bits, int(cfg.steps_per_rev).bit_length() - 1
+    return cfg.field_bits - cfg.turn_bits, int(cfg.steps_per_rev).bit_length() - 1
 
 
 def encode_area(cfg: EncoderConfig, value: int) -> int:
@@ -93,7 +93,7 @@ def encode_area(cfg: EncoderConfig, value: int) -> int:
             field, n = _tannenbaum_bits(cfg)
             word = ((coded >> n) << field) | ((coded & ((1 << n) - 1)) << (field - n))
         elif cfg.alignment is Alignment.LEFT:
-            word = coded << (cfg.data_bits - cfg.value_bits)
+            word = coded << (cfg.field_bits - cfg.value_bits)
         else:
             word = coded
     area = word << cfg.trailing_zero_bits
@@ -115,7 +115,7 @@ def decode_area(cfg: EncoderConfig, area: int) -> int:
         field, n = _tannenbaum_bits(cfg)
         coded = ((word >> field) << n) | ((word & ((1 << field) - 1)) >> (field - n))
     elif cfg.alignment is Alignment.LEFT:
-        coded = word >> (cfg.data_bits - cfg.value_bits)
+        coded = word >> (cfg.field_bits - cfg.value_bits)
     else:
         coded = word
     if cfg.code is Code.GRAY_EXCESS:

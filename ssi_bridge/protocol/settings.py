@@ -15,6 +15,8 @@ from typing import IO, Any
 import yaml
 
 from ssi_bridge.exceptions import ConfigError
+from ssi_bridge.protocol.families import FAMILIES
+from ssi_bridge.protocol.para1 import validate_para1
 from ssi_bridge.protocol.codes import Code
 from ssi_bridge.protocol.family_rules import code_refusal
 
@@ -111,8 +113,22 @@ def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
     """One joint's settings from its values ``{"<key>": value}`` (the keys of JOINT_DEFAULTS).
 
     The checks every reader of ``<joint>.*`` makes, whether the station reads a params file or
-    the node its declared parameters: one place, so both refuse the same values alike.
+    the node its declared parameters: one place, so both refuse the same values alike, before
+    anything is started: an unknown family and a REG_PARA1 the module would refuse with
+    ERR_PARA (000 Table 19) included.
     """
+    family = str(jv["family"])
+    if family.upper() not in FAMILIES:
+        raise ConfigError(f"{joint}.family {family[:40]!r}: unknown encoder family; known: "
+                          f"{', '.join(sorted(FAMILIES))}")
+    try:
+        para1 = int(jv["para1"])
+    except (TypeError, ValueError):
+        raise ConfigError(f"{joint}.para1 {str(jv['para1'])[:40]!r}: not an integer") from None
+    reason = validate_para1(para1)
+    if reason:
+        shown = f"0x{para1:08X}" if para1 >= 0 else str(para1)
+        raise ConfigError(f"{joint}.para1 {shown} is invalid: {reason}")
     if jv["motion.kind"] not in MOTION_KINDS:
         raise ConfigError(f"{joint}.motion.kind {jv['motion.kind']!r}: one of {MOTION_KINDS}")
     if jv["code"] not in CODES:

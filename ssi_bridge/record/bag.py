@@ -13,6 +13,11 @@ statistics) and starts with the configuration metadata record and every schema a
 so each file stands alone. The writer's per-chunk index lives with the open file only, so a
 session's memory does not grow with its length.
 
+Log times never decrease in a bag (``mcap doctor --strict-message-order``; a reader in file
+order sees time order): a message handed over with a log time before the latest one written
+(its thread was preempted between reading the clock and writing, or the clock stepped back) is
+written at that latest log time; its publish time stays as given.
+
 Crash safety: a background thread closes the open chunk and flushes the file every
 ``flush_period_s`` (0.5 s), so a kill -9 loses at most that much; ``recover.recover_bag``
 rebuilds the cut last file and metadata.yaml. Any OSError (disk full, EFBIG, EIO) turns the
@@ -201,7 +206,8 @@ class BagRecorder:
 
     def write_serialized(self, topic: str, data: bytes, log_time_ns: int,
                          publish_time_ns: int | None = None) -> None:
-        """Append a message already serialized to CDR (a snapshot's ring holds such)."""
+        """Append a message already serialized to CDR (a snapshot's ring holds such), at
+        ``log_time_ns`` or the latest log time written if that is later."""
         with self._lock:
             self._check()
             entry = self._topics.get(topic)
@@ -209,6 +215,7 @@ class BagRecorder:
                 raise RecordingError(f"topic {topic} was not added to the recorder")
             file = self._file
             assert file is not None
+            log_time_ns = max(log_time_ns, self._info.end_ns)  # never before the latest
             try:
                 if self._split.due(file.info, file.size, log_time_ns):
                     file = self._next_file()

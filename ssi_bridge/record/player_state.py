@@ -61,12 +61,13 @@ def select_topics(available: Iterable[str], topics: list[str] | None = None,
 
     Included: every topic named in ``topics`` or matched by ``regex`` (``re.search``), or all
     when neither is given; then those named in ``exclude_topics`` or matched by
-    ``exclude_regex`` are dropped. Raises RecordingError for a topic named that the bag does not
-    have, a malformed expression, or a selection that leaves nothing to play.
+    ``exclude_regex`` are dropped. Raises RecordingError for a topic in ``topics`` that the bag
+    does not have, a malformed expression, or a selection that leaves nothing to play. A topic
+    in ``exclude_topics`` that the bag does not have excludes nothing and is no error, as for
+    ``ros2 bag play`` (its storage filter only tests whether a recorded topic is in the list).
     """
     have = sorted(available)
-    named = list(topics or []) + list(exclude_topics or [])
-    unknown = [t for t in named if t not in have]
+    unknown = [t for t in topics or [] if t not in have]
     if unknown:
         raise RecordingError(f"no topic {', '.join(unknown)} in the bag "
                              f"(it has {', '.join(have)})")

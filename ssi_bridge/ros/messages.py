@@ -1,14 +1,17 @@
-"""ROS messages built from the bus samples: ~/status channels, stamps.
+"""ROS messages built from the cycle core's results: joint_states, ~/status, stamps.
 
 Kept apart from the node so the per-cycle message building reads (and is timed) on its own.
 """
 
 from __future__ import annotations
 
-from typing import Any
 
 from builtin_interfaces.msg import Time
-from ssi_bridge_msgs.msg import ChannelStatus
+from sensor_msgs.msg import JointState
+from ssi_bridge_msgs.msg import ChannelStatus, Status
+from std_msgs.msg import Header
+
+from ssi_bridge.core.cycle import CycleResult
 
 from ssi_bridge.protocol.images import ProcessInput
 from ssi_bridge.protocol.registers import Reg
@@ -65,3 +68,35 @@ def channel_msg(name: str, slot: int, image: bytes, position: int, inp: ProcessI
         m.cam_enabled = watch.cam.enabled
     return m
 
+
+
+def joint_state_msg(result: CycleResult, stamp: Time, frame_id: str) -> JointState:
+    """joint_states of one cycle: only the joints with a sample latched at ``stamp``."""
+    js = JointState()
+    js.header.stamp = stamp
+    js.header.frame_id = frame_id
+    for part in result.published:
+        assert part.output is not None
+        js.name.append(part.joint.name)
+        js.position.append(part.output.position)
+        js.velocity.append(part.output.velocity)
+    return js
+
+
+def status_msg(result: CycleResult, header: Header) -> Status:
+    """~/status of one cycle: every joint that has an image, published or set aside (and why)."""
+    status = Status(header=header)
+    for part in result.joints:
+        joint = part.joint
+        image = part.image or joint.counters.last_image
+        if image is None:
+            continue
+        position = (part.sample.position if part.sample is not None
+                    else joint.counters.last_position)
+        msg = channel_msg(joint.name, joint.slot, image, position, ProcessInput.decode(image),
+                          joint.counters, joint.frames)
+        msg.published = part.output is not None
+        msg.set_aside_reason = part.reason
+        msg.set_aside = joint.counters.set_aside
+        status.channels.append(msg)
+    return status

@@ -36,17 +36,16 @@ from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.one_master import ensure_node_alone
 from ssi_bridge.core.bridge import Bridge
-from ssi_bridge.core.cycle import Cycle, CycleResult
+from ssi_bridge.core.cycle import Cycle
 from ssi_bridge.core.cycle_log import StationLog
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
-from ssi_bridge.protocol.images import ProcessInput
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits, cycle_wire_time
 from ssi_bridge.ros.lifecycle import BridgeLifecycle
 from ssi_bridge.ros.liveview import LiveView
-from ssi_bridge.ros.messages import channel_msg, idle_read, time_msg
+from ssi_bridge.ros.messages import idle_read, joint_state_msg, status_msg, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
 from ssi_bridge.ros.node_status import NodeDiagnostics
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
@@ -351,7 +350,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
             for ok, text in part.output.events:
                 self.handlers.log_event("encoder_status", part.joint.name, "frame check", ok,
                                         text)
-        js = self._joint_state(result, stamp_ns)
+        js = joint_state_msg(result, time_msg(stamp_ns), self.settings.frame_id)
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         want_status = (self.recorder.capturing or self.status_pub.get_subscription_count() > 0
                        or self.liveview.wants(self.status_pub))
@@ -360,40 +359,10 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                 return
             self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
         if want_status:
-            status = self._status(result, js)
+            status = status_msg(result, js.header)
             if status.channels and self.publish_safe(self.status_pub, status):
                 self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
         self._publish_on_change()
-
-    def _joint_state(self, result: CycleResult, stamp_ns: int) -> JointState:
-        """joint_states of one cycle: the joints with a sample latched at the stamp."""
-        js = JointState()
-        js.header.stamp = time_msg(stamp_ns)
-        js.header.frame_id = self.settings.frame_id
-        for part in result.published:
-            assert part.output is not None
-            js.name.append(part.joint.name)
-            js.position.append(part.output.position)
-            js.velocity.append(part.output.velocity)
-        return js
-
-    def _status(self, result: CycleResult, js: JointState) -> Status:
-        """~/status of one cycle: every joint that has an image, published or set aside."""
-        status = Status(header=js.header)
-        for part in result.joints:
-            joint = part.joint
-            image = part.image or joint.counters.last_image
-            if image is None:
-                continue
-            position = (part.sample.position if part.sample is not None
-                        else joint.counters.last_position)
-            msg = channel_msg(joint.name, joint.slot, image, position,
-                              ProcessInput.decode(image), joint.counters, joint.frames)
-            msg.published = part.output is not None
-            msg.set_aside_reason = part.reason
-            msg.set_aside = joint.counters.set_aside
-            status.channels.append(msg)
-        return status
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""

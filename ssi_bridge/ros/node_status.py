@@ -22,9 +22,9 @@ from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_statu
 
 #: bus counters whose growth since the last diagnostics message is a WARN: what the bus did
 #: that the receive path survived, another node's SYNC or NMT commands, stations restarted
-BUS_WARN_COUNTS = ("undecodable_frames", "malformed_pdos", "receive_errors", "callback_errors",
-                   "invalid_nmt_states", "nmt_restarts", "foreign_syncs", "foreign_nmt_commands",
-                   "foreign_station_frames")
+BUS_WARN_COUNTS = ("undecodable_frames", "malformed_pdos", "malformed_frames", "receive_errors",
+                   "callback_errors", "invalid_nmt_states", "nmt_restarts", "foreign_syncs",
+                   "foreign_nmt_commands", "foreign_station_frames")
 #: and an ERROR: a round of a station's supervisor thread failed (it goes on; the log says why)
 BUS_ERROR_COUNT = "supervisor_errors"
 

@@ -4,10 +4,16 @@
 in :data:`NODE_PARAMETERS`, per-joint ones (declared as ``<joint>.<name>``) in
 :data:`JOINT_PARAMETERS`; :mod:`ssi_bridge.ros.params` declares them and checks the values
 (``autostart`` first, by ``ros/lifecycle.py``, with its executable's default).
+
+No name is both a value and the ``.``-prefix of another: ``ros2 param dump`` and the nested
+form of a params file split names on ``.``, so such a pair cannot be written
+(:func:`nesting_clashes`). :data:`RENAMED` maps old names to the new ones; the node refuses an
+old name with the new one in the message.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -43,15 +49,16 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "true: configure and activate at start-up (ssi_bridge_node's default); false: start "
         "unconfigured and wait for ~/change_state (ssi_bridge_managed_node's default)",
         read_only=True)),
-    "simulation": (True, _describe(
+    "simulation.enabled": (True, _describe(
         "true: start the simulated encoders, XN-1SSI modules and gateway (a station of its "
         "own, see simulation.transport) and drive it over CAN; "
         "false: talk to a real XN-GW-CANOPEN station", read_only=True)),
     "simulation.transport": ("udp_multicast", _describe(
         "How the node reaches its simulated station, always over CAN only: udp_multicast "
         "(the station runs as a child process on python-can's udp_multicast bus on loopback, "
-        "group and port derived from bus.channel) or virtual (the station runs in the node's "
-        "process on the virtual bus; also the fallback without multicast on loopback)",
+        "group and port derived from bus.channel, the node's name and ROS_DOMAIN_ID) or "
+        "virtual (the station runs in the node's process on the virtual bus; also the "
+        "fallback without multicast on loopback)",
         read_only=True)),
     "simulation.start_timeout": (30.0, _describe(
         "Seconds the node waits for the simulated station's boot-up message at start, and "
@@ -78,11 +85,11 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         read_only=True, float_range=(0.05, 10.0))),
     "bus.listen_only": (False, _describe(
         "Only observe the bus another master drives: no NMT, SDO, SYNC or RPDO; one cycle is "
-        "published per observed SYNC; register services refuse. Needs simulation:=false",
+        "published per observed SYNC; register services refuse. Needs simulation.enabled:=false",
         read_only=True)),
     "replay.can_log": ("", _describe(
         "Run on a recorded CAN log (e.g. <bag>/can_0.log) instead of a bus: it is played onto "
-        "a private virtual channel and observed listen-only. Needs simulation:=false",
+        "a private virtual channel and observed listen-only. Needs simulation.enabled:=false",
         read_only=True)),
     "replay.rate": (1.0, _describe(
         "Speed factor of the log replay (2.0 = twice as fast); stamps keep the logged spacing",
@@ -184,7 +191,9 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "slot": (0, _describe("XN-1SSI module slot in the station (1-8, the object subindex); "
                           "0: position in 'joints' + 1", read_only=True, int_range=(0, 8))),
     "family": ("GENERIC", _describe(
-        "Simulated encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...)", read_only=True)),
+        "Encoder family preset (GENERIC, AFM60_MULTI, TTK70, ...): the simulated encoder, and "
+        "the layout the frame checks and max_speed follow; an unknown name is refused at "
+        "start-up", read_only=True)),
     "code": ("", _describe(
         "Simulated encoder transmit code: '' (family default), 'binary' or 'gray'; REG_PARA1's "
         "SSI_CODE_G/D must match it; a code the family's manual does not offer is refused at "
@@ -214,10 +223,11 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "max_speed": (-1.0, _describe(
         "Plausibility limit in rad/s (rotary) or m/s (linear): a sample whose step from the "
         "previous one is faster is flagged in diagnostics and its velocity is NaN; 0: off; "
-        "-1 (default, on for every family): the family's physical limit (TR: overspeed "
-        "6000 1/min = 628 rad/s, 001 §5.4.2; families whose manual states none, GENERIC "
-        "included: 12000 1/min = 1257 rad/s, a typical mechanical limit of fast SSI encoders, "
-        "or 10 m/s for linear ones; docs/node.md). Changes at run time",
+        "-1 (default, on for every family): no family's manual states a shaft speed (the "
+        "TR 10-6000 1/min of 001 §5.4.2 is the speed monitor's threshold, not a limit), so "
+        "12000 1/min = 1257 rad/s, a typical mechanical limit of fast SSI encoders, for "
+        "every rotary family (GENERIC and TR included), or 10 m/s for linear ones; "
+        "docs/node.md. Changes at run time",
         float_range=(-1.0, 1e6))),
     "motion.kind": ("constant", _describe("Simulated motion: constant, still or sine",
                                           read_only=True)),
@@ -230,3 +240,21 @@ JOINT_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
     "motion.start": (0.0, _describe("start position in rev or m", read_only=True,
                                     float_range=(-1e6, 1e6))),
 }
+
+#: old name -> new name: parameters renamed so that no name is both a value and a prefix
+RENAMED: dict[str, str] = {"simulation": "simulation.enabled"}
+
+
+def nesting_clashes(names: Iterable[str]) -> list[tuple[str, str]]:
+    """Pairs ``(value, longer)`` where parameter ``value`` is also a ``.``-prefix of parameter
+    ``longer`` (e.g. ``bus`` and ``bus.channel``): ``ros2 param dump`` nests names on ``.``
+    and fails on such a pair, and a nested params file cannot hold both."""
+    given = set(names)
+    out = []
+    for name in sorted(given):
+        parts = name.split(".")
+        for k in range(1, len(parts)):
+            prefix = ".".join(parts[:k])
+            if prefix in given:
+                out.append((prefix, name))
+    return out

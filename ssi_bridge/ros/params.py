@@ -15,7 +15,10 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.ros.param_table import JOINT_PARAMETERS, NODE_PARAMETERS
+from ssi_bridge.protocol.joint_encoder import joint_config
+from ssi_bridge.ros.param_table import (
+    JOINT_PARAMETERS, NODE_PARAMETERS, RENAMED, nesting_clashes,
+)
 from ssi_bridge.ros.qos_overrides import stray_overrides
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
@@ -35,6 +38,7 @@ class NodeSettings:
     publish_rate: float = 100.0
     diagnostics_period: float = 1.0
     frame_id: str = ""
+    #: simulation.enabled: the node starts and drives a simulated station of its own
     simulation: bool = True
     #: how the node reaches its simulated station: "udp_multicast" (child process) or "virtual"
     simulation_transport: str = "udp_multicast"
@@ -165,8 +169,34 @@ def unknown_overrides(node: Node) -> list[str]:
     return out
 
 
+def renamed_overrides(node: Node) -> None:
+    """ConfigError for a parameter given (params file, ``-p``) under its old name
+    (:data:`~ssi_bridge.ros.param_table.RENAMED`), naming the new one."""
+    given = getattr(node, "_parameter_overrides", {})
+    for old, new in RENAMED.items():
+        if old in given:
+            raise ConfigError(f"parameter '{old}' is now '{new}' (a name that is also the prefix "
+                              f"of others breaks 'ros2 param dump'): set {new} instead")
+
+
+def _joint_name_clashes(node: Node, names: list[str]) -> None:
+    """ConfigError when a joint's parameters would make a name both a value and a prefix
+    (a joint named ``publish_rate``: ``publish_rate`` and ``publish_rate.slot``)."""
+    declared = set(node.list_parameters([], 0).names)
+    per_joint = {f"{joint}.{key}" for joint in names for key in JOINT_PARAMETERS}
+    for value, longer in nesting_clashes(declared | per_joint):
+        if value in per_joint or longer in per_joint:
+            raise ConfigError(f"joints {_echo(names)}: parameter '{_echo(value)[1:-1]}' would "
+                              f"also be the prefix of '{_echo(longer)[1:-1]}' (params files and "
+                              "'ros2 param dump' nest names on '.'): name the joint otherwise")
+
+
 def declare_parameters(node: Node) -> NodeSettings:
-    """Declare every parameter on ``node`` and return the validated settings."""
+    """Declare every parameter on ``node`` and return the validated settings.
+
+    Raises ConfigError, before anything is opened, for an old parameter name, a joint name
+    that clashes with a parameter name, or a value out of place."""
+    renamed_overrides(node)
     values = {name: _declare(node, name, d, desc) for name, (d, desc) in NODE_PARAMETERS.items()}
     if not values["joints"]:
         # an empty YAML list has no element type, so ROS hands it over as "not set"
@@ -174,6 +204,7 @@ def declare_parameters(node: Node) -> NodeSettings:
                           "channel (e.g. joints: [joint1])")
     names = [str(j) for j in values["joints"]]
     check_joint_names(names, _echo(names))
+    _joint_name_clashes(node, names)
     stations = _stations(values["stations"], values["bus.node_id"])
     joints = []
     per_station: dict[int, int] = {}
@@ -210,15 +241,13 @@ def declare_parameters(node: Node) -> NodeSettings:
         raise ConfigError(f"simulation.transport {values['simulation.transport']!r}: one of "
                           f"{TRANSPORTS}")
     for flag in ("bus.listen_only", "replay.can_log"):
-        if values[flag] and values["simulation"]:
-            raise ConfigError(f"{flag} needs simulation:=false: the simulated station needs "
-                              "this node to drive its bus")
-    for line in unknown_overrides(node):
-        node.get_logger().warning(line)
-    return NodeSettings(
+        if values[flag] and values["simulation.enabled"]:
+            raise ConfigError(f"{flag} needs simulation.enabled:=false: the simulated station "
+                              "needs this node to drive its bus")
+    settings = NodeSettings(
         joints=tuple(joints), publish_rate=values["publish_rate"],
         diagnostics_period=values["diagnostics_period"], frame_id=values["frame_id"],
-        simulation=values["simulation"],
+        simulation=values["simulation.enabled"],
         simulation_transport=values["simulation.transport"],
         simulation_start_timeout=values["simulation.start_timeout"],
         simulation_station_priority=values["simulation.station_priority"],
@@ -227,7 +256,8 @@ def declare_parameters(node: Node) -> NodeSettings:
         bus_sdo_timeout=values["bus.sdo_timeout"],
         node_id=stations[0], stations=stations, storage_path=values["storage_path"],
         velocity_window=values["velocity_window"], stale_cycles=values["stale_cycles"],
-        latch_bound=values["latch_bound"], record_enabled=values["record.enabled"], record_root=values["record.root"],
+        latch_bound=values["latch_bound"], record_enabled=values["record.enabled"],
+        record_root=values["record.root"],
         record_path=values["record.path"], record_compression=values["record.compression"],
         record_can_log=values["record.can_log"], record_max_size=values["record.max_size"],
         record_max_duration=values["record.max_duration"], bus_listen_only=values["bus.listen_only"],
@@ -238,3 +268,27 @@ def declare_parameters(node: Node) -> NodeSettings:
         foxglove_port=values["foxglove.port"], foxglove_address=values["foxglove.address"].strip(),
         foxglove_services=values["foxglove.services"],
         foxglove_parameters=values["foxglove.parameters"])
+    check_simulated_layouts(settings)
+    for line in unknown_overrides(node):  # warnings only once the settings can run
+        node.get_logger().warning(line)
+    return settings
+
+
+def check_simulated_layouts(settings: NodeSettings) -> None:
+    """With a simulated station, every joint's encoder layout must be one it can simulate.
+
+    The station builds each joint's encoder from the family preset and the overrides
+    (:func:`~ssi_bridge.protocol.joint_encoder.joint_config`) and refuses to start otherwise;
+    checked here, the refusal comes before the station is started or the bus opened. A real
+    station only loses the frame checks of such a joint (a warning at start-up).
+
+    Raises ConfigError naming the joint and the rule.
+    """
+    if not settings.simulation:
+        return
+    for joint in settings.joints:
+        try:
+            joint_config(joint)
+        except ConfigError as err:
+            raise ConfigError(f"{joint.name}: the simulated station cannot build its encoder: "
+                              f"{err}") from None

@@ -149,8 +149,8 @@ class SessionRecorder:
         snapshots = self.snapshots
         if bag is None and snapshots is None:
             return
-        now_ns = self._node.get_clock().now().nanoseconds
         data = cdr.serialize(msg)
+        now_ns = self._node.get_clock().now().nanoseconds  # the bag keeps log times in order
         if snapshots is not None:
             try:
                 self._keep(snapshots, topic, msg, data, now_ns, stamp_ns)

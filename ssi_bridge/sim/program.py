@@ -1,9 +1,9 @@
 """``ros2 run ssi_bridge station``: the simulated XN-GW-CANOPEN station as a device of its own.
 
 Reads the node's params file (joints, families, motion, para1, storage, bus), opens the bus
-and runs until SIGINT/SIGTERM (exit 0). A node with ``simulation:=false`` on the same bus
-then drives it exactly as a real station. The node with ``simulation:=true`` starts this
-same program as its child process (``--parent-pid``: the station ends with its parent).
+and runs until SIGINT/SIGTERM (exit 0). A node with ``simulation.enabled:=false`` on the same
+bus then drives it exactly as a real station. The node with ``simulation.enabled:=true`` starts
+this same program as its child process (``--parent-pid``: the station ends with its parent).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ READY = "station ready"
 DESCRIPTION = """\
 Run the simulated XN-GW-CANOPEN station (SSI encoders -> SSI lines -> XN-1SSI modules ->
 gateway) on a CAN bus, as a device of its own. A ssi_bridge node started with
-simulation:=false on the same bus drives it like real hardware, on this host or another.
+simulation.enabled:=false on the same bus drives it like real hardware, on this host or another.
 
 The station reads the node's parameters from a ROS 2 params file: joints, <joint>.family,
 <joint>.slot, <joint>.code, <joint>.cable_length, <joint>.para1, <joint>.motion.*, the
@@ -55,7 +55,7 @@ EPILOG = """\
 examples:
   station --params-file config/ssi_bridge.yaml --interface udp_multicast \\
       --channel 239.74.163.2:43113@127.0.0.1
-  ssi_bridge_node --ros-args --params-file config/ssi_bridge.yaml -p simulation:=false \\
+  ssi_bridge_node --ros-args --params-file config/ssi_bridge.yaml -p simulation.enabled:=false \\
       -p bus.interface:=udp_multicast -p bus.channel:=239.74.163.2:43113@127.0.0.1
 """
 

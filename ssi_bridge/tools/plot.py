@@ -9,7 +9,9 @@ Examples:
     plot run1 --frame --joint axis_1 --index 100 --bits 25 --bit-rate 500000 -o frame.png
     plot --frame --value 0x1ABCDE --bits 25 --error-bits 2 -o frame.png   # no bag needed
 
-Exit status 0 on success, 2 when the bag or an option is unusable (message says why).
+Exit status 0 on success, 2 when the bag or an option is unusable (message says why), 130
+when Ctrl-C cut it short (the shell's 128 + SIGINT: a picture not drawn is not done; one line,
+no traceback).
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ import sys
 from pathlib import Path
 
 from ssi_bridge.exceptions import RecordingError
+
+#: exit status after Ctrl-C (SIGINT), as a shell reports a command it interrupted
+INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -94,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     except (RecordingError, ValueError, OSError) as err:
         print(f"plot: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"plot: interrupted; {args.output} not written (or incomplete)", file=sys.stderr)
+        return INTERRUPTED
     print(f"wrote {args.output}")
     return 0
 

@@ -14,7 +14,8 @@ In a terminal: space pauses and resumes, → publishes the next message while pa
 the rate by 10 %, and a progress line on stderr shows the time, the rate and the messages
 played. The replay's node offers ~/pause, ~/resume, ~/play_next, ~/set_rate and ~/seek.
 It waits up to 5 s (--wait-for-subscribers) for a subscriber on every played topic.
-Exit status: 0 done, 1 interrupted, 2 the bag or an option is unusable (message says why).
+Exit status, as ros2 bag play's: 0 done, or stopped by Ctrl-C (SIGINT) or SIGTERM; 2 the
+bag or an option is unusable (message says why); 130 a --recover cut short by Ctrl-C.
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ from ssi_bridge.exceptions import RecordingError
 #: announces a participant every 3 s after its first burst, so a discovery that missed the
 #: burst on a busy machine still ends within the wait
 DEFAULT_WAIT = 5.0
+#: exit status of a ``--recover`` cut short by Ctrl-C (the shell's 128 + SIGINT)
+INTERRUPTED = 128 + signal.SIGINT
 
 
 def seconds(text: str) -> Decimal:
@@ -135,6 +138,15 @@ def _options(args: argparse.Namespace) -> Any:
                          hold_at_end=bool(args.foxglove_port) and not args.loop)
 
 
+def _stop_on_signals(state: Any) -> None:
+    """Ctrl-C (SIGINT) and SIGTERM stop the playback: the replay ends as after its last message
+    (subscribers get what was published, the terminal its settings) and exits 0, as
+    ``ros2 bag play`` does. rclpy installs no handler of its own (``_play``), so a signal
+    never ends a wait with an exception."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: state.stop())
+
+
 def _spin(executor: Any, stop: threading.Event) -> None:
     """Serve the player services until ``stop`` is set or the context shuts down."""
     from rclpy.executors import ExternalShutdownException
@@ -156,8 +168,9 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
     if not args.no_ros:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
 
-        rclpy.init(args=["replay", *ros_args])
+        rclpy.init(args=["replay", *ros_args], signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node("ssi_bridge_replay")
     keyboard = None
     progress = None
@@ -179,7 +192,7 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
             spinner = threading.Thread(target=_spin, args=(executor, stop_spin),
                                        name="replay-services", daemon=True)
             spinner.start()
-        signal.signal(signal.SIGTERM, lambda *_: player.state.stop())
+        _stop_on_signals(player.state)
         if not args.disable_keyboard_controls:
             keyboard = Keyboard(player.state)
             if keyboard.start():
@@ -205,7 +218,7 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
             node.destroy_node()
     if player.state.stopped:
         print(f"replay: stopped after {count} messages from {bag.path}", file=sys.stderr)
-        return 1
+        return 0
     print(f"replayed {count} messages from {bag.path}")
     return 0
 
@@ -232,18 +245,20 @@ def main(argv: list[str] | None = None) -> int:
     except (RecordingError, ValueError) as err:
         print(f"replay: error: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        if args.recover:  # a repair cut short is not done: run it again
+            print(f"replay: --recover {args.bag} interrupted", file=sys.stderr)
+            return INTERRUPTED
+        print(f"replay: stopped before playback of {args.bag}", file=sys.stderr)
+        return 0
     try:
         return _play(args, bag, options, ros_args)
     except (RecordingError, ValueError) as err:
         print(f"replay: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 1
-    except Exception as err:  # rclpy's shutdown on SIGINT ends a wait with its own exception
-        from rclpy.executors import ExternalShutdownException
-        if isinstance(err, ExternalShutdownException):
-            return 1
-        raise
+    except KeyboardInterrupt:  # Ctrl-C before the player's handlers were in place
+        print(f"replay: stopped before playback of {bag.path}", file=sys.stderr)
+        return 0
     finally:
         bag.close()
         if not args.no_ros:

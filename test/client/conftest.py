@@ -7,16 +7,20 @@ virtual bus open on its channel.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+import os
+import time
+from collections.abc import Callable, Iterator
 
 import can.interfaces.virtual as virtual
 import pytest
 
+from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.protocol.settings import BusConfig, station_settings
 from ssi_bridge.sim.gateway.bus import LossyBus
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
+from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
@@ -74,3 +78,31 @@ def station(channel: str) -> Iterator[tuple[XnGateway, BridgeClient, list[Script
     finally:
         client.close()
         gateway.stop()
+
+
+@pytest.fixture
+def udp_station(request: pytest.FixtureRequest):
+    """A simulated station (node 1, one joint) and a connected master on a private
+    udp_multicast channel (CAN over UDP multicast on loopback): (channel, station, client)."""
+    channel = derive_channel(f"udp-{os.getpid()}-{request.node.name}")
+    station = Station(station_settings({"joints": ["j"], "j.slot": 1,
+                                        "bus.interface": "udp_multicast",
+                                        "bus.channel": channel}))
+    station.start()
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1,
+                          opener=wire_bus)
+    try:
+        client.connect()
+        yield channel, station, client
+    finally:
+        client.close()
+        station.stop()
+
+
+def wait_until(condition: Callable[[], bool], what: str, timeout: float = 3.0) -> None:
+    """Wait until ``condition()`` holds; fail the test with ``what`` after ``timeout`` s."""
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            pytest.fail(what)
+        time.sleep(0.005)

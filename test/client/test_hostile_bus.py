@@ -23,10 +23,9 @@ from can.interfaces.virtual import VirtualBus
 
 from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus, parse_channel
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.protocol.settings import BusConfig, station_settings
+from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
-from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
 from .conftest import ScriptedReader, run_cycles
@@ -45,24 +44,6 @@ def _raw_sender() -> socket.socket:
     sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 1))
     return sock
-
-
-@pytest.fixture
-def udp_station(request: pytest.FixtureRequest):
-    """A simulated station and a connected master on a private udp_multicast channel."""
-    channel = derive_channel(f"hostile-{os.getpid()}-{request.node.name}")
-    station = Station(station_settings({"joints": ["j"], "j.slot": 1,
-                                        "bus.interface": "udp_multicast",
-                                        "bus.channel": channel}))
-    station.start()
-    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), NODE, 1,
-                          opener=wire_bus)
-    try:
-        client.connect()
-        yield channel, station, client
-    finally:
-        client.close()
-        station.stop()
 
 
 def test_datagrams_that_are_no_can_frames_stop_neither_master_nor_station(

@@ -9,24 +9,15 @@ decoded from its first bytes and published as a position of -1 098 066 rad.
 
 from __future__ import annotations
 
-import time
-
 import can
-import pytest
 
 from ssi_bridge.protocol.dictionary import tpdo_cob_base
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 
+from .conftest import wait_until
+
 NODE = 5  # the station fixture's gateway
-
-
-def _wait(condition, what: str, timeout: float = 3.0) -> None:
-    end = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > end:
-            pytest.fail(what)
-        time.sleep(0.005)
 
 
 def test_tpdos_of_a_wrong_length_are_counted_and_never_decoded(station, channel, caplog):
@@ -41,7 +32,7 @@ def test_tpdos_of_a_wrong_length_are_counted_and_never_decoded(station, channel,
         frames.append((tpdo_cob_base(9) + NODE, b"\xff\xff\xff"))  # 3 of 0x6820's 4 bytes
         for can_id, data in frames:
             intruder.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
-        _wait(lambda: client.counters.malformed_pdos == 3,
+        wait_until(lambda: client.counters.malformed_pdos == 3,
               f"malformed TPDOs counted: {client.counters.malformed_pdos} of 3")
     finally:
         intruder.shutdown()

@@ -137,7 +137,7 @@ def test_ld48_leaves_reg_para1(setup):
 
 def test_fault_injection_is_refused_on_real_hardware(setup):
     bridge, _, _ = setup
-    with pytest.raises(ConfigError, match="simulation:=true"):
+    with pytest.raises(ConfigError, match="simulation.enabled:=true"):
         bridge.inject_fault(bridge.joint("a"), 1, 0.0, 0.0)
 
 

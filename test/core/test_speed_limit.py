@@ -1,10 +1,12 @@
 """``<joint>.max_speed: -1`` is a physical limit for every family, never off (docs/node.md).
 
-The TR encoders' overspeed limit is at most 6000 1/min (001 §5.4.2 "The maximum speed must be
-between 10 and 6000 min-1"); 004 (SICK) and 003 (EL500x notes) state no speed for their
-families, so those take the documented default: 12000 1/min rotary (GENERIC included), 10 m/s
-linear. A jump no shaft can make is then flagged without any setting, as #23 found it was not
-for GENERIC (a TPDO of the wrong length published as -1 098 066 rad).
+No manual states a shaft speed: 004 (SICK) and 003 (EL500x notes) give none, and 001 (TR)
+only the range of its speed monitor's threshold, "The maximum speed must be between 10 and
+6000 min-1" (001 §5.4.2), which a faster shaft exceeds and reports with the overspeed special
+bit (§5.5.2): so a TR shaft can turn faster than 6000 1/min, and every family takes the
+documented default: 12000 1/min rotary (GENERIC and TR included), 10 m/s linear. A jump no
+shaft can make is then flagged without any setting, as #23 found it was not for GENERIC (a
+TPDO of the wrong length published as -1 098 066 rad).
 """
 
 from __future__ import annotations
@@ -14,18 +16,21 @@ import math
 import pytest
 
 from ssi_bridge.core.joint import Joint, spec_max_speed
+from ssi_bridge.protocol.encoder_config import SpecialBit
 from ssi_bridge.protocol.families import FAMILIES, family_max_speed
 from ssi_bridge.protocol.images import encode_input
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.protocol.settings import JointSettings
+from ssi_bridge.sim.encoder.encoder import make_encoder
+from ssi_bridge.sim.encoder.motion import ConstantVelocity
+
+OVERSPEED = SpecialBit.OVERSPEED
 
 RPM = 2 * math.pi / 60                      # rad/s per 1/min
-TR_LIMIT = 6000 * RPM                       # 001 §5.4.2: 628.3 rad/s
 ROTARY_DEFAULT = 12000 * RPM                # docs/node.md: 1256.6 rad/s
 LINEAR_DEFAULT = 10.0                       # docs/node.md: m/s
 EXPECTED = {family: ROTARY_DEFAULT for family in FAMILIES}
-EXPECTED.update(TR_PROGRAMMABLE=TR_LIMIT, TR_PARITY=TR_LIMIT, TR_CHECKSUM=TR_LIMIT,
-                TTK70=LINEAR_DEFAULT, KH53=LINEAR_DEFAULT)
+EXPECTED.update(TTK70=LINEAR_DEFAULT, KH53=LINEAR_DEFAULT)
 PERIOD = 0.002                              # 500 Hz
 IMAGE = encode_input(0, int(Reg.REG_SSI_FRAME), False, False, False, 0, 0, 0)
 
@@ -35,7 +40,9 @@ def test_every_family_has_a_physical_limit_by_default(family: str) -> None:
     assert spec_max_speed(family) == pytest.approx(EXPECTED[family])
     spec = family_max_speed(family)
     assert spec.linear == (family in ("TTK70", "KH53"))
+    # the TR text names 001 §5.4.2 as what it is, a monitor's threshold
     assert ("001 §5.4.2" in spec.source) == family.startswith("TR_"), spec.source
+    assert ("threshold" in spec.source) == family.startswith("TR_"), spec.source
     joint = Joint(JointSettings(name="j", slot=1, family=family), velocity_window=3,
                   max_speed=-1.0, stale_cycles=5)
     assert joint.max_speed == pytest.approx(EXPECTED[family]) and joint.max_speed > 0
@@ -74,6 +81,24 @@ def test_generic_flags_a_jump_no_shaft_makes_without_any_setting() -> None:
     assert joint.counters.implausible == 1 and math.isnan(out[-1])
 
 
+def test_a_tr_shaft_above_its_overspeed_threshold_is_motion_not_a_bit_error() -> None:
+    # 001 §5.4.2: the speed monitor's threshold is at most 6000 1/min; §5.5.2: the overspeed
+    # bit is set when the shaft exceeds it. So 7000 1/min is a speed the encoder itself
+    # reports as real: the simulated TR encoder sets its overspeed bit there ...
+    rps = 7000 / 60
+    enc = make_encoder("TR_PROGRAMMABLE", ConstantVelocity(rps), special_bits=(OVERSPEED,))
+    assert enc.config.overspeed_rpm == 6000
+    enc.frame_at(0.0)
+    assert enc.frame_at(0.01).bits & 1, "no overspeed bit at 7000 1/min"
+    # ... and the node takes its steps as motion (max_speed -1), not as implausible jumps
+    joint = Joint(JointSettings(name="j", slot=1, family="TR_PROGRAMMABLE"), velocity_window=3,
+                  max_speed=-1.0, stale_cycles=5)
+    counts_per_rev = 2 * math.pi / joint.scale.unit_per_count
+    out = _run(joint, [int(k * counts_per_rev * rps * PERIOD) for k in range(20)])
+    assert joint.counters.implausible == 0
+    assert out[-1] == pytest.approx(rps * 2 * math.pi, rel=1e-2)
+
+
 def test_zero_still_switches_the_check_off() -> None:
     joint = Joint(JointSettings(name="j", slot=1), velocity_window=3, max_speed=0.0,
                   stale_cycles=5)
@@ -88,6 +113,7 @@ def test_the_parameter_description_says_what_minus_one_means() -> None:
     default, descriptor = JOINT_PARAMETERS["max_speed"]
     text = descriptor.description
     assert default == -1.0
-    for words in ("6000 1/min", "001 §5.4.2", "GENERIC", "12000 1/min", "10 m/s", "0: off"):
+    for words in ("6000 1/min", "001 §5.4.2", "threshold", "GENERIC", "TR", "12000 1/min",
+                  "10 m/s", "0: off"):
         assert words in text, f"{words!r} not in the max_speed description: {text}"
     assert "off where the family states none" not in text

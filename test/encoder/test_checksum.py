@@ -28,8 +28,10 @@ from ssi_bridge.protocol.frame_check import FrameCheck
 
 def _manual_example(value: int) -> tuple[int, object]:
     # 001 §5.2.4.2 example: 4096 steps/revolution (12 bits), 1024 revolutions (10 bits),
-    # "Total number of steps = 22 bits, this corresponds to 22 data bits", code binary
-    enc = make_encoder("TR_CHECKSUM", Still(0.0), steps_per_rev=4096, revolutions_numerator=1024)
+    # "Total number of steps = 22 bits, this corresponds to 22 data bits", code binary: the
+    # Number of data bits typed in is 22 (001 §5.2.1 "must be typed in exactly")
+    enc = make_encoder("TR_CHECKSUM", Still(0.0), steps_per_rev=4096, revolutions_numerator=1024,
+                       data_bits=22)
     enc.apply_preset(0.0, value)
     return enc.frame_at(0.0).bits, enc.config
 
@@ -40,7 +42,7 @@ def test_frame_layout_of_the_manual_example(value: int) -> None:
     # revolutions), 13-24 "P 2^11 - P 2^0", 25-28 "0 0 0 0" (16 bit steps per revolution),
     # 29-43 "CRC 2^14 - CRC 2^0" (15 bit TR check sum), MSB first
     bits, cfg = _manual_example(value)
-    assert cfg.frame_bits == 43
+    assert (cfg.data_bits, cfg.field_bits, cfg.frame_bits) == (22, 28, 43)
     s = format(bits, "043b")
     assert s[0:2] == "00"
     assert s[2:12] == format(value >> 12, "010b")
@@ -66,11 +68,34 @@ def test_full_resolution_fills_all_28_data_bits() -> None:
     (dict(special_bits=(SpecialBit.ENCODER_ERROR,)), "special"),   # "ohne SSI-Sonderbits"
     # 16 bits of steps per revolution at most
     (dict(steps_per_rev=131072, revolutions_numerator=16), "singleturn"),
-    (dict(data_bits=24), "data_bits 28"),                  # fixed 12 + 16 field layout
+    (dict(turn_bits=13), "turn_bits 12"),                   # fixed 12 + 16 field layout
+    # "the Number of data bits required for the programmed Total number of steps must be
+    # typed in exactly" (§5.2.1): 4096 x 4096 steps need 24, 4096 x 1024 need 22
+    (dict(data_bits=28), "needs exactly 24"),
+    (dict(data_bits=25), "needs exactly 24"),
+    (dict(revolutions_numerator=1024, data_bits=24), "needs exactly 22"),
+    (dict(revolutions_numerator=1024, data_bits=21), "values need 22 bits"),
+    # §5.2.1 "Check sum: max. number of data bits <= 28"
+    (dict(data_bits=29), "<= 28"),
 ])
 def test_rules_of_the_check_sum_format(override: dict, why: str) -> None:
     with pytest.raises(ConfigError, match=why):
         family_config("TR_CHECKSUM", **override)
+
+
+@pytest.mark.parametrize("override, data_bits", [
+    ({}, 24),                                                   # 4096 x 4096
+    (dict(revolutions_numerator=1024), 22),                     # the manual's example
+    (dict(revolutions_numerator=1024, data_bits=22), 22),       # as typed in, §5.2.4.2
+    (dict(steps_per_rev=65536), 28),                            # the largest, §5.2.4.2
+    (dict(steps_per_rev=1024, revolutions_numerator=100), 17),  # 102400 steps
+])
+def test_number_of_data_bits_is_the_manuals(override: dict, data_bits: int) -> None:
+    # 001 §5.2.1: Number of data bits = the bits of the total number of steps; the field on the
+    # wire stays 12 + 16 bits and the frame 43 clocks whatever the number (§5.2.4.2)
+    cfg = family_config("TR_CHECKSUM", **override)
+    assert (cfg.data_bits, cfg.field_bits, cfg.position_bits, cfg.frame_bits) == \
+        (data_bits, 28, 28, 43)
 
 
 def test_the_simulated_checksum_has_hamming_distance_6() -> None:

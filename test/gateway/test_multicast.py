@@ -121,6 +121,28 @@ def test_derived_ports_lie_above_the_ephemeral_ports() -> None:
         assert not ports & set(ephemeral), (ephemeral, sorted(ports & set(ephemeral))[:5])
 
 
+def test_the_station_bus_of_a_node_depends_on_its_domain(monkeypatch) -> None:
+    """Two nodes of one name and bus.channel on different ROS_DOMAIN_IDs get buses of their
+    own, each a derived port that keeps to the DDS-free offsets; domain 0 (or none) keeps the
+    bus of bus.channel alone, and a udp_multicast channel given by the user stays as given."""
+    from ssi_bridge.ros.params import NodeSettings  # the node's settings, as the node has them
+    from ssi_bridge.sim.supervisor.station import with_station_bus
+
+    s = NodeSettings(joints=(), bus_channel="robot")
+    by_domain = {d: with_station_bus(s, "/ssi_bridge", d).bus_channel for d in range(233)}
+    assert len(set(by_domain.values())) == 233, "a bus of its own for every domain"
+    assert by_domain[0] == derive_channel("robot")
+    dds = {7400 + 250 * d + off + 2 * p for d in range(233) for p in range(75) for off in (10, 11)}
+    ports = {parse_channel(c).port for c in by_domain.values()}
+    assert min(ports) >= 61000 and not ports & dds
+    monkeypatch.setenv("ROS_DOMAIN_ID", "42")
+    assert with_station_bus(s, "/ssi_bridge").bus_channel == by_domain[42]
+    monkeypatch.setenv("ROS_DOMAIN_ID", "")
+    assert with_station_bus(s, "/ssi_bridge").bus_channel == by_domain[0]
+    given = NodeSettings(joints=(), bus_interface="udp_multicast", bus_channel="239.1.2.3:61234")
+    assert with_station_bus(given, "/ssi_bridge", 42).bus_channel == "239.1.2.3:61234"
+
+
 def test_a_taken_port_is_named_with_the_reason() -> None:
     """A port held on every address by a socket without SO_REUSEADDR: the error says so
     (python-can's own message is only "could not create or configure socket") and names the

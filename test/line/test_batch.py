@@ -16,6 +16,8 @@ from ssi_bridge.sim.line.line import LineConfig, SsiLine
     ("GENERIC", {}, 0), ("GENERIC", {"code": Code.GRAY}, 0), ("AHM36_MULTI", {}, 0),
     ("AFS60", {}, 0), ("TTK70", {}, 3), ("ATM60", {"steps_per_rev": 1000}, 0),
     ("GENERIC", {}, -2),
+    # 001 §5.2.4.2's example: 4096 x 1024 steps = 22 data bits, 28-bit field + 15 check sum bits
+    ("TR_CHECKSUM", {"revolutions_numerator": 1024, "data_bits": 22}, 0),
 ])
 def test_batch_equals_scalar(family, kw, n_extra) -> None:
     """Same frames, pause-1, extra zero clocks and ZERO-test level as SsiLine.read."""

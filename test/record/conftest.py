@@ -11,6 +11,8 @@ from sensor_msgs.msg import JointState
 from ssi_bridge.record.bag import BagRecorder
 from ssi_bridge_msgs.msg import ChannelStatus, Event, Status
 
+from ..conftest import log_time_disorder
+
 T0 = 1_700_000_000_000_000_000
 JOINTS = ("axis_1", "axis_2")
 
@@ -73,5 +75,7 @@ def write_session(directory: Path, n: int, compression: str = "zstd") -> Path:
 
 @pytest.fixture(scope="session")
 def session_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A closed 2 s bag of the four topics (shared, read-only)."""
-    return write_session(tmp_path_factory.mktemp("bags") / "session", 2000)
+    """A closed 2 s bag of the four topics (shared, read-only), in log-time order."""
+    bag = write_session(tmp_path_factory.mktemp("bags") / "session", 2000)
+    assert not log_time_disorder(bag)
+    return bag

@@ -132,6 +132,38 @@ def test_concurrent_writers(tmp_path: Path) -> None:
         assert sum(1 for _ in reader.messages()) == 2000
 
 
+def test_a_message_handed_over_late_is_logged_in_order_in_every_file(tmp_path: Path) -> None:
+    """An ~/events message whose thread read the clock 7 ms before a joint_states message but
+    wrote after it (preempted in between) was logged 7 ms before its predecessor: ``mcap
+    doctor --strict-message-order`` failed. It is logged at the latest log time instead, its
+    publish time kept; the next file of a split starts no earlier either."""
+    from ..conftest import log_time_disorder
+
+    ms = 1_000_000
+    rec = BagRecorder.open(tmp_path / "late")
+    rec.add_topic("/joint_states", "sensor_msgs/msg/JointState")
+    rec.add_topic("/ssi_bridge/events", "ssi_bridge_msgs/msg/Event")
+    make_event = TOPICS["/ssi_bridge/events"][1]
+    rec.write("/joint_states", joint_state(10), T0 + 10 * ms)
+    rec.write("/ssi_bridge/events", make_event(3), T0 + 3 * ms, T0 + 3 * ms)
+    rec.write("/joint_states", joint_state(20), T0 + 20 * ms)
+    rec.split()
+    rec.write("/ssi_bridge/events", make_event(15), T0 + 15 * ms, T0 + 15 * ms)
+    rec.write("/joint_states", joint_state(30), T0 + 30 * ms)
+    summary = rec.close()
+    assert not log_time_disorder(tmp_path / "late")
+    logged = []
+    for name in summary.files:
+        with open(tmp_path / "late" / name, "rb") as f:
+            logged.append([(ch.topic, m.log_time - T0, m.publish_time - T0)
+                           for _, ch, m in make_reader(f).iter_messages(log_time_order=False)])
+    assert logged == [
+        [("/joint_states", 10 * ms, 10 * ms), ("/ssi_bridge/events", 10 * ms, 3 * ms),
+         ("/joint_states", 20 * ms, 20 * ms)],
+        [("/ssi_bridge/events", 20 * ms, 15 * ms), ("/joint_states", 30 * ms, 30 * ms)]]
+    assert summary.duration == pytest.approx(0.020)
+
+
 @pytest.mark.parametrize(("setup", "match"), [
     (lambda p: p.mkdir(), "already exists"),
     (lambda p: p.parent.joinpath("file").write_text("x"), "cannot create bag"),

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -81,3 +83,23 @@ def test_cli_frame_and_errors(tmp_path: Path) -> None:
 def test_frame_levels_sizes(n_bits: int) -> None:
     lv = frame_levels((1 << n_bits) - 1, n_bits, 250e3, 20e-6)
     assert len(lv.samples) == n_bits + 1
+
+
+def test_ctrl_c_cuts_a_plot_short_in_one_line_with_130(session_bag: Path, tmp_path: Path) -> None:
+    """A batch tool stopped before it is done exits non-zero (the shell's 128 + SIGINT), with
+    one line instead of a KeyboardInterrupt traceback. SIGINT goes in once matplotlib's
+    library is mapped: plot imports it inside main, then reads, draws and writes (seconds)."""
+    out = tmp_path / "cut.png"
+    proc = subprocess.Popen([sys.executable, "-m", "ssi_bridge.tools.plot", str(session_bag),
+                             "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    maps = Path(f"/proc/{proc.pid}/maps")
+    deadline = time.monotonic() + 60
+    while "matplotlib" not in maps.read_text():
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "plot: interrupted" in err and "Traceback" not in err, err

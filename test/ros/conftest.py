@@ -412,6 +412,17 @@ def station_pid(node: NodeProcess) -> int:
     return stations[0]
 
 
+# -- the simulated station's bus -------------------------------------------------------------------
+def station_channel(bus_channel: str, domain_id: int) -> str:
+    """The udp_multicast channel a default-named node with ``bus.channel`` = ``bus_channel`` in
+    DDS domain ``domain_id`` shares with its simulated station child (the node's own rule)."""
+    from ssi_bridge.ros.params import NodeSettings
+    from ssi_bridge.sim.supervisor.station import with_station_bus
+
+    return str(with_station_bus(NodeSettings(joints=(), bus_channel=bus_channel), domain=domain_id)
+               .bus_channel)
+
+
 # -- joint_states by joint name --------------------------------------------------------------------
 def joint_of(msg: Any, name: str) -> tuple[float, float] | None:
     """(position, velocity) of joint ``name`` in a JointState, None when the cycle left it out

@@ -24,9 +24,9 @@ from can.interfaces.udp_multicast.utils import pack_message
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 
-from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus, parse_channel
+from ssi_bridge.base.udp_bus import open_udp_bus, parse_channel
 
-from .conftest import latest_status, wait_for_level
+from .conftest import station_channel, latest_status, wait_for_level
 from .test_node_station_process import _gone, _station_of
 
 PERIOD = 0.5
@@ -42,7 +42,7 @@ def _values(st) -> dict[str, str]:
 def test_the_node_survives_a_hostile_bus_and_says_what_it_saw(running, probe, domain_id):
     name = f"hostile_{domain_id}_{os.getpid()}"
     node = running({"bus.channel": name, "diagnostics_period": PERIOD})
-    endpoint = parse_channel(derive_channel(name))
+    endpoint = parse_channel(station_channel(name, domain_id))
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     joints = probe.subscribe(JointState, node.topic("joint_states"))
     wait_for_level(probe, node, diags, "/ssi_bridge: joint1", DiagnosticStatus.OK, 20.0)
@@ -51,7 +51,7 @@ def test_the_node_survives_a_hostile_bus_and_says_what_it_saw(running, probe, do
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 1))
-    other = open_udp_bus(derive_channel(name))  # another node on the bus
+    other = open_udp_bus(station_channel(name, domain_id))  # another node on the bus
     try:
         for i in range(300):
             raw.sendto(GARBAGE if i % 2 else BAD_FRAME, (endpoint.group, endpoint.port))

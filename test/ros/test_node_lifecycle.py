@@ -145,7 +145,7 @@ def test_walk_through_the_lifecycle(tmp_path, domain_id, child_preexec, probe):
 
 def test_failing_configure_stays_unconfigured(tmp_path, domain_id, child_preexec, probe):
     # no simulated station and nothing else on the bus: the gateway never answers
-    node = _start_managed(tmp_path, domain_id, child_preexec, {"simulation": False})
+    node = _start_managed(tmp_path, domain_id, child_preexec, {"simulation.enabled": False})
     try:
         probe.wait_for(lambda: "managed node: unconfigured" in node.log(), 30.0,
                        "the node's start", node)

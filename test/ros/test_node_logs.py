@@ -128,7 +128,7 @@ def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):
 
 
 def test_listen_only_on_a_silent_bus_says_so(start_node):
-    node = start_node({"simulation": False, "bus.listen_only": True})
+    node = start_node({"simulation.enabled": False, "bus.listen_only": True})
     node.wait_for_log("bridging")
     started = time.monotonic()
     node.wait_for_log("no SYNC on the bus", timeout=SILENT_WARNING_S + 30.0)

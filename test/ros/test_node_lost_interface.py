@@ -1,6 +1,6 @@
 """A lost CAN interface comes back by itself: the node never exits and says what happened.
 
-The node (``simulation: false``) masters a separately started ``station`` over an interface
+The node (``simulation.enabled: false``) masters a separately started ``station`` over an interface
 the test unplugs and plugs back (``unpluggable_can.py``: python-can's ``can.interface``
 entry point, registered by a throwaway ``*.dist-info`` on the node's PYTHONPATH; unplugged,
 its calls fail with ENETDOWN as socketcan's do and opening it fails with ENODEV). Measured on
@@ -76,7 +76,7 @@ def test_an_unplugged_interface_comes_back_without_a_restart(
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     try:
         _ready(station)
-        node = start_node({"simulation": False, "bus.interface": INTERFACE,
+        node = start_node({"simulation.enabled": False, "bus.interface": INTERFACE,
                            "bus.channel": channel, "diagnostics_period": PERIOD})
         diags = probe.subscribe(DiagnosticArray, "/diagnostics")
         joints = probe.subscribe(JointState, node.topic("joint_states"))

@@ -5,13 +5,21 @@ Two nodes with the same parameters (``bus.channel`` included), started as the la
 udp_multicast group and port derived from the node's fully qualified name as well, so both
 bridges come up and publish, each its own joint_states and its own /diagnostics names. Before,
 both stations came up on the same derived group, each master saw the other's station boot,
-and both exited 1 (a CAN bus has one master, CiA 301).
+and both exited 1 (a CAN bus has one master, CiA 301). The same for one bridge started on two
+``ROS_DOMAIN_ID``s: the derived group and port depend on the domain too.
 """
 
 from __future__ import annotations
 
+import os
+import re
+import time
+
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
+
+from ..conftest import claim_domain
+from .conftest import launch_node
 
 
 def test_two_bridges_in_namespaces_both_publish(start_node, probe, domain_id):
@@ -36,3 +44,30 @@ def test_two_bridges_in_namespaces_both_publish(start_node, probe, domain_id):
     assert a.proc.poll() is None and b.proc.poll() is None
     for node in (a, b):
         assert "did not answer" not in node.log(), node.log()[-2000:]
+
+
+def test_the_same_bridge_on_two_domains_runs_twice(start_node, tmp_path, child_preexec):
+    """Robots (and CI jobs) are kept apart by ROS_DOMAIN_ID: two nodes of the same name and
+    parameters on two domains each get a bus of their own, so the second does not hear the
+    first's SYNC and exit 1 ("another CANopen master drives ...")."""
+    same = {"bus.channel": f"domains_{os.getpid()}"}
+    a = start_node(same)
+    other, claim = claim_domain()
+    try:
+        (tmp_path / "other").mkdir()
+        b = launch_node(tmp_path / "other", other, 1, child_preexec, same)
+        try:
+            for node in (a, b):
+                node.wait_for_log("bridging")
+            time.sleep(2.0)  # the one-master check and a few hundred cycles
+            assert a.proc.poll() is None and b.proc.poll() is None, (a.log()[-2000:],
+                                                                     b.log()[-2000:])
+            for node in (a, b):
+                assert "another CANopen master" not in node.log(), node.log()[-2000:]
+                assert "not sent by this master" not in node.log(), node.log()[-2000:]
+            buses = [re.search(r"on udp_multicast:(\S+) node", n.log()) for n in (a, b)]
+            assert all(buses) and buses[0][1] != buses[1][1], [m and m[1] for m in buses]
+        finally:
+            assert b.stop() == 0, b.log()[-2000:]
+    finally:
+        os.close(claim)

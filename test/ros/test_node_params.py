@@ -79,7 +79,7 @@ def test_stop_recording_without_a_session_is_refused(shared_node, shared_probe):
 def test_a_station_that_does_not_answer_exits_nonzero_with_the_reason(start_node):
     """Nobody serves node 1 on this virtual channel: one line names the first SDO transfer
     of the start-up configuration and the bound that bus.sdo_timeout sets."""
-    node = start_node({"simulation": False, "bus.sdo_timeout": 0.3})
+    node = start_node({"simulation.enabled": False, "bus.sdo_timeout": 0.3})
     code = node.proc.wait(30)
     assert code == 1, node.log()
     log = node.log()

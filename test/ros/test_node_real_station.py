@@ -1,7 +1,7 @@
 """One node for simulated and real stations (docs/architecture.md "Three layers").
 
-A node with ``simulation: false`` drives a separately started ``station`` program as it would
-drive real hardware: it loads nothing of ``ssi_bridge.sim``, and it knows a joint only from
+A node with ``simulation.enabled: false`` drives a separately started ``station`` program as it
+would drive real hardware: it loads nothing of ``ssi_bridge.sim``, and it knows a joint only from
 its parameters and the bus. So the rules that depend on the encoder are the same code as in
 the simulated default: a REG_PARA1 with invalid LSB bits (000 Table 19) changes the scale of
 REG_SSI_POS and joint_states follows it; a linear family (TTK70, 004 §3.6) is published in m.
@@ -26,7 +26,7 @@ from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.registers import Reg
 
-from .conftest import REPO, NodeProcess, dds_env, installed_executable
+from .conftest import REPO, NodeProcess, dds_env, installed_executable, joint_of
 from .test_node_station_process import _ready
 from .test_node_station_process import _start_station as start_station_process
 
@@ -82,7 +82,7 @@ def test_a_node_on_real_hardware_loads_nothing_of_the_simulator(tmp_path, domain
     station = _start_station(tmp_path, {"joints": ["joint1"], **bus,
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     modules = tmp_path / "modules_real.txt"
-    node = _start_probed_node(tmp_path, domain_id, {"simulation": False, **bus}, modules)
+    node = _start_probed_node(tmp_path, domain_id, {"simulation.enabled": False, **bus}, modules)
     try:
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 20, 30.0, "joint_states from the station", node)
@@ -96,7 +96,7 @@ def test_a_node_on_real_hardware_loads_nothing_of_the_simulator(tmp_path, domain
 
 
 def test_the_simulated_default_loads_the_supervisor(tmp_path, domain_id, probe):
-    """The control of the probe above: with simulation: true the supervisor is loaded."""
+    """The control of the probe above: with simulation.enabled: true the supervisor is loaded."""
     modules = tmp_path / "modules_sim.txt"
     node = _start_probed_node(tmp_path, domain_id, {
         "bus.channel": f"probe_{domain_id}", "storage_path": str(tmp_path / "bank.json")},
@@ -144,7 +144,7 @@ def test_invalid_lsb_bits_keep_the_position_on_a_real_station(tmp_path, domain_i
     station = _start_station(tmp_path, {"joints": ["joint1"], **bus, **still,
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     try:
-        node = start_node({"simulation": False, **bus})
+        node = start_node({"simulation.enabled": False, **bus})
         _invalid_lsb_keeps_the_position(node, probe)
     finally:
         _stop_station(station)
@@ -172,22 +172,21 @@ def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
         _ready(station)
     try:
-        node = start_node({"simulation": simulation, **(bus if not simulation else {})},
+        node = start_node({"simulation.enabled": simulation, **(bus if not simulation else {})},
                           params_file=config)
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 150, 30.0, "joint_states", node)
-        msgs = [m for _, m in joints[-100:]]
-        k = list(msgs[-1].name).index("carriage")
-        velocities = [m.velocity[k] for m in msgs if math.isfinite(m.velocity[k])]
+        carriage = [(m, v) for _, m in joints[-100:]
+                    if (v := joint_of(m, "carriage")) is not None]
+        velocities = [v for _m, (_p, v) in carriage if math.isfinite(v)]
         assert velocities, "no finite carriage velocity"
         mean = sum(velocities) / len(velocities)
         assert abs(mean - 0.01) < 0.001, f"carriage at {mean} (m/s expected: 0.01)"
-        # between fresh samples (finite velocity): a station process starved beside burners
-        # makes the joint STALE for a while, and a STALE message holds the last position
-        fresh = [m for m in msgs if math.isfinite(m.velocity[k])]
-        span = fresh[-1].header.stamp.sec + fresh[-1].header.stamp.nanosec * 1e-9 - (
-            fresh[0].header.stamp.sec + fresh[0].header.stamp.nanosec * 1e-9)
-        moved = fresh[-1].position[k] - fresh[0].position[k]
+        # between samples with a finite velocity (a left-out stretch restarts the estimate)
+        fresh = [(m, pv) for m, pv in carriage if math.isfinite(pv[1])]
+        span = fresh[-1][0].header.stamp.sec + fresh[-1][0].header.stamp.nanosec * 1e-9 - (
+            fresh[0][0].header.stamp.sec + fresh[0][0].header.stamp.nanosec * 1e-9)
+        moved = fresh[-1][1][0] - fresh[0][1][0]
         # metres, not radians (the bug this guards against was a factor of ~700): within 10 %
         # of the motion, which a station process starved beside burners keeps (7 % seen)
         assert abs(moved - 0.01 * span) < 0.001 * span, f"carriage moved {moved} m in {span:.2f} s"

@@ -1,7 +1,7 @@
 """Log replay: a session's CAN log, recorded from a simulated node, drives a second node.
 
 Both nodes are the installed executable in their own process on real DDS; the second runs
-with ``simulation: false`` and ``replay.can_log`` and must publish what the first one did.
+with ``simulation.enabled: false`` and ``replay.can_log`` and must publish what the first one did.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def recorded_log(running, probe, tmp_path: Path) -> tuple[Path, set[int]]:
 def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node, probe) -> None:
     log, simulated = recorded_log
     # the replay waits for this test's subscriber: a 2 s log must not end before discovery
-    node = start_node({"simulation": False, "replay.can_log": str(log),
+    node = start_node({"simulation.enabled": False, "replay.can_log": str(log),
                        "joint1.steps_per_rev": STEPS, "joint1.revolutions": TURNS,
                        "bus.node_id": 1, "replay.wait_for_subscribers": 15.0})
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
@@ -95,7 +95,7 @@ def test_replay_exits_at_the_end_when_asked_and_records_again(recorded_log, star
                                                               tmp_path: Path) -> None:
     log, _ = recorded_log
     root = tmp_path / "again"
-    node = start_node({"simulation": False, "replay.can_log": str(log), "replay.rate": 4.0,
+    node = start_node({"simulation.enabled": False, "replay.can_log": str(log), "replay.rate": 4.0,
                        "replay.exit_at_end": True, "record.enabled": True,
                        "record.root": str(root), "record.path": "replayed"})
     assert node.proc.wait(30) == 0, node.log()[-3000:]
@@ -111,10 +111,10 @@ def test_replay_exits_at_the_end_when_asked_and_records_again(recorded_log, star
 def test_listen_only_needs_real_mode(start_node, flag: str, value: object) -> None:
     node = start_node({flag: value})
     assert node.proc.wait(30) == 1
-    assert f"{flag} needs simulation:=false" in node.log(), node.log()[-2000:]
+    assert f"{flag} needs simulation.enabled:=false" in node.log(), node.log()[-2000:]
 
 
 def test_replay_of_a_missing_log_is_refused(start_node, tmp_path: Path) -> None:
-    node = start_node({"simulation": False, "replay.can_log": str(tmp_path / "none.log")})
+    node = start_node({"simulation.enabled": False, "replay.can_log": str(tmp_path / "none.log")})
     assert node.proc.wait(30) == 1
     assert "does not exist" in node.log(), node.log()[-2000:]

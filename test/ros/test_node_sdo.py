@@ -115,7 +115,7 @@ def test_node_id_picks_the_station_and_0_the_joints(running, probe):
 
 
 def test_sdo_services_are_refused_listen_only(start_node, probe):
-    node = start_node({"simulation": False, "bus.listen_only": True})
+    node = start_node({"simulation.enabled": False, "bus.listen_only": True})
     res = probe.call(SdoRead, node.topic("~/sdo_read"), SdoRead.Request(index=0x1000),
                      timeout=30.0)
     assert not res.success and LISTEN_ONLY in res.message, res.message

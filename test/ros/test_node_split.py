@@ -22,6 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import StartRecording, StopRecording
 
+from ..conftest import log_time_disorder
 from .conftest import NodeProcess, RosProbe, dds_env, installed_executable
 
 SESSION_S = 20.0
@@ -98,6 +99,7 @@ def test_twenty_seconds_split_every_five_give_four_or_five_files(session) -> Non
     assert info["message_count"] == session["stop"].message_count
     for entry in info["files"][:-1]:
         assert entry["duration"]["nanoseconds"] <= SPLIT_S * 1_000_000_000
+    assert not log_time_disorder(bag), "every file of the session in log-time order"
 
 
 def test_rosbags_and_mcap_ros2_counts_equal_metadata_and_the_subscriber(session) -> None:  # type: ignore[no-untyped-def]

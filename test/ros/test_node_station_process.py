@@ -2,7 +2,7 @@
 
 Checks the life cycle a user relies on: the child dies with the node (also after ``kill -9``),
 a crashed station is an ERROR in the bus diagnostics while the node keeps publishing, the
-``station`` program runs on its own and a node with ``simulation:=false`` drives it as real
+``station`` program runs on its own and a node with ``simulation.enabled:=false`` drives it as real
 hardware, and the in-process ``virtual`` fallback still reaches the station only by bus.
 """
 
@@ -225,7 +225,7 @@ def test_node_with_simulation_false_drives_a_separately_started_station(
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     try:
         _ready(station)
-        node = start_node({"simulation": False, **bus})
+        node = start_node({"simulation.enabled": False, **bus})
         joints = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 20, 30.0, "joint_states from the station", node)
         w = probe.call(WriteRegister, node.topic("~/write_register"),
@@ -277,7 +277,7 @@ def test_station_help_is_plain_text():
     out = subprocess.run([str(installed_executable("station")), "--help"], capture_output=True, text=True,
                          env=dds_env(0), timeout=30)
     assert out.returncode == 0
-    for word in ("--params-file", "udp_multicast", "simulation:=false", "0x4000"):
+    for word in ("--params-file", "udp_multicast", "simulation.enabled:=false", "0x4000"):
         assert word in out.stdout
     for markup in ("``", ":param", ":class:", ".. "):
         assert markup not in out.stdout, markup

@@ -53,8 +53,10 @@ def test_three_joints_on_two_stations_publish_their_own_motion(running, probe, t
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(msgs) > 60, 10.0, "joint_states of both stations", node)
     elapsed = time.monotonic() - t_start
-    last = msgs[-1][1]
-    assert list(last.name) == list(MOTION)
+    # a joint whose sample was not latched at a stamp is left out of that message
+    full = [m for _, m in msgs if list(m.name) == list(MOTION)]
+    assert len(full) >= 0.8 * len(msgs), "the joints of both stations are published together"
+    last = full[-1]
     for i, (joint, (velocity, start)) in enumerate(MOTION.items()):
         # velocity: the constant shaft speed, from this joint's own station
         # bound as for one station: one count over the window of 4 periods plus SYNC-stamp
@@ -63,7 +65,7 @@ def test_three_joints_on_two_stations_publish_their_own_motion(running, probe, t
         # may be up to half a period late (a busy machine)
         truth = 2 * math.pi * velocity
         bound = STEP / (3.5 / RATE) + 0.01 * abs(truth)
-        speeds = [m.velocity[i] for _, m in msgs[-30:]]
+        speeds = [m.velocity[i] for m in full[-30:]]
         worst = max(speeds, key=lambda v: abs(v - truth))
         assert abs(worst - truth) <= bound, (joint, truth, bound, worst, speeds)
         # position: start + velocity x (time since the simulated station started)

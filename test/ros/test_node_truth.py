@@ -28,10 +28,10 @@ from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 from ssi_bridge_msgs.srv import InjectFault, SdoRead
 
-from ssi_bridge.base.udp_bus import derive_channel, open_udp_bus
+from ssi_bridge.base.udp_bus import open_udp_bus
 from support.truth import TruthOracle, samples_from_joint_states
 
-from .conftest import inject, latest_status, station_pid, wait_for_level
+from .conftest import inject, latest_status, station_channel, station_pid, wait_for_level
 
 K = InjectFault.Request
 RATE = 200.0
@@ -121,7 +121,15 @@ class Run:
 
 @pytest.fixture
 def channel(domain_id: int) -> str:
+    """The node's bus.channel."""
     return f"truth_{domain_id}_{os.getpid()}"
+
+
+@pytest.fixture
+def wire(channel: str, domain_id: int) -> str:
+    """The udp_multicast channel the node shares with its station: where another producer
+    puts its frames."""
+    return station_channel(channel, domain_id)
 
 
 @pytest.mark.parametrize("seconds", [0.5, 2.0])
@@ -168,9 +176,9 @@ def test_a_queueing_station_answering_its_backlog_never_publishes_an_old_latch(
     assert reasons, "the backlog's cycles are set aside"
 
 
-def _foreign_syncs(channel: str, rate: float, seconds: float, stop: threading.Event) -> int:
-    """Send SYNC (0x080) at ``rate`` Hz for ``seconds`` from another producer on the bus."""
-    bus = open_udp_bus(derive_channel(channel))
+def _foreign_syncs(wire: str, rate: float, seconds: float, stop: threading.Event) -> int:
+    """Send SYNC (0x080) at ``rate`` Hz for ``seconds`` from another producer on ``wire``."""
+    bus = open_udp_bus(wire)
     sent = 0
     try:
         start = time.monotonic()
@@ -184,8 +192,8 @@ def _foreign_syncs(channel: str, rate: float, seconds: float, stop: threading.Ev
 
 
 @pytest.mark.parametrize("rate,seconds", [(10.0, 2.0), (1000.0, 2.0)])
-def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, channel, rate,
-                                                                seconds):
+def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, channel, wire,
+                                                                rate, seconds):
     """Another producer's SYNCs (CiA 301 allows one producer): the station answers them too,
     each answer latched at that SYNC. None is published as the master's cycle; the bus says
     so; the joint is published again once they stop."""
@@ -193,7 +201,7 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     stop = threading.Event()
     t0 = time.monotonic()
     try:
-        sent = _foreign_syncs(channel, rate, seconds, stop)
+        sent = _foreign_syncs(wire, rate, seconds, stop)
     finally:
         stop.set()
     t1 = time.monotonic()
@@ -208,9 +216,9 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     assert any("another producer" in m for m in warned), warned[-3:]
 
 
-def test_one_stray_sync_is_set_aside_for_the_cycles_it_touches(running, probe, channel):
+def test_one_stray_sync_is_set_aside_for_the_cycles_it_touches(running, probe, channel, wire):
     run = Run(running, probe, _params(channel))
-    bus = open_udp_bus(derive_channel(channel))
+    bus = open_udp_bus(wire)
     t0 = time.monotonic()
     try:
         bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))

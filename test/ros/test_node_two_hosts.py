@@ -102,7 +102,7 @@ def test_station_and_node_on_two_hosts_subscriber_on_a_third(namespaces, domain_
         **params, "bus.channel": f"{group}@10.201.0.2"}}}))
     node_file = tmp_path / "node.yaml"
     node_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
-        **params, "simulation": False, "bus.channel": f"{group}@10.201.0.1"}}}))
+        **params, "simulation.enabled": False, "bus.channel": f"{group}@10.201.0.1"}}}))
     env = _env(domain_id)
     procs: list[subprocess.Popen] = []
     logs = {name: tmp_path / f"{name}.log" for name in ("station", "node")}

@@ -1,7 +1,7 @@
 """One master per bus: a second bridge given a bus another master drives does not start.
 
-Two nodes with ``simulation: false`` on one udp_multicast channel with one separately started
-``station``: the first masters it; the second hears the first's SYNC (and SDO requests to
+Two nodes with ``simulation.enabled: false`` on one udp_multicast channel with one separately
+started ``station``: the first masters it; the second hears the first's SYNC (and SDO requests to
 node 1) before it sends anything, exits 1 with one line naming them and their COB-IDs, and
 the first goes on undisturbed. The same for two simulated nodes given the same udp_multicast
 channel on purpose: the second starts no station of its own. Before: the second reset and
@@ -46,10 +46,10 @@ def test_a_second_real_master_on_the_bus_exits_1_naming_the_first(
                                         "storage_path": str(tmp_path / "st" / "bank.json")})
     try:
         _ready(station)
-        first = start_node({"simulation": False, **bus})
+        first = start_node({"simulation.enabled": False, **bus})
         joints = probe.subscribe(JointState, first.topic("joint_states"))
         probe.wait_for(lambda: len(joints) > 20, 30.0, "joint_states of the first", first)
-        second = start_node({"simulation": False, **bus}, namespace="/second")
+        second = start_node({"simulation.enabled": False, **bus}, namespace="/second")
         line = _one_line_exit_1(second)
         assert "cannot start" in line and "another CANopen master" in line, line
         assert "SYNC on 0x080" in line and channel in line, line

@@ -88,7 +88,7 @@ def _plain_area_shift(cfg: EncoderConfig) -> int | None:
     if (cfg.origin < 0 or cfg.code is not Code.BINARY or cfg.shift_right
             or cfg.alignment is Alignment.TANNENBAUM):
         return None
-    shift = cfg.data_bits - cfg.value_bits if cfg.alignment is Alignment.LEFT else 0
+    shift = cfg.field_bits - cfg.value_bits if cfg.alignment is Alignment.LEFT else 0
     return shift + cfg.trailing_zero_bits
 
 

@@ -27,17 +27,19 @@ from typing import TYPE_CHECKING
 import can
 import canopen
 from canopen.objectdictionary import ODArray
-from canopen.sdo import SdoAbortedError, SdoServer
+from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
 from ssi_bridge.base.rx_guard import GuardedListener
+from ssi_bridge.protocol.frame_rules import station_rules
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import NOTIFIER_CYCLE, BridgeNetwork, LossyBus, take_bus
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.sim.gateway.emergency import Emergencies
 from ssi_bridge.sim.gateway.objects import EncoderObjects
 from ssi_bridge.sim.gateway.pdo import PdoEngine
+from ssi_bridge.sim.gateway.sdo_server import StationSdo
 from ssi_bridge.base.timebase import ModelClock
 
 if TYPE_CHECKING:
@@ -52,19 +54,6 @@ SYNC_COB_OBJECT = 0x1005
 _SDO_STATES = ("PRE-OPERATIONAL", "OPERATIONAL")
 
 
-class _StationSdo(SdoServer):
-    """canopen's SDO server, answering only in PRE-OPERATIONAL/OPERATIONAL, under the lock."""
-
-    def __init__(self, node: _StationNode) -> None:
-        super().__init__(0x600 + node.id, 0x580 + node.id, node)
-        self._station = node
-
-    def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        with self._station.lock:
-            if self._station.nmt.state in _SDO_STATES:
-                super().on_request(can_id, data, timestamp)
-
-
 class _StationNode(canopen.LocalNode):
     """A LocalNode that reports every completed SDO/PDO write (to re-read PDO parameters)."""
 
@@ -73,7 +62,7 @@ class _StationNode(canopen.LocalNode):
         super().__init__(node_id, od)
         self._after_write = after_write
         self.lock = lock
-        self.sdo = _StationSdo(self)
+        self.sdo = StationSdo(self, _SDO_STATES)
 
     def set_data(self, index: int, subindex: int, data: bytes,
                  check_writable: bool = False) -> None:
@@ -116,6 +105,7 @@ class XnGateway:
                              self.objects.pdo_packer, lock=self._lock)
         self.bus: LossyBus | None = None
         self.network: BridgeNetwork | None = None
+        self.listener: GuardedListener | None = None
         self._sync_cob: int | None = None
         self._answering: float | None = None  # wire time of the SYNC being answered
         #: SYNC cycles run so far
@@ -134,6 +124,12 @@ class XnGateway:
         # subscribers get each frame's wire time: a SYNC latches where it was on the wire
         # and no undecodable datagram, receive error or raising callback stops the station
         listener = GuardedListener(self.network, f"gateway node {self.node_id}")
+        # an NMT command or SDO request of another length, or an SDO segment outside a
+        # transfer, is counted and logged as malformed, never decoded (protocol/frame_rules)
+        listener.rules.update(station_rules(self.node_id))
+        self.node.sdo.report = listener.malformed
+        #: the station's receive path: its faults by kind (``listener.faults``)
+        self.listener = listener
         self.network.listeners[:] = [listener]
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
         self.network.connect()

@@ -13,8 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ssi_bridge.protocol.checksum import code_word
 from ssi_bridge.protocol.codes import Code
-from ssi_bridge.protocol.encoder_config import ERROR_BITS, Alignment, ErrorOutput, SpecialBit
+from ssi_bridge.protocol.encoder_config import (ERROR_BITS, Alignment, ErrorOutput, FrameFormat,
+                                                SpecialBit)
 from ssi_bridge.sim.encoder.encoder import SsiEncoder
 from ssi_bridge.protocol.layout import encode_area
 from ssi_bridge.sim.encoder.motion import ConstantVelocity, Sine, Still
@@ -64,12 +66,12 @@ def _frames(enc: SsiEncoder, ts: np.ndarray) -> np.ndarray:
         v = value.astype(np.uint64)
         if cfg.alignment is Alignment.TANNENBAUM:
             spr = int(cfg.steps_per_rev)
-            field = cfg.data_bits - cfg.turn_bits
+            field = cfg.field_bits - cfg.turn_bits
             st = spr.bit_length() - 1
             word = ((v >> np.uint64(st)) << np.uint64(field)) | \
                    ((v & np.uint64(spr - 1)) << np.uint64(field - st))
         elif cfg.alignment is Alignment.LEFT:
-            word = v << np.uint64(cfg.data_bits - cfg.value_bits)
+            word = v << np.uint64(cfg.field_bits - cfg.value_bits)
         else:
             word = v
         if cfg.code is Code.GRAY:
@@ -82,6 +84,8 @@ def _frames(enc: SsiEncoder, ts: np.ndarray) -> np.ndarray:
         return np.full(ts.shape, (1 << cfg.frame_bits) - 1, dtype=np.uint64)
     if errors and cfg.error_output is ErrorOutput.ERROR_VALUE:
         area = np.full(ts.shape, cfg.error_value << cfg.trailing_zero_bits, dtype=np.uint64)
+    if cfg.frame_format is FrameFormat.CHECKSUM:   # 28-bit field + 15 check sum bits
+        return np.array([code_word(int(a)) for a in area], dtype=np.uint64)
     tail = 0
     for b in cfg.special_bits:
         lvl = 1 if (b in errors or (b is SpecialBit.POWER_FAIL and enc.power_failure)) else 0

@@ -1,6 +1,6 @@
 """The node's simulated station(s): started, watched, faulted and stopped for the node.
 
-The node imports this package only with ``simulation: true`` (its one import of the
+The node imports this package only with ``simulation.enabled: true`` (its one import of the
 simulator, docs/architecture.md); a node on real hardware loads nothing of ``ssi_bridge.sim``.
 Everything here reaches the station over CAN, as the node does: :meth:`Simulation.start`
 starts the ``station`` program as a child process (or the station in-process on the virtual
@@ -34,10 +34,11 @@ class Simulation:
         self.stations: ChildStation | InProcessStation | StationGroup | None = None
 
     @staticmethod
-    def bus_settings(settings: NodeSettings, node: str) -> NodeSettings:
-        """``settings`` with the bus the node ``node`` (its fully qualified name) shares with
-        its simulated stations."""
-        return with_station_bus(settings, node)
+    def bus_settings(settings: NodeSettings, node: str,
+                     domain: int | None = None) -> NodeSettings:
+        """``settings`` with the bus the node ``node`` (its fully qualified name) in DDS domain
+        ``domain`` (default: ``ROS_DOMAIN_ID``) shares with its simulated stations."""
+        return with_station_bus(settings, node, domain)
 
     @staticmethod
     def open_bus(config: BusConfig) -> can.BusABC:

@@ -2,7 +2,8 @@
 
 ``simulation.transport: udp_multicast`` (default) runs the station as a child process (the
 ``station`` program, :mod:`ssi_bridge.sim.program`) on python-can's udp_multicast
-bus on loopback, on a group and port derived from ``bus.channel``; ``virtual`` is the
+bus on loopback, on a group and port derived from ``bus.channel``, the node's name and
+``ROS_DOMAIN_ID`` (:func:`with_station_bus`); ``virtual`` is the
 fallback for machines without multicast on loopback: the same station in the node's process
 on the in-process virtual bus. Either way the node talks to it only through the bus. The
 start waits for the station's boot-up message (bounded by ``simulation.start_timeout``).
@@ -45,19 +46,37 @@ _LIBC = ctypes.CDLL(None, use_errno=True)
 
 #: the node's default fully qualified name: its derived bus is the one of ``bus.channel`` alone
 DEFAULT_NODE = "/ssi_bridge"
+#: rcl's domain without ROS_DOMAIN_ID (or with it empty)
+DEFAULT_DOMAIN = 0
 
 
-def with_station_bus(s: NodeSettings, node: str = DEFAULT_NODE) -> NodeSettings:
+def ros_domain_id() -> int:
+    """The DDS domain this process's nodes join by default: ``ROS_DOMAIN_ID`` as rcl reads it
+    (unset or empty: 0). A value rcl refuses has ended ``rclpy.init`` before this is asked;
+    here it counts as the default."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    try:
+        return int(text) if text else DEFAULT_DOMAIN
+    except ValueError:
+        return DEFAULT_DOMAIN
+
+
+def with_station_bus(s: NodeSettings, node: str = DEFAULT_NODE,
+                     domain: int | None = None) -> NodeSettings:
     """``s`` with the bus the node ``node`` (fully qualified name) shares with its station.
 
     udp_multicast: the user's udp_multicast channel, else a group and port of their own on
-    loopback, derived from ``bus.channel`` and, for any other node name than the default,
-    from the name too: bridges in different namespaces never meet on one bus by accident (a
-    CAN bus has one master). virtual: the bus as configured (it is the process's own). The
-    node's client, CAN log sniffer and diagnostics all use the result.
+    loopback, derived from ``bus.channel``, for any other node name than the default from the
+    name too, and for any other DDS domain than 0 from ``domain`` too (default: this process's
+    ``ROS_DOMAIN_ID``): bridges in different namespaces or domains never meet on one bus by
+    accident (a CAN bus has one master). virtual: the bus as configured (it is the process's
+    own). The node's client, CAN log sniffer and diagnostics all use the result.
     """
     if s.simulation_transport == "udp_multicast" and s.bus_interface != "udp_multicast":
         key = s.bus_channel if node == DEFAULT_NODE else f"{node}:{s.bus_channel}"
+        domain = ros_domain_id() if domain is None else domain
+        if domain != DEFAULT_DOMAIN:
+            key = f"domain {domain}:{key}"
         return dataclasses.replace(s, bus_interface="udp_multicast",
                                    bus_channel=derive_channel(key))
     return s
