@@ -213,11 +213,11 @@ NODE_FIXTURES = frozenset({"ros_domain", "module_domain"})
 #: load, stress, soak and two-host tests: ``slow``, left out of ``make test``, run by
 #: ``make test-all``. A file names all its tests, ``file::test`` every case of that test.
 SLOW = {
-    "test/ros/test_node_truth.py::test_the_disturbance_matrix_on_two_stations_beside_two_burners":
+    "test/ros/test_node_truth_matrix.py::test_the_disturbance_matrix_on_two_stations_beside_two_burners":
         "load: the disturbance matrix beside two CPU burners, held to the truth",
-    "test/ros/test_node_truth.py::test_the_disturbance_matrix_on_eight_joints":
+    "test/ros/test_node_truth_matrix.py::test_the_disturbance_matrix_on_eight_joints":
         "soak: the disturbance matrix on eight joints, held to the truth",
-    "test/ros/test_node_truth.py::test_a_station_killed_and_started_again_on_the_same_bus":
+    "test/ros/test_node_truth_matrix.py::test_a_station_killed_and_started_again_on_the_same_bus":
         "stress: a station killed and another started on the same bus",
     "test/ros/test_node_load.py": "load: 60 s at 1 kHz beside two CPU burners",
     "test/ros/test_node_two_hosts.py": "two hosts: three network namespaces",

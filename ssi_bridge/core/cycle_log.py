@@ -19,10 +19,12 @@ master's SYNC ``k`` (wire time ``t_k``) only when
    sample is the encoder's position at ``t_k`` within ``latch_bound`` of motion (the node's
    bound is the gateway's reaction allowance plus the cycle's wire time, since a slot's frames
    may wait behind the other slots' on the wire);
-3. the window before ``k`` (of whichever producer's SYNC) also held exactly one image and one
-   position, the earlier of them within ``latch_bound`` of that window's SYNC: the station was
-   in step when ``k`` came. A station that missed the previous window, or answered it only
-   late, may still owe an answer, and that late answer would be the first one after ``t_k``.
+3. in each of the two windows before ``k`` (of whichever producer's SYNCs) *every* slot of the
+   station got exactly one image and one position, the first within ``latch_bound`` of that
+   window's SYNC: the station was in step when ``k`` came. A station that missed a window, or
+   answered it late or only in part, may still owe an answer, whose frames would be the first
+   after ``t_k``; and a station whose answers spill over the next SYNC (a wire too busy for
+   them) mixes frames of several answers in one window, which a slot alone cannot see.
 
 Anything else is *set aside* with a reason (:data:`REASONS`); the cycle leaves the joint out.
 A station that stays exactly one SYNC behind for good, with on-time-looking answers, cannot be
@@ -107,15 +109,25 @@ class StationLog:
 
     :param latch_bound: the longest a slot's frames may end after the SYNC (s) for the
         sample to count as latched at the SYNC (rule 2 of the module docstring)
-    :raises ValueError: ``latch_bound`` not > 0
+    :param slots: the slots of the station the master reads (rule 3 asks all of them)
+    :param history: windows before the SYNC in which the station must have been in step
+    :raises ValueError: ``latch_bound`` not > 0, no slots, ``history`` < 1
     """
 
-    def __init__(self, latch_bound: float, history: int = 2) -> None:
+    def __init__(self, latch_bound: float, slots: tuple[int, ...] = (1,),
+                 history: int = 2) -> None:
         if not latch_bound > 0:
             raise ValueError(f"latch_bound {latch_bound} s must be > 0")
         if history < 1:
             raise ValueError(f"history {history} must be >= 1 window")
+        if not slots:
+            raise ValueError("a station log needs the slots that answer (1-8)")
         self.latch_bound = latch_bound
+        #: the station's slots that the master reads: each answers every SYNC it handles
+        self.slots = tuple(sorted(set(slots)))
+        #: (t_k, frames received so far) -> whether the station was in step before t_k
+        self._in_step: tuple[float, int, bool] | None = None
+        self._received = 0
         #: windows before the SYNC that must show the station in step (rule 3)
         self.history = history
         self._lock = threading.Lock()
@@ -169,6 +181,7 @@ class StationLog:
 
     def _add(self, slot: int, frame: Frame) -> None:
         with self._lock:
+            self._received += 1
             frames = self._frames.get(slot)
             if frames is None:
                 frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
@@ -189,26 +202,46 @@ class StationLog:
             syncs = self._syncs
             i = bisect_left(syncs, t_k)
             t_next = syncs[i + 1] if i + 1 < len(syncs) else None
-            back = self.history
-            # the windows before k: bounds[j] .. bounds[j + 1], the last one ending at t_k
-            bounds = syncs[max(i - back, 0): i + 1]
-            counts = [[0, 0, float("inf")] for _ in range(len(bounds) - 1)]
             images: list[Frame] = []
             positions: list[Frame] = []
             for f in reversed(self._frames.get(slot, ())):
+                if f.t < t_k:
+                    break
+                if t_next is None or f.t < t_next:
+                    (images if f.kind == IMAGE else positions).append(f)
+            in_step = self._station_in_step(t_k, i)
+        return self._judge(slot, t_k, in_step, images, positions)
+
+    def _station_in_step(self, t_k: float, i: int) -> bool:
+        """Rule 3 for the SYNC at ``t_k`` (index ``i`` of the SYNCs), under the lock: in each
+        of the ``history`` windows before it, every slot of the station answered exactly once
+        (one image, one position), the first frame within ``latch_bound`` of the window's
+        SYNC. A station whose answer spills over a SYNC (a wire too busy for its answers, a
+        late or partial answer) is out of step, for all its slots: a slot's frames of one
+        window may then belong to different answers. Computed once per SYNC and frame count.
+        """
+        cached = self._in_step
+        if cached is not None and cached[0] == t_k and cached[1] == self._received:
+            return cached[2]
+        back = self.history
+        bounds = self._syncs[max(i - back, 0): i + 1]
+        ok = len(bounds) == back + 1
+        for slot in self.slots:
+            if not ok:
+                break
+            counts = [[0, 0, float("inf")] for _ in range(back)]
+            for f in reversed(self._frames.get(slot, ())):
                 if f.t >= t_k:
-                    if t_next is None or f.t < t_next:
-                        (images if f.kind == IMAGE else positions).append(f)
                     continue
                 if f.t < bounds[0]:
                     break
                 w = counts[bisect_right(bounds, f.t) - 1]
                 w[f.kind] += 1
                 w[2] = min(w[2], f.t)
-        in_step = len(counts) == back and all(
-            n_img == 1 and n_pos == 1 and first - t0 <= self.latch_bound
-            for (n_img, n_pos, first), t0 in zip(counts, bounds))
-        return self._judge(slot, t_k, in_step, images, positions)
+            ok = all(n_img == 1 and n_pos == 1 and first - t0 <= self.latch_bound
+                     for (n_img, n_pos, first), t0 in zip(counts, bounds))
+        self._in_step = (t_k, self._received, ok)
+        return ok
 
     def _judge(self, slot: int, t_k: float, in_step: bool, images: list[Frame],
                positions: list[Frame]) -> Verdict:

@@ -169,14 +169,15 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
     def _attach_frame_logs(self) -> None:
         """A frame log per station, fed by its slot table (every SYNC and TPDO it sees)."""
         self.frame_logs.clear()
-        by_client: dict[int, StationLog] = {}
+        by_client: dict[int, tuple[Any, list[Joint]]] = {}
         for joint in self.joints.values():
             client = self.client_of(joint.name)
-            log = by_client.get(id(client))
-            if log is None:
-                log = by_client[id(client)] = StationLog(self.latch_bound_s)
-                client.table.sink = log
-            self.frame_logs[joint.settings.station] = log
+            by_client.setdefault(id(client), (client, []))[1].append(joint)
+        for client, joints in by_client.values():
+            log = StationLog(self.latch_bound_s, slots=tuple(j.slot for j in joints))
+            client.table.sink = log
+            for joint in joints:
+                self.frame_logs[joint.settings.station] = log
 
     def _connect_stations(self, s: NodeSettings) -> None:
         """The master, one client per station, and each joint's start-up configuration."""

@@ -173,15 +173,53 @@ def test_an_unknown_sync_and_the_settled_share():
     assert log.settled(1, 4) == (4 * P, 0.5)
 
 
-def test_slots_are_judged_apart():
-    log = StationLog(BOUND)
-    for k in range(1, 4):
+def test_a_slot_that_missed_a_window_puts_the_whole_station_out_of_step():
+    """Rule 3 asks every slot of the station: one slot's gap means the station's answers of
+    that window may be spread over the next, for the other slots too."""
+    log = StationLog(BOUND, slots=(1, 2))
+    for k in range(1, 5):
         log.sync(k, k * P)
         _answer(log, k * P + 0.0002, k, slot=1)
         if k != 2:
             _answer(log, k * P + 0.0004, k, slot=2)
-    assert log.verdict(1, 3).sample is not None
+    assert log.verdict(1, 3).reason == UNSETTLED
     assert log.verdict(2, 3).reason == UNSETTLED
+    assert log.verdict(1, 4).reason == UNSETTLED   # window 2 is still one of the two before
+    log.sync(5, 5 * P)
+    for slot in (1, 2):
+        _answer(log, 5 * P + 0.0002 * slot, 5, slot=slot)
+    assert log.verdict(1, 5).sample is not None and log.verdict(2, 5).sample is not None
+
+
+def test_answers_that_spill_over_the_next_sync_are_never_vouched_for():
+    """Eight slots' answer takes longer on the wire than the SYNCs of another producer leave
+    it (000 Table 15: one image per slot, one position TPDO per two slots): each window holds
+    the tail of one answer and the head of the next, so a slot may find one image and one
+    position in a window, from two different answers, latched before the SYNC."""
+    slots = tuple(range(1, 9))
+    log = StationLog(0.005, slots=slots)
+    frame = 0.00021
+    t, seq = 0.0, 0
+    pending: list[tuple[int, str, int]] = []   # (slot, kind, value of the answer's latch)
+    for j in range(60):                        # a SYNC every 1 ms, every 5th one the master's
+        t_sync = j * 0.001
+        if j % 5 == 0:
+            seq += 1
+            log.sync(seq, t_sync)
+        else:
+            log.foreign_sync(t_sync)
+        t = max(t, t_sync)
+        pending += [(s, "image", j) for s in slots] + [(s, "position", j) for s in slots]
+        while pending and t + frame < t_sync + 0.001:   # the wire until the next SYNC
+            slot, kind, value = pending.pop(0)
+            t += frame
+            if kind == "image":
+                log.image(slot, t, IMG, 0)
+            else:
+                log.position(slot, t, value)
+    vouched = [v for k in range(1, seq + 1) for slot in slots
+               if (v := log.verdict(slot, k)).sample is not None]
+    assert vouched == []
 
 
 def test_the_bound_must_be_positive():

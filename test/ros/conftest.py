@@ -397,21 +397,6 @@ def shared_node(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPat
         _stop_and_report(node)
 
 
-# -- the simulated station child of a node -------------------------------------------------------
-def station_pid(node: NodeProcess) -> int:
-    """The pid of the node's simulated station child (``simulation.transport: udp_multicast``)."""
-    kids: list[int] = []
-    for task in Path(f"/proc/{node.proc.pid}/task").iterdir():
-        try:
-            kids += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    stations = [k for k in kids
-                if b"ssi_bridge.sim.program" in Path(f"/proc/{k}/cmdline").read_bytes()]
-    assert len(stations) == 1, f"expected one station child of the node, got {stations}"
-    return stations[0]
-
-
 # -- the simulated station's bus -------------------------------------------------------------------
 def station_channel(bus_channel: str, domain_id: int) -> str:
     """The udp_multicast channel a default-named node with ``bus.channel`` = ``bus_channel`` in

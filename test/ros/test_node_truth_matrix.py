@@ -1,0 +1,109 @@
+"""The disturbance matrix's long cases: one node through many disturbances, held to the truth.
+
+The slow tier (``make test-slow``; ``test/conftest.py`` lists them): the shipped two-station
+example (rotary and linear, constant and sine) beside two CPU burners, eight joints on one
+station, and a standalone station killed and another started on the same bus. Every
+published sample is checked against the truth oracle as in ``test_node_truth.py``; a
+violation names the disturbance it fell in.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import yaml
+
+from support.node_truth import RATE, Run, eight_joints, epochs, matrix, two_stations
+from support.truth import TruthOracle
+
+from .conftest import installed_executable, station_channel
+
+
+@pytest.fixture
+def channel(domain_id: int) -> str:
+    """The node's bus.channel."""
+    return f"matrix_{domain_id}_{os.getpid()}"
+
+
+@pytest.fixture
+def wire(channel: str, domain_id: int) -> str:
+    """The udp_multicast channel the node shares with its station."""
+    return station_channel(channel, domain_id)
+
+
+def test_the_disturbance_matrix_on_two_stations_beside_two_burners(running, probe, channel,
+                                                                   wire):
+    """Rotary and linear, constant and sine, two stations; two CPU burners throughout."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
+    try:
+        run = Run(running, probe, two_stations(channel))
+        t0 = time.monotonic()
+        matrix(run, wire, 1)
+        run.check("matrix_two_stations_burners", t0)
+    finally:
+        for p in burners:
+            os.kill(p.pid, signal.SIGKILL)
+            p.wait(5)
+
+
+def test_the_disturbance_matrix_on_eight_joints(running, probe, channel, wire):
+    run = Run(running, probe, eight_joints(channel))
+    t0 = time.monotonic()
+    matrix(run, wire, 1)
+    run.check("matrix_eight_joints", t0)
+
+
+def test_a_station_killed_and_started_again_on_the_same_bus(start_node, probe, tmp_path,
+                                                           domain_id):
+    """A real-station set-up (simulation.enabled false): the standalone ``station`` program
+    killed and another started on the same bus; its motion epoch is new."""
+    channel = station_channel(f"restart_{domain_id}_{os.getpid()}", domain_id)
+    params = {"joints": ["joint1"], "publish_rate": RATE, "diagnostics_period": 0.25,
+              "simulation.enabled": False, "bus.interface": "udp_multicast",
+              "bus.channel": channel}
+    config = tmp_path / "station.yaml"
+    config.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"joints": ["joint1"]}}}))
+
+    def station() -> subprocess.Popen:
+        proc = subprocess.Popen(
+            [str(installed_executable("station")), "--params-file", str(config),
+             "--interface", "udp_multicast", "--channel", channel],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        time.sleep(2.0)
+        return proc
+
+    first = station()
+    second = None
+    try:
+        run = Run(lambda p: start_node(p), probe, params)
+        time.sleep(0.5)
+        t0 = time.monotonic()
+        os.kill(first.pid, signal.SIGKILL)
+        first.wait(5)
+        cut = time.time()  # wire time: the stamps after it are the new station's
+        time.sleep(0.5)
+        second = station()
+        run.published_again(time.monotonic() + 0.5)
+        time.sleep(1.0)
+        # the samples before the restart against the first station's epoch, after it against
+        # the new one's
+        def stamp(m) -> float:
+            return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+        before = [(t, m) for t, m in run.joints if stamp(m) < cut]
+        after = [(t, m) for t, m in run.joints if stamp(m) > cut]
+        run.joints[:] = before
+        run.check("station_killed", t0)
+        run.oracle = TruthOracle.from_params(params, epochs(probe, run.node, [1]))
+        run.joints[:] = after
+        run.check("station_restarted", t0)
+    finally:
+        for proc in (first, second):
+            if proc is not None and proc.poll() is None:
+                os.kill(proc.pid, signal.SIGKILL)
+                proc.wait(5)
