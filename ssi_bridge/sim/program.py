@@ -75,10 +75,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--channel", help="python-can channel (overrides bus.channel)")
     p.add_argument("--bitrate", type=int, help="bit rate in bit/s (overrides bus.bitrate)")
     p.add_argument("--node-id", type=int, help="CANopen node id 1-127 (overrides bus.node_id)")
-    p.add_argument("--priority", type=int, default=0, metavar="N",
-                   help="run every thread SCHED_FIFO N (1-99; hardware never waits for a CPU), "
-                        "set before the station starts any thread; 0 (default): normal "
-                        "scheduling. Without the right to it: normal, said once")
+    p.add_argument("--priority", type=int, default=10, metavar="N",
+                   help="run every thread SCHED_FIFO N (1-99; hardware never waits for a CPU, "
+                        "and a driver sets aside answers later than its latch bound), set "
+                        "before the station starts any thread; default 10, as the node's own "
+                        "station child (simulation.station_priority); 0: normal scheduling. "
+                        "Without the right to it: normal, said once")
     p.add_argument("--parent-pid", type=int, default=0, metavar="PID",
                    help="exit when this process is gone (used by the node for its child)")
     p.add_argument("--log-level", default="INFO",
