@@ -1,0 +1,34 @@
+"""The master's side of the cycle core: where a client's frames go, and its SYNC count.
+
+The node wires each station's client to its frame log (``core/cycle_log.StationLog``, a
+:class:`~ssi_bridge.client.frame_sink.FrameSink`) and asks which SYNC it sent last, through
+these two calls, so that nothing outside ``client/`` reaches into a client's slot table.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from ssi_bridge.client.frame_sink import FrameSink
+from ssi_bridge.client.samples import SlotTable
+
+
+class Tabled(Protocol):
+    """A master or listen-only client: it keeps its slots in a :class:`SlotTable`."""
+
+    @property
+    def table(self) -> SlotTable:
+        """The client's slot table."""
+
+
+def feed_frames(client: Tabled, sink: FrameSink | None) -> None:
+    """Hand every SYNC and TPDO ``client`` sees to ``sink`` from now on (None: to nobody)."""
+    client.table.sink = sink
+
+
+def last_sync(client: Tabled) -> int:
+    """The sequence number of the newest SYNC ``client`` sent or observed (0: none yet)."""
+    return client.table.sync_seq
+
+
+__all__ = ["Tabled", "feed_frames", "last_sync"]
