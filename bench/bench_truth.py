@@ -1,8 +1,9 @@
 """Benchmark: the node under disturbance, every published sample held to the truth.
 
 Runs the cases of ``test/ros/test_node_truth.py`` (stalls of the simulated station, a
-queueing station's backlog, a second SYNC producer, a stray SYNC, CAN frame loss; the slow
-tier's cases too) as real node processes beside two CPU-burning processes (one per core,
+queueing station's backlog, a second SYNC producer, a stray SYNC, CAN frame loss) and of
+``test_node_truth_matrix.py`` (the slow tier's matrix on two stations and on eight joints, a
+station killed and started again) as real node processes beside two CPU-burning processes (one per core,
 stopped by PID at the end), and prints per case, from the truth oracle
 (``test/support/truth.py``):
 
@@ -35,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchlib import emit, emit_record, save  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
-TESTS = "test/ros/test_node_truth.py"
+TESTS = ("test/ros/test_node_truth.py", "test/ros/test_node_truth_matrix.py")
 
 
 def _burners(n: int) -> list[subprocess.Popen]:
@@ -57,7 +58,7 @@ def main() -> None:
         load = _burners(2)
         try:
             run = subprocess.run(
-                [sys.executable, "-m", "pytest", TESTS, "-q", "-n", "0", "-m", "",
+                [sys.executable, "-m", "pytest", *TESTS, "-q", "-n", "0", "-m", "",
                  "-p", "no:cacheprovider"], cwd=REPO, env=env, capture_output=True,
                 text=True, timeout=1800)
         except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
