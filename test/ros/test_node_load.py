@@ -94,28 +94,41 @@ def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe, t
             assert values.get("error_cycles", "0") == "0", f"{st.name}: {st.message} {values}"
             assert values.get("emergencies", "0") == "0", f"{st.name}: {st.message} {values}"
             assert "silent" not in st.message, st.message
-    # the velocity is unknown (NaN) until two samples after start (docs/node.md); after that a
-    # NaN would mean a frozen position (ERR_SSI) or a stale joint
-    for j in range(len(got[0].velocity)):
-        known = [i for i, m in enumerate(got) if not math.isnan(m.velocity[j])]
-        assert known and known[0] <= 10, f"joint {j}: no velocity in the first samples"
-        late = [i for i in range(known[0], len(got)) if math.isnan(got[i].velocity[j])]
-        assert not late, f"joint {j}: NaN velocity at samples {late[:10]} of {len(got)}"
-    # a STALE joint is left out of a message (docs/node.md): take the shoulder's samples
+    # the velocity is unknown (NaN) until two samples after start (docs/node.md); after that
+    # only right after a joint was left out for stale_cycles (5) cycles, when the estimate
+    # restarts: a NaN anywhere else would mean a frozen position (ERR_SSI)
+    restart_gap = 4.5e9 / RATE
+    for name in ("shoulder", "carriage"):
+        series = [(s, m.velocity[m.name.index(name)]) for s, m in zip(stamps, got)
+                  if name in m.name]
+        known = [i for i, (_s, v) in enumerate(series) if not math.isnan(v)]
+        assert known and known[0] <= 10, f"{name}: no velocity in the first samples"
+        late = [i for i in range(known[0], len(series)) if math.isnan(series[i][1])
+                and series[i][0] - series[i - 1][0] < restart_gap]
+        assert not late, f"{name}: NaN velocity at samples {late[:10]} of {len(series)}"
+    # a joint without a sample vouched for at the stamp is left out of a message (docs/node.md)
     sh = [(s, m) for s, m in zip(stamps, got) if "shoulder" in m.name]
-    assert len(sh) > 0.9 * len(got), f"shoulder in only {len(sh)} of {len(got)} messages"
+    assert len(sh) > 0.8 * len(got), f"shoulder in only {len(sh)} of {len(got)} messages"
     t = (np.array([s for s, _ in sh]) - stamps[0]) * 1e-9
     p = np.array([m.position[m.name.index("shoulder")] for _, m in sh])
     v = np.array([m.velocity[m.name.index("shoulder")] for _, m in sh])
     basis = np.column_stack([np.sin(W * t), np.cos(W * t), np.ones_like(t)])
     (a, b, _c), *_ = np.linalg.lstsq(basis, p, rcond=None)
     truth = W * (a * np.cos(W * t) - b * np.sin(W * t))
-    # docs/node.md "Velocity": |error| <= a_max * span + 1 count / span (+ the stamp
-    # resolution, 1 us on each end of the window); span from the stamps themselves
+    # docs/node.md "Velocity": |error| <= a_max * span + 1 count / span + |v| * L / span (the
+    # latch within L = latch_bound_s of its stamp, read off the bus status) + the stamp
+    # resolution (1 us on each end); span from the stamps themselves, checked where the
+    # node's window is the last five published samples (not within four after a restart)
+    bus = [st for _, arr in diags for st in arr.status if st.name.endswith(": bus")]
+    latch = max(float({kv.key: kv.value for kv in st.values}.get("latch_bound_s", "0"))
+                for st in bus) if bus else 0.0
     k = 4
     span = t[k:] - t[:-k]
-    bound = AMP * W * W * span + STEP / span + abs(AMP * W) * 2e-6 / span
+    bound = (AMP * W * W * span + STEP / span + abs(AMP * W) * (2e-6 + 2 * latch) / span)
     err = np.abs(v[k:] - truth[k:])
+    gaps = np.diff(t) * 1e9 >= restart_gap
+    fresh_window = np.array([not gaps[i:i + k].any() for i in range(len(err))])
+    err = np.where(fresh_window & ~np.isnan(err), err, 0.0)
     bad = int(np.sum(err > bound))
     if os.environ.get("SSI_BRIDGE_LOAD_DUMP"):
         np.savez(os.environ["SSI_BRIDGE_LOAD_DUMP"], t=t, p=p, v=v, truth=truth, stamps=stamps)
