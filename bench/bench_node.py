@@ -14,7 +14,21 @@ same run and the same DDS domain. After ~2 s of warm-up, ~5 s are measured per p
   the SSI latch (SYNC) time, the bare publisher the instant before publish() (lower is better;
   goal p99 <= 1.2x bare)
 * ``cpu_s_per_s``: utime+stime of the publisher process (/proc/<pid>/stat) over the window per
-  second; the node's includes its simulated station, gateway and CAN bus (lower is better)
+  second; the node's is its own process (its station child, ``simulation.transport:
+  udp_multicast``, is not in it; the simulated wire's timing of the node's own frames is)
+  (lower is better)
+
+The driver alone, first (``node_<N>enc_driver_*``; ``BENCH_NODE_ONLY=driver`` runs only this
+part): each case :data:`DRIVER_RUNS` times in one sitting, each run the node, the bare and the
+floor publisher; printed as the median of the runs' ratios, with the runs:
+
+* ``driver_latency_p50_us`` / ``_p99_us``: the node's span per cycle, from the kernel receive
+  timestamp of the frame that completed it to ``publish()`` returning (the node writes it when
+  ``SSI_BRIDGE_SPAN_LOG`` names a file, ``ssi_bridge/ros/span_probe.py``), against the floor
+  publisher's span, datagram in the kernel (``SO_TIMESTAMPNS``) to ``publish()`` returning
+  (goal p99 <= 1.3x)
+* ``driver_cpu_s_per_s``: the node's process alone against the bare publisher (goal <= 1.5x);
+  ``station_child_cpu_s_per_s``: its station child process, for the record
 
 * ``latency_beyond_wire_p50_us`` / ``_p99_us``: receive - header.stamp minus the
   computed SYNC -> last TPDO wire time (the TPDOs of one cycle, worst-case stuffed) against
@@ -87,6 +101,13 @@ BARE_TOPIC = "/bench_bare/joint_states"
 STATIONS_RATE_HZ = 400.0
 STATIONS_BITRATE = 1_000_000
 
+#: the node's span probe (ssi_bridge/ros/span_probe.py): set in the measured node's environment
+SPAN_ENV = "SSI_BRIDGE_SPAN_LOG"
+#: runs of each case for the driver-only figures (medians of the runs' ratios)
+DRIVER_RUNS = 3
+#: goals of the driver-only figures (issue: the driver's own latency and CPU)
+DRIVER_GOALS = {"latency_p99": 1.3, "cpu": 1.5}
+
 UNITS = {"rate_hz": "Hz", "jitter_p99_us": "us", "latency_p50_us": "us",
          "latency_p99_us": "us", "cpu_s_per_s": "s/s"}
 GOALS = {"rate_hz": (">=", 0.99), "latency_p99_us": ("<=", 1.2)}
@@ -95,8 +116,8 @@ NOTES = {
     "jitter_p99_us": "p99 of |receive interval - 1/rate|; lower is better",
     "latency_p50_us": "receive wall time - header.stamp, median; lower is better",
     "latency_p99_us": "receive wall time - header.stamp, p99; lower is better",
-    "cpu_s_per_s": "publisher process CPU s (utime+stime) per s of publishing; node includes "
-                   "its simulated station and CAN bus; lower is better",
+    "cpu_s_per_s": "publisher process CPU s (utime+stime) per s of publishing; the node's "
+                   "process alone (not its station child); lower is better",
 }
 
 
@@ -170,7 +191,25 @@ def floor_sender(port: int, rate: float) -> int:
         sock.sendto(struct.pack("<q", time.time_ns()), ("127.0.0.1", port))
 
 
-def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
+def _kernel_receive(sock: Any) -> tuple[bytes, int]:
+    """One datagram of ``sock`` (SO_TIMESTAMPNS on) and its kernel receive time (ns, 0: none),
+    as the node's udp_multicast bus receives each frame."""
+    import socket
+    import struct
+
+    data, ancillary, _, _ = sock.recvmsg(64, socket.CMSG_SPACE(16))
+    for level, kind, raw in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(raw) >= 16:
+            sec, nsec = struct.unpack("@ll", raw[:16])
+            return data, sec * 1_000_000_000 + nsec
+    return data, 0
+
+
+#: Linux's SO_TIMESTAMPNS (Python's socket module may not name it)
+SO_TIMESTAMPNS = 35
+
+
+def floor_publisher(n_joints: int, rate: float, topic: str, span_log: str = "") -> int:
     """The least any rclpy node that publishes what it receives adds to the bare publisher.
 
     Another process sends a datagram stamped with its send time ``rate`` times a second (as a
@@ -178,6 +217,11 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
     ``FLOOR_PRIORITY`` as the node's CAN receive thread is, wakes and publishes an N-joint
     JointState stamped with that send time at once: no simulation, no CAN decoding, no
     hand-off to another thread, nothing computed. Runs until SIGINT.
+
+    ``span_log``: a file that gets the floor's span per message as the node's span probe
+    writes it (``ssi_bridge/ros/span_probe.py``): the datagram's kernel receive time
+    (``SO_TIMESTAMPNS``, read with ``recvmsg`` as the node's bus reads its frames) and the
+    instant ``publish()`` returned.
     """
     import socket
     import struct
@@ -188,7 +232,11 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
 
     node, pub = _joint_state_publisher("floor", topic)
     names = [f"j{i + 1}" for i in range(n_joints)]
+    from ssi_bridge.ros.span_probe import SpanProbe
+
+    probe = SpanProbe(span_log) if span_log else None
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     sock.bind(("127.0.0.1", 0))
     # _die_with_parent: in this process _BENCH_PID is the floor publisher's own PID
     sender = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--floor-sender",
@@ -199,9 +247,12 @@ def floor_publisher(n_joints: int, rate: float, topic: str) -> int:
         run_this_thread_at("floor_rx", FLOOR_PRIORITY)
         count = 0
         while True:
-            sent_ns = struct.unpack("<q", sock.recv(64))[0]
+            data, received_ns = _kernel_receive(sock)
+            sent_ns = struct.unpack("<q", data)[0]
             count += 1
             pub.publish(_joint_state(names, count, *divmod(sent_ns, 1_000_000_000)))
+            if probe is not None:
+                probe.published(received_ns / 1e9, n_joints)
 
     threading.Thread(target=receive, name="floor_rx", daemon=True).start()
     try:
@@ -314,10 +365,58 @@ def burners(n: int) -> list[subprocess.Popen]:
                              start_new_session=True) for _ in range(n)]
 
 
-def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path,
-            rate: float = RATE_HZ) -> dict:
-    """Run ``cmd`` (the publisher) and the subscriber; return the window's figures."""
+def descendants(pid: int) -> list[int]:
+    """The PIDs of ``pid``'s child processes and theirs (the node's station child)."""
+    found: list[int] = []
+    todo = [pid]
+    while todo:
+        parent = todo.pop()
+        for task in Path(f"/proc/{parent}/task").glob("*/children"):
+            try:
+                kids = [int(k) for k in task.read_text().split()]
+            except OSError:
+                continue
+            found += kids
+            todo += kids
+    return found
+
+
+def _cpu_of(pids: list[int]) -> float:
+    total = 0.0
+    for pid in pids:
+        try:
+            total += cpu_seconds(pid)
+        except OSError:
+            pass
+    return total
+
+
+def span_window(path: Path, w0: int, w1: int) -> Any:
+    """Spans (us) of the records of a span file published within [w0, w1) (wall ns)."""
     import numpy as np
+
+    from ssi_bridge.ros.span_probe import read_spans
+
+    rows = np.array(read_spans(str(path)), dtype=np.int64).reshape(-1, 3)
+    sel = (rows[:, 1] >= w0) & (rows[:, 1] < w1) & (rows[:, 0] > 0)
+    return (rows[sel, 1] - rows[sel, 0]) / 1e3
+
+
+def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path,
+            rate: float = RATE_HZ, spans: Path | None = None, span_env: bool = True) -> dict:
+    """Run ``cmd`` (the publisher) and the subscriber; return the window's figures.
+
+    ``spans``: the span file the publisher writes (``span_env``: named by
+    ``SSI_BRIDGE_SPAN_LOG`` in its environment, set here, as the node reads it; else the
+    command line names it, as the floor's); its records in the window become
+    ``span`` (us) in the result. ``cpu_s_per_s`` is the publisher process alone (its threads;
+    a child process such as the node's station is not in its utime+stime), and
+    ``children_cpu_s_per_s`` its child processes'.
+    """
+    import numpy as np
+
+    if spans is not None and span_env:
+        env = {**env, SPAN_ENV: str(spans)}
 
     out = work / f"{tag}.samples"
     ready = work / f"{tag}.ready"
@@ -346,9 +445,12 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
                                    f"publisher log: {_tail(pub_log)}")
             time.sleep(0.05)
         time.sleep(WARMUP_S)
-        cpu0, w0, m0 = cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        kids = descendants(pub.pid)
+        cpu0, kid0, w0, m0 = (cpu_seconds(pub.pid), _cpu_of(kids), time.time_ns(),
+                              time.monotonic())
         time.sleep(MEASURE_S)
-        cpu1, w1, m1 = cpu_seconds(pub.pid), time.time_ns(), time.monotonic()
+        cpu1, kid1, w1, m1 = (cpu_seconds(pub.pid), _cpu_of(kids), time.time_ns(),
+                              time.monotonic())
         if pub.poll() is not None:
             raise RuntimeError(f"{tag}: publisher exited {pub.returncode}: {_tail(pub_log)}")
         _stop(sub)
@@ -380,7 +482,25 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
         "latency_p50_us": float(np.percentile(latency, 50)),
         "latency_p99_us": float(np.percentile(latency, 99)),
         "cpu_s_per_s": (cpu1 - cpu0) / (m1 - m0),
+        "children_cpu_s_per_s": (kid1 - kid0) / (m1 - m0),
+        "span": (span_window(spans, w0, w1) if spans is not None and spans.exists()
+                 else np.array([])),
     }
+
+
+def driver_run(n_joints: int, run: int, domain_id: int, env: dict[str, str],
+               work: Path) -> tuple[dict, dict, dict]:
+    """One run of a case: the node, the bare and the floor publisher, one after the other,
+    the node and the floor writing their spans."""
+    rate = case_rate(n_joints)
+    node = measure(f"node{n_joints}r{run}", node_cmd(n_joints, domain_id, work),
+                   f"{NODE_NS}/joint_states", env, work, rate,
+                   spans=work / f"node{n_joints}r{run}.spans")
+    bare = measure(f"bare{n_joints}r{run}", bare_cmd(n_joints), BARE_TOPIC, env, work, rate)
+    spans = work / f"floor{n_joints}r{run}.spans"
+    floor = measure(f"floor{n_joints}r{run}", floor_cmd(n_joints, spans), FLOOR_TOPIC, env,
+                    work, rate, spans=spans, span_env=False)
+    return node, bare, floor
 
 
 def node_cmd(n_joints: int, domain_id: int, work: Path,
@@ -407,9 +527,9 @@ def bare_cmd(n_joints: int) -> list[str]:
             str(case_rate(n_joints)), BARE_TOPIC]
 
 
-def floor_cmd(n_joints: int) -> list[str]:
+def floor_cmd(n_joints: int, spans: Path | None = None) -> list[str]:
     return [sys.executable, str(Path(__file__).resolve()), "--floor", str(n_joints),
-            str(case_rate(n_joints)), FLOOR_TOPIC]
+            str(case_rate(n_joints)), FLOOR_TOPIC] + ([str(spans)] if spans else [])
 
 
 def report(records: list[dict], n_joints: int, node: dict, bare: dict, label: str = "") -> None:
@@ -471,6 +591,64 @@ def report_floor(records: list[dict], n_joints: int, node: dict, bare: dict,
             "ratio": round(nb / f, 3),
             "note": f"the node's latency beyond the wire ({wire_us:.0f} us subtracted) against "
                     f"the floor publisher's latency; {where}"})
+
+
+def report_driver(records: list[dict], n_joints: int, runs: list[tuple[dict, dict, dict]]) -> None:
+    """The driver alone, medians of the runs' ratios (each run against its own baselines).
+
+    Latency: the node's span from the kernel receive time of the frame that completed a
+    cycle to ``publish()`` returning (``ros/span_probe.py``) against the floor publisher's
+    same span (datagram in the kernel to ``publish()`` returning). CPU: the node's process
+    alone (not its station child) against the bare publisher's.
+    """
+    import statistics
+
+    import numpy as np
+
+    where = (f"{n_joints} joint(s) at {case_rate(n_joints):g} Hz, {BITRATE} bit/s; median of "
+             f"{len(runs)} runs in one sitting, each against its own baselines")
+    usable = [(n, b, f) for n, b, f in runs if len(n["span"]) and len(f["span"])]
+    for q in (50, 99):
+        if not usable:
+            emit(records, {"metric": f"node_{n_joints}enc_driver_latency_p{q}_us",
+                           "error": "no span records (the node or floor wrote none)"})
+            continue
+        d = [float(np.percentile(n["span"], q)) for n, _, _ in usable]
+        f = [float(np.percentile(fl["span"], q)) for _, _, fl in usable]
+        ratios = [a / b for a, b in zip(d, f)]
+        rec: dict = {
+            "metric": f"node_{n_joints}enc_driver_latency_p{q}_us",
+            "value": round(statistics.median(d), 1), "unit": "us",
+            "baseline": round(statistics.median(f), 1),
+            "ratio": round(statistics.median(ratios), 3),
+            "runs": [round(r, 3) for r in ratios],
+            "note": "the driver's span: kernel receive time of the frame that completed a "
+                    "cycle -> publish() returned (ros/span_probe.py); baseline = the floor "
+                    "publisher's span, datagram in the kernel -> publish() returned; ratio = "
+                    f"median of the runs' ratios; {where}"}
+        if q == 99:
+            rec["goal"] = f"ratio <= {DRIVER_GOALS['latency_p99']}"
+            rec["goal_met"] = rec["ratio"] <= DRIVER_GOALS["latency_p99"]
+        emit(records, rec)
+    cpu = [n["cpu_s_per_s"] for n, _, _ in runs]
+    bare = [b["cpu_s_per_s"] for _, b, _ in runs]
+    ratios = [a / b for a, b in zip(cpu, bare) if b]
+    rec = {"metric": f"node_{n_joints}enc_driver_cpu_s_per_s",
+           "value": round(statistics.median(cpu), 3), "unit": "s/s",
+           "baseline": round(statistics.median(bare), 3),
+           "ratio": round(statistics.median(ratios), 3) if ratios else None,
+           "runs": [round(r, 3) for r in ratios],
+           "goal": f"ratio <= {DRIVER_GOALS['cpu']}",
+           "note": "utime+stime of the node's process alone (its station child not counted: a "
+                   "real deployment has none) per s; baseline = bare rclpy timer publisher; "
+                   f"ratio = median of the runs' ratios; {where}"}
+    rec["goal_met"] = rec["ratio"] is not None and rec["ratio"] <= DRIVER_GOALS["cpu"]
+    emit(records, rec)
+    emit(records, {"metric": f"node_{n_joints}enc_station_child_cpu_s_per_s",
+                   "value": round(statistics.median(n["children_cpu_s_per_s"]
+                                                    for n, _, _ in runs), 3),
+                   "unit": "s/s",
+                   "note": f"the simulated station's child process (not the driver's); {where}"})
 
 
 def report_loaded(records: list[dict], n_joints: int, node: dict) -> None:
@@ -673,6 +851,7 @@ def run(records: list[dict]) -> None:
         return
     if not NODE_EXE.exists():
         raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
+    only = os.environ.get("BENCH_NODE_ONLY", "")
     domain_id = _domain_id()
     env = _env(domain_id)
     plain: dict[int, dict] = {}
@@ -680,15 +859,14 @@ def run(records: list[dict]) -> None:
         work = Path(tmp)
         for n in CASES:
             try:
-                node = measure(f"node{n}", node_cmd(n, domain_id, work),
-                               f"{NODE_NS}/joint_states", env, work, case_rate(n))
-                bare = measure(f"bare{n}", bare_cmd(n), BARE_TOPIC, env, work,
-                               case_rate(n))
+                runs = [driver_run(n, r, domain_id, env, work) for r in range(DRIVER_RUNS)]
+                report_driver(records, n, runs)
+                node, bare, floor = runs[0]
                 report(records, n, node, bare)
-                floor = measure(f"floor{n}", floor_cmd(n), FLOOR_TOPIC, env, work,
-                                case_rate(n))
                 report_floor(records, n, node, bare, floor)
                 plain[n] = node
+                if only == "driver":
+                    continue
                 if n == max(CASES):
                     pinned = measure(f"node{n}pin", node_cmd(n, domain_id, work, {
                         "cpu_affinity": [PIN_CPU]}), f"{NODE_NS}/joint_states", env, work,
@@ -697,6 +875,8 @@ def run(records: list[dict]) -> None:
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_{n}enc", "error": f"{type(err).__name__}: {err}",
                                "note": traceback.format_exc(limit=3)[-800:]})
+        if only == "driver":
+            return
         try:
             run_stations(records, domain_id, env, work)
         except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
@@ -728,6 +908,9 @@ def main() -> int:
         run(records)
     except Exception as err:  # noqa: BLE001
         emit(records, {"metric": "node", "error": f"{type(err).__name__}: {err}"})
+    if os.environ.get("BENCH_NODE_ONLY"):
+        save(records)
+        return 0
     try:  # the service-burst part; `python bench/service_burst.py` runs it alone
         sys.path.insert(0, str(HERE))
         import service_burst
@@ -742,8 +925,9 @@ def main() -> int:
 if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--bare":
         sys.exit(bare_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
-    if len(sys.argv) == 5 and sys.argv[1] == "--floor":
-        sys.exit(floor_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]))
+    if len(sys.argv) in (5, 6) and sys.argv[1] == "--floor":
+        sys.exit(floor_publisher(int(sys.argv[2]), float(sys.argv[3]), sys.argv[4],
+                                 *sys.argv[5:]))
     if len(sys.argv) == 4 and sys.argv[1] == "--floor-sender":
         sys.exit(floor_sender(int(sys.argv[2]), float(sys.argv[3])))
     sys.exit(main())

@@ -55,6 +55,7 @@ from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
 from ssi_bridge.ros.rclpy_compat import RCLError
 from ssi_bridge.ros.recording import SessionRecorder
 from ssi_bridge.ros.services import BridgeServices
+from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
 
 class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, LifecycleNode):
@@ -96,6 +97,8 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         #: the simulated station's clock: wire time since the node started (fault durations)
         self.model_clock = ModelClock()
         self.stamper = Stamper(self.get_clock(), self.get_logger())
+        #: the benchmark's span per cycle (ros/span_probe.py); None unless it asks
+        self._span_probe = probe_from_env()
         self._mirror = threading.local()  # .active: a parameter set mirroring the module
         #: the joints' cores by name, in the configured order (filled by the bus side)
         self.joints: dict[str, Joint] = {}
@@ -359,6 +362,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         if js.name:
             if not self.publish_safe(self.joint_pub, js):
                 return
+            if self._span_probe is not None:  # bench/bench_node.py: the driver's own span
+                rx = getattr(self.client, "bus", None)  # listen-only: none
+                self._span_probe.published(getattr(rx, "rx_latest", 0.0), len(js.name))
             self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
         if want_status:
             status = status_msg(result, js.header)
