@@ -17,8 +17,9 @@ STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
 otherwise                                           OK
 =================================================  =========
 
-A joint's published level is debounced (:class:`ChannelHealth`): it rises once the condition
-has held for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
+A joint's published level is debounced (:class:`ChannelHealth`): STALE rises at once (its
+``stale_cycles`` count is its debounce); any other level rises once the condition has held
+for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
 so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
 better level held CLEAR_AFTER_S; a WARN/ERROR that flaps is confirmed by its share of the
 cycles (:data:`FLAP_SHARE`). The window and the debounce run on SYNC wire time, and every
@@ -279,6 +280,10 @@ class ChannelHealth:
             confirmed, raw, self._up = flapped, flapped, None
         elif raw < confirmed:
             confirmed, self._up = raw, None
+        elif raw == STALE and raw > confirmed:
+            # no sample vouched for in ``stale_cycles`` cycles in a row: that count is the
+            # debounce already, and a left-out joint must say so within 0.2 s (docs/node.md)
+            confirmed, self._up = STALE, None
         elif raw > confirmed:
             if self._up is None:
                 self._up = (now, raw)

@@ -59,6 +59,8 @@ def test_a_stalled_station_never_publishes_an_old_latch(running, probe, channel,
     time.sleep(1.0)
     run.check(f"stall_{seconds:g}s", t0)
     assert run.set_aside_during(w0, w1) & {"no answer"}, "~/status says why during the stall"
+    after = run.diagnostics_after(t0)
+    assert after is not None and after <= 0.2, f"/diagnostics said so {after} s after the cycle"
     assert run.worst_level_during(t0, t1 + 0.5) > DiagnosticStatus.OK
 
 
@@ -102,6 +104,9 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     run.published_again(t1 + 0.5)
     time.sleep(0.5)
     run.check(f"foreign_sync_{rate:g}hz", t0)
+    if rate >= 1000:  # the flood leaves the joint out: /diagnostics says so within 0.2 s
+        after = run.diagnostics_after(t0)
+        assert after is not None and after <= 0.2, f"/diagnostics {after} s after the cycle"
     probe.wait_for(lambda: int(bus_values(run.diags).get("foreign_syncs", "0")) > 0, 5.0,
                    "foreign_syncs counted", run.node)
     warned = [st.message for t, arr in run.diags if t0 <= t <= t1 + 1.0 for st in arr.status

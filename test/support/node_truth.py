@@ -174,9 +174,7 @@ class Run:
         path = os.environ.get(REPORT_ENV)
         if not path or not case:
             return
-        seen = [t for t, arr in self.diags if t0 is not None and t >= t0 for st in arr.status
-                if st.name in (f"/ssi_bridge: {self.first}", "/ssi_bridge: bus")
-                and st.level > DiagnosticStatus.OK]
+        after = self.diagnostics_after(t0) if t0 is not None else None
         set_aside = max((ch.set_aside for _, m in self.status for ch in m.channels),
                         default=0)
         left_out = sum(1 for _, m in self.status for ch in m.channels if not ch.published)
@@ -187,8 +185,28 @@ class Run:
                 "worst_velocity_error": report.worst_velocity_error,
                 "violations": len(report.violations), "set_aside": set_aside,
                 "left_out_cycles": left_out,
-                "diagnostics_after_s": (min(seen) - t0) if seen and t0 is not None else None,
+                "diagnostics_after_s": after,
                 "latch_bound_s": self.bound}) + "\n")
+
+    def diagnostics_after(self, t0: float) -> float | None:
+        """Seconds from the first cycle after ``t0`` (monotonic) that left the first joint out
+        to the first /diagnostics message with that joint or the bus not OK, both by the
+        node's own stamps (so neither DDS nor this process's scheduling counts); None when no
+        cycle left it out."""
+        def stamp(m: Any) -> float:
+            return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+        w0 = time.time() - (time.monotonic() - t0)
+        out = [stamp(m) for _, m in self.status if stamp(m) >= w0
+               for ch in m.channels if ch.joint == self.first and not ch.published]
+        if not out:
+            return None
+        first = min(out)
+        said = [stamp(arr) for _, arr in self.diags if stamp(arr) >= first
+                for st in arr.status
+                if st.name in (f"/ssi_bridge: {self.first}", "/ssi_bridge: bus")
+                and st.level > DiagnosticStatus.OK]
+        return (min(said) - first) if said else None
 
     def set_aside_during(self, w0: float, w1: float) -> set[str]:
         """The reasons ~/status gave for the first joint left out of the cycles stamped in
