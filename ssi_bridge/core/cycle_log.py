@@ -19,9 +19,12 @@ master's SYNC ``k`` (wire time ``t_k``) only when
    sample is the encoder's position at ``t_k`` within ``latch_bound`` of motion (the node's
    bound is the gateway's reaction allowance plus the cycle's wire time, since a slot's frames
    may wait behind the other slots' on the wire);
-3. in each of the two windows before ``k`` (of whichever producer's SYNCs) *every* slot of the
-   station got exactly one image and one position, the first within ``latch_bound`` of that
-   window's SYNC: the station was in step when ``k`` came. A station that missed a window, or
+3. the two windows before ``k`` are the master's own (no other producer's SYNC since the SYNC
+   two before ``k``) and in each of them *every* slot of the station got exactly one image and
+   one position, the first within ``latch_bound`` of that window's SYNC: the station was in
+   step when ``k`` came. Between another producer's SYNCs a station saturated by them can
+   stay one answer behind with every answer looking prompt; a full period of the master's
+   own is long enough that it cannot. A station that missed a window, or
    answered it late or only in part, may still owe an answer, whose frames would be the first
    after ``t_k``; and a station whose answers spill over the next SYNC (a wire too busy for
    them) mixes frames of several answers in one window, which a slot alone cannot see.
@@ -136,6 +139,8 @@ class StationLog:
         #: the master's own SYNCs: sequence number -> wire time
         self._own: dict[int, float] = {}
         self._own_order: deque[int] = deque()
+        #: the wire times of the master's own SYNCs in the log (rule 3's windows are theirs)
+        self._own_times: set[float] = set()
         self._frames: dict[int, deque[Frame]] = {}
         #: foreign SYNCs seen (the master counts them too; kept here for the tests' view)
         self.foreign_syncs = 0
@@ -149,11 +154,15 @@ class StationLog:
                 i = bisect_left(self._syncs, old)
                 if i < len(self._syncs) and self._syncs[i] == old:
                     del self._syncs[i]
+                self._own_times.discard(old)
             else:
                 self._own_order.append(seq)
                 if len(self._own_order) > KEEP_SYNCS:
-                    self._own.pop(self._own_order.popleft(), None)
+                    gone = self._own.pop(self._own_order.popleft(), None)
+                    if gone is not None:
+                        self._own_times.discard(gone)
             self._own[seq] = t
+            self._own_times.add(t)
             self._insert(t)
 
     def foreign_sync(self, t: float) -> None:
@@ -225,7 +234,9 @@ class StationLog:
             return cached[2]
         back = self.history
         bounds = self._syncs[max(i - back, 0): i + 1]
-        ok = len(bounds) == back + 1
+        # the windows are the master's own: with another producer's SYNC among them, a
+        # station saturated by SYNCs can stay one answer behind, each answer looking prompt
+        ok = len(bounds) == back + 1 and all(t in self._own_times for t in bounds)
         for slot in self.slots:
             if not ok:
                 break

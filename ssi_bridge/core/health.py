@@ -17,9 +17,10 @@ STS_OFLW / STS_UFLW (limits), SSI_DIAG, STS_STOP     WARN
 otherwise                                           OK
 =================================================  =========
 
-A joint's published level is debounced (:class:`ChannelHealth`): STALE rises at once (its
-``stale_cycles`` count is its debounce); any other level rises once the condition has held
-for ``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
+A joint's published level is debounced (:class:`ChannelHealth`): STALE rises at once when
+nothing at all of the joint came for ``stale_cycles`` cycles (that count is its debounce);
+any other level, and STALE from lossy cycles, rises once the condition has held for
+``RAISE_AFTER_S`` and falls once the better level has held for ``CLEAR_AFTER_S``,
 so a load hiccup shorter than RAISE_AFTER_S never shows and a level can fall only after the
 better level held CLEAR_AFTER_S; a WARN/ERROR that flaps is confirmed by its share of the
 cycles (:data:`FLAP_SHARE`). The window and the debounce run on SYNC wire time, and every
@@ -54,6 +55,8 @@ class ChannelCounters:
     set_aside: int = 0
     #: why the joint was left out of the last cycle ("" when it was published)
     last_reason: str = ""
+    #: cycles in a row in which nothing at all of the joint arrived
+    consecutive_silent: int = 0
     #: the latest 8-byte process input image (decoded only when a status is built)
     last_image: bytes | None = None
     last_position: int = 0
@@ -165,6 +168,7 @@ class ChannelHealth:
         #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
         self._history: deque[tuple[float, int]] = deque()
         self.level = STALE
+        self._silent = False
         self.message = "no sample received yet"
         self._messages: dict[int, str] = {STALE: self.message}
 
@@ -175,7 +179,7 @@ class ChannelHealth:
 
     def observe(self, now: float, *, stale: bool, implausible: bool, sts: int | None,
                 consecutive_stale: int, stale_limit: int, seq: int | None = None,
-                lost: float | None = None) -> int:
+                lost: float | None = None, silent: bool = False) -> int:
         """Count one SYNC and return the debounced level.
 
         :param now: wire time of the SYNC (the window's clock)
@@ -183,7 +187,10 @@ class ChannelHealth:
         :param seq: the SYNC's sequence number; SYNCs skipped since the last one count lost
         :param lost: the share of the joint's data of this SYNC that is missing (default:
             all of it when ``stale``)
+        :param silent: nothing at all of the joint came for ``stale_limit`` cycles in a row
+            (STALE is then published without the rise debounce)
         """
+        self._silent = silent
         share = (1.0 if stale else 0.0) if lost is None else min(max(lost, 0.0), 1.0)
         syncs = self._syncs
         if seq is not None:
@@ -280,9 +287,11 @@ class ChannelHealth:
             confirmed, raw, self._up = flapped, flapped, None
         elif raw < confirmed:
             confirmed, self._up = raw, None
-        elif raw == STALE and raw > confirmed:
-            # no sample vouched for in ``stale_cycles`` cycles in a row: that count is the
-            # debounce already, and a left-out joint must say so within 0.2 s (docs/node.md)
+        elif raw == STALE and raw > confirmed and self._silent:
+            # nothing at all of the joint for ``stale_cycles`` cycles in a row (a silent or
+            # stalled station, a cable pulled): that count is the debounce already, and a
+            # left-out joint must say so within 0.2 s (docs/node.md). Lossy cycles that left
+            # it out keep the debounce: bursts of loss would flap it
             confirmed, self._up = STALE, None
         elif raw > confirmed:
             if self._up is None:

@@ -189,12 +189,14 @@ class Joint:
         counters = self.counters
         self.health.observe(now, stale=stale, implausible=implausible, sts=counters.last_sts,
                             consecutive_stale=counters.consecutive_stale,
-                            stale_limit=self.stale_cycles, seq=seq, lost=lost)
+                            stale_limit=self.stale_cycles, seq=seq, lost=lost,
+                            silent=counters.consecutive_silent >= self.stale_cycles)
 
     def quiet(self, now: float) -> None:
         """A period without SYNC (listen-only): a stale cycle."""
         self.counters.stale_cycles += 1
         self.counters.consecutive_stale += 1
+        self.counters.consecutive_silent += 1
         self.observe(now, stale=True, implausible=False)
 
     def _settle(self, settled: tuple[float, float] | None, seq: int, implausible: bool) -> None:
@@ -220,6 +222,9 @@ class Joint:
         counters.consecutive_stale += 1
         if image or position is not None:
             counters.set_aside += 1
+            counters.consecutive_silent = 0
+        else:
+            counters.consecutive_silent += 1
         counters.last_reason = reason
         if image:
             counters.last_image = image
@@ -237,6 +242,7 @@ class Joint:
         if fresh:
             counters.samples += 1
             counters.consecutive_stale = 0
+            counters.consecutive_silent = 0
         else:
             counters.stale_cycles += 1
             counters.consecutive_stale += 1

@@ -119,15 +119,22 @@ def test_reordered_frames_of_one_answer_still_count():
     assert log.verdict(1, 3).sample is not None
 
 
-def test_a_foreign_sync_before_ours_opens_the_window_the_station_must_have_answered():
+def test_a_foreign_sync_in_the_windows_before_ours_is_not_in_step_even_if_answered():
+    """Between another producer's SYNCs a saturated station can stay one answer behind with
+    every answer looking prompt: only the master's own windows show it in step (rule 3)."""
     log = StationLog(BOUND)
     _steady(log, 2)
     log.foreign_sync(3 * P - 0.002)
     _answer(log, 3 * P - 0.0017, 99)     # its answer to the foreign SYNC, in that window
     log.sync(3, 3 * P)
     _answer(log, 3 * P + 0.0003, 3)
-    v = log.verdict(1, 3)
-    assert v.sample is not None and v.sample.position == 3
+    assert log.verdict(1, 3).reason == UNSETTLED
+    for k in (4, 5):
+        log.sync(k, k * P)
+        _answer(log, k * P + 0.0003, k)
+    assert log.verdict(1, 4).reason == UNSETTLED   # the foreign window is one of the two
+    v = log.verdict(1, 5)
+    assert v.sample is not None and v.sample.position == 5
 
 
 def test_an_answer_to_a_foreign_sync_that_comes_after_ours_is_not_ours():
