@@ -45,7 +45,7 @@ class StationClient(Protocol):
     def edit_output(self, slot: int, edit: Callable[[bytearray], None]) -> None:
         """Change bytes 0-5 of the module's process output image and send it."""
 
-    def read_object(self, index: int, subindex: int = 0) -> int | bytes | str:
+    def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """SDO upload of ``index:subindex``, decoded by the station's dictionary."""
 
     def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
