@@ -15,7 +15,6 @@ import time
 from typing import Protocol
 
 import can
-import canopen
 
 from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.link import ReopeningBus
@@ -39,6 +38,10 @@ class Attached(Protocol):
     node_id: int
     counters: ClientCounters
     table: SlotTable
+
+    @property
+    def gateway_alive(self) -> bool:
+        """True while the station's heartbeat is current."""
 
     def request_configuration(self) -> None:
         """Have the station configured again by its supervisor thread (the bus came back)."""
@@ -67,7 +70,7 @@ class CanMaster:
         self.bus: ReceiveWatch | None = None
         #: the opened bus, reopened after its interface is lost (None on a handed-over bus)
         self.link: ReopeningBus | None = None
-        self.network: canopen.Network | None = None
+        self.network: MasterNetwork | None = None
         #: one sender at a time on the network (SYNC, RPDOs of every station)
         self.send_lock = threading.Lock()
         self.clients: list[Attached] = []

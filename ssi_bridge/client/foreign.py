@@ -111,7 +111,7 @@ class ForeignTraffic:
         self.frames = {**self.frames, **station_frames(node_id)}
         self.ids = frozenset(self.frames)
 
-    def observe(self, can_id: int, data: bytes, wire_t: float) -> None:
+    def observe(self, can_id: int, data: bytes | bytearray, wire_t: float) -> None:
         """A received frame on one of :attr:`ids` (receive thread); others are ignored."""
         if can_id == SYNC_COB_ID:
             self._count(FOREIGN_SYNCS)

@@ -24,7 +24,7 @@ class FrameSink(Protocol):
     def foreign_sync(self, t: float) -> None:
         """Another producer's SYNC at wire time ``t``."""
 
-    def image(self, slot: int, t: float, data: bytes, count: int) -> None:
+    def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
         """A process input image of ``slot`` (the ``count``-th) at wire time ``t``."""
 
     def position(self, slot: int, t: float, value: int) -> None:

@@ -207,7 +207,7 @@ class ListenOnlyClient(can.Listener):
         """Refused: the process output belongs to the other master."""
         raise self._refuse(f"slot {slot} process output")
 
-    def read_object(self, index: int, subindex: int = 0) -> int | bytes | str:
+    def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """Refused: an SDO request is a frame on the bus."""
         raise self._refuse(f"SDO upload of 0x{index:04X}:{subindex:02X}")
 

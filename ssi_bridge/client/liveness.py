@@ -39,10 +39,11 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Protocol
 
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.rx_guard import raised_at
+from ssi_bridge.client.bus import ReceiveWatch
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.exceptions import SsiBridgeError
 from ssi_bridge.base.timebase import wire_now
@@ -86,13 +87,14 @@ class Supervised(Protocol):
     heartbeat_ms: int
     heartbeat_timeout: float
     counters: ClientCounters
-    bus: Any  # ReceiveWatch | None: ``seen_until()``
+    #: the receive path's watch (``seen_until()``), None before connect
+    bus: ReceiveWatch | None
 
     @property
     def gateway_alive(self) -> bool:
         """True while the station's heartbeat is current."""
 
-    def read_object(self, index: int, subindex: int = 0) -> Any:
+    def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """One SDO upload (raises SsiBridgeError)."""
 
     def configure(self) -> None:

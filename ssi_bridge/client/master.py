@@ -27,7 +27,7 @@ import can
 import canopen
 
 from ssi_bridge.base.rate_log import RateLimitedLog
-from ssi_bridge.client.bus_master import SYNC_COB_ID, CanMaster
+from ssi_bridge.client.bus_master import CanMaster
 from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
@@ -42,7 +42,7 @@ from ssi_bridge.client.bus import BusOpener, ReceiveWatch
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.protocol.dictionary import (
     MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
-    rpdo_cob_base)
+    SYNC_COB_ID, rpdo_cob_base)
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.protocol.images import CmpControl, Control, ProcessInput
 
@@ -288,7 +288,7 @@ class BridgeClient:
             data = bytes(st.output)
         self._send_output(slot, data)
 
-    def read_object(self, index: int, subindex: int = 0) -> int | bytes | str:
+    def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """SDO upload with typed errors (SdoAbortError with the CiA 301 meaning)."""
         if self.sdo is None:
             raise BusError("client not connected")
@@ -300,14 +300,14 @@ class BridgeClient:
             raise BusError("client not connected")
         self.sdo.write(index, subindex, value)
 
-    def _locked(self, slot: int, job: Callable[[], int | None]) -> int:
+    def _locked[T](self, slot: int, job: Callable[[], T]) -> T:
         self.table.slot(slot)  # KeyError for an unknown slot
         lock = self._slot_locks[slot]
         if not lock.acquire(timeout=self._handshake.total_timeout):
             self.counters.handshake_failures += 1
             raise HandshakeTimeout(f"slot {slot}: another register handshake is still running")
         try:
-            return job()  # type: ignore[return-value]
+            return job()
         except (HandshakeTimeout, GatewayUnavailable):
             self.counters.timeouts += 1
             self.counters.handshake_failures += 1
@@ -351,10 +351,9 @@ class BridgeClient:
         assert self.sdo is not None
         self.sync()
         try:
-            raw = self.sdo.read(PROCESS_INPUT, slot)
+            data = self.sdo.read_image(PROCESS_INPUT, slot)
         except GatewayUnavailable:
             return None
-        data = int(raw).to_bytes(8, "little") if isinstance(raw, int) else bytes(raw)
         self.table.on_image(slot, data)
         return ProcessInput.decode(data)
 

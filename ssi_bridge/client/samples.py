@@ -261,7 +261,7 @@ class SlotTable:
             return True
         return False
 
-    def on_image(self, slot: int, data: bytes, timestamp: float = 0.0) -> SlotState:
+    def on_image(self, slot: int, data: bytes | bytearray, timestamp: float = 0.0) -> SlotState:
         """Store a received process input image (wire time ``timestamp``); return the slot.
 
         A SYNC's TPDOs follow it on the wire, so an image that ended before the current
@@ -289,7 +289,8 @@ class SlotTable:
                 self.cond.notify_all()
             return st
 
-    def on_positions(self, slots: list[int], data: bytes, timestamp: float = 0.0) -> None:
+    def on_positions(self, slots: list[int], data: bytes | bytearray, timestamp: float = 0.0
+                     ) -> None:
         """Store the positions of an encoder default PDO (wire time ``timestamp``)."""
         if len(data) == POSITION_PAIR.size:
             values = POSITION_PAIR.unpack(data)

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import can
 import canopen
-from canopen.sdo import SdoAbortedError, SdoCommunicationError, SdoVariable
+from canopen import SdoAbortedError, SdoCommunicationError
+from canopen.sdo.base import SdoVariable
 
 from ssi_bridge.base.canopen_compat import CheckedRemoteNode
 from ssi_bridge.base.rate_log import RateLimitedLog
@@ -105,6 +106,8 @@ class SdoAccess:
     def __init__(self, node_id: int, dictionary: canopen.ObjectDictionary, timeout: float,
                  counters: ClientCounters | None = None) -> None:
         self.lock = threading.RLock()
+        #: the station's node id (canopen's ``RemoteNode.id`` is typed ``int | None``)
+        self.node_id = node_id
         self.counters = counters if counters is not None else ClientCounters()
         self._stale_log = RateLimitedLog(logger)
         #: the station; its SDO client takes only the answer to its current request
@@ -138,7 +141,7 @@ class SdoAccess:
             f"{self.timeout:.3f} s ({err}); is the gateway powered, on this bus and not "
             f"STOPPED?")
 
-    def read(self, index: int, subindex: int = 0) -> int | bytes | str:
+    def read(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """Upload one object (raises SdoAbortError / GatewayUnavailable)."""
         with self.lock:
             try:
@@ -147,6 +150,15 @@ class SdoAccess:
                 return var.raw
             except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
                 raise self._fail(err, "upload", index, subindex) from err
+
+    def read_image(self, index: int, subindex: int) -> bytes:
+        """Upload a process image (0x2000 / 0x2100, UNSIGNED64 in ``base/od.py``) as its 8
+        bytes, little endian (raises SdoAbortError / GatewayUnavailable, BusError for a value
+        that is no image)."""
+        raw = self.read(index, subindex)
+        if isinstance(raw, float | str):
+            raise BusError(f"0x{index:04X}:{subindex:02X} read as {raw!r}, not a process image")
+        return int(raw).to_bytes(8, "little") if isinstance(raw, int) else bytes(raw)
 
     def write(self, index: int, subindex: int, value: int | bytes) -> None:
         """Download one object (raises SdoAbortError / GatewayUnavailable)."""
@@ -182,7 +194,7 @@ class SdoAccess:
         by default."""
         with self.lock:
             try:
-                for pdo in pdo_plan(slots, self.node.id, images=images):
+                for pdo in pdo_plan(slots, self.node_id, images=images):
                     pdo_map = (self.node.tpdo if pdo.transmit else self.node.rpdo)[pdo.number]
                     self._setup(pdo_map, pdo.cob_id, pdo.trans_type, list(pdo.entries))
             except (SdoAbortedError, SdoCommunicationError, can.CanError) as err:
@@ -194,7 +206,7 @@ class SdoAccess:
         One upload of sub-index 1 (COB-ID) of each communication parameter. Raises
         GatewayUnavailable / SdoAbortError.
         """
-        for pdo in pdo_plan(slots, self.node.id, images=images):
+        for pdo in pdo_plan(slots, self.node_id, images=images):
             found = int.from_bytes(self.upload(pdo.com_index, 1)[:4], "little")
             if found & (PDO_INVALID | COB_ID_BITS) != pdo.cob_id:
                 logger.info("0x%04X:01 is 0x%08X, configured was 0x%03X (valid): the PDOs "

@@ -15,12 +15,12 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Mapping
-from typing import Any
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.core.frame_watch import read_cam
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.core.joint_scale import to_int32
+from ssi_bridge.core.ports import FaultPort, StationClient
 from ssi_bridge.exceptions import ConfigError, GatewayUnavailable, SsiBridgeError
 from ssi_bridge.protocol.encoder_config import ERROR_BITS, ErrorOutput, FrameFormat
 from ssi_bridge.protocol.para1 import validate_para1
@@ -61,14 +61,14 @@ class Bridge:
     :param on_para1: called with (joint, value) once the module holds a new REG_PARA1
     """
 
-    def __init__(self, joints: Mapping[str, Joint], client_of: Callable[[str], Any],
+    def __init__(self, joints: Mapping[str, Joint], client_of: Callable[[str], StationClient],
                  on_para1: Callable[[str, int], None] | None = None) -> None:
         #: the node's joints (the node's own mapping: a managed node fills it at each configure)
         self.joints = joints
         self.client_of = client_of
         self._on_para1 = on_para1
         #: fault injection into the simulated station (None on real hardware)
-        self.faults: Any = None
+        self.faults: FaultPort | None = None
         self.para1_lock = threading.RLock()
 
     def joint(self, requested: str) -> Joint:

@@ -171,7 +171,7 @@ class StationLog:
             self.foreign_syncs += 1
             self._insert(t)
 
-    def image(self, slot: int, t: float, data: bytes, count: int) -> None:
+    def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
         """A process input image of ``slot`` ended on the wire at ``t``."""
         self._add(slot, Frame(IMAGE, t, bytes(data), 0, count))
 

@@ -1,7 +1,9 @@
 """A joint's health: counters, the level of one status byte, the windowed, debounced level.
 
 ROS-free; the levels are the values of ``diagnostic_msgs/DiagnosticStatus`` (OK 0, WARN 1,
-ERROR 2, STALE 3), so ``ros/diagnostics.py`` puts them into messages unchanged.
+ERROR 2, STALE 3), so ``ros/diagnostics.py`` puts them into messages unchanged. Its ``level``
+field is a ROS ``byte``, one-byte :class:`bytes` in Python, so a :data:`Level` is one byte too;
+one-byte values order as their numbers do (``OK < WARN < ERROR < STALE``, ``max`` the worst).
 
 Level mapping (docs/node.md has the table):
 
@@ -31,12 +33,18 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Final, NewType
 
+from ssi_bridge.protocol.frame_check import FrameVerdict
 from ssi_bridge.protocol.images import ModuleStatus, ProcessInput
 
-#: diagnostic levels, the byte values of diagnostic_msgs/DiagnosticStatus
-OK, WARN, ERROR, STALE = b"\x00", b"\x01", b"\x02", b"\x03"
+#: a diagnostic level: the one-byte value of ``diagnostic_msgs/DiagnosticStatus.level``
+Level = NewType("Level", bytes)
+#: the diagnostic levels, as diagnostic_msgs/DiagnosticStatus names them
+OK: Final = Level(b"\x00")
+WARN: Final = Level(b"\x01")
+ERROR: Final = Level(b"\x02")
+STALE: Final = Level(b"\x03")
 
 
 @dataclass
@@ -61,9 +69,9 @@ class ChannelCounters:
     last_image: bytes | None = None
     last_position: int = 0
     #: cycles whose frame failed the parity / filler check, and the latest verdict
-    #: (a ``FrameVerdict``, None when the latest image carried no checked frame)
+    #: (None when the latest image carried no checked frame)
     frame_errors: int = 0
-    frame: Any = None
+    frame: FrameVerdict | None = None
 
     @property
     def last_input(self) -> ProcessInput | None:
@@ -87,7 +95,7 @@ _ERR_PARA, _ERR_SSI = int(ModuleStatus.ERR_PARA), int(ModuleStatus.ERR_SSI)
 
 
 def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
-                  ) -> tuple[int, str]:
+                  ) -> tuple[Level, str]:
     """Level and one-line message of a joint channel from byte 7 of its process input.
 
     Plain int tests: this runs every cycle for every joint.
@@ -159,18 +167,18 @@ class ChannelHealth:
         #: a sample has been seen (before it, STALE "no sample received yet" is no condition)
         self._sampled = False
         #: (since, lowest raw level) while the raw level is above ``_confirmed``
-        self._up: tuple[float, int] | None = None
+        self._up: tuple[float, Level] | None = None
         #: the flap rule's window, the last RAISE_AFTER_S: the times of all its cycles, and of
         #: those whose raw level was ERROR / WARN or ERROR (running, so a cycle costs O(1))
         self._recent: deque[float] = deque()
         self._recent_error: deque[float] = deque()
         self._recent_warn: deque[float] = deque()
         #: (time, confirmed level) at each change, back to the one in force CLEAR_AFTER_S ago
-        self._history: deque[tuple[float, int]] = deque()
+        self._history: deque[tuple[float, Level]] = deque()
         self.level = STALE
         self._silent = False
         self.message = "no sample received yet"
-        self._messages: dict[int, str] = {STALE: self.message}
+        self._messages: dict[Level, str] = {STALE: self.message}
 
     @property
     def stale_ratio(self) -> float:
@@ -179,7 +187,7 @@ class ChannelHealth:
 
     def observe(self, now: float, *, stale: bool, implausible: bool, sts: int | None,
                 consecutive_stale: int, stale_limit: int, seq: int | None = None,
-                lost: float | None = None, silent: bool = False) -> int:
+                lost: float | None = None, silent: bool = False) -> Level:
         """Count one SYNC and return the debounced level.
 
         :param now: wire time of the SYNC (the window's clock)
@@ -237,7 +245,7 @@ class ChannelHealth:
                 f"of wire time; WARN from {STALE_RATIO_WARN:.0%}, ERROR from "
                 f"{STALE_RATIO_ERROR:.0%})")
 
-    def _flapping(self, now: float, raw: int) -> int | None:
+    def _flapping(self, now: float, raw: Level) -> Level | None:
         """The worst WARN/ERROR that flaps in the last RAISE_AFTER_S (:data:`FLAP_SHARE` of its
         cycles, spanning half of it), or None. Its message says in how many cycles.
 
@@ -267,7 +275,7 @@ class ChannelHealth:
                 return worst
         return None
 
-    def _debounce(self, now: float, raw: int) -> int:
+    def _debounce(self, now: float, raw: Level) -> Level:
         """Two stages. ``confirmed`` follows the raw level down at once but up only when the
         worse level held RAISE_AFTER_S (a load hiccup never confirms it). The published level
         follows ``confirmed`` up at once and down to the worst confirmed level of the last

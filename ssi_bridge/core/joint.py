@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
-from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth
+from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
 from ssi_bridge.core.joint_scale import JointScale
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
@@ -179,7 +179,7 @@ class Joint:
 
     # -- one cycle --------------------------------------------------------------------------
     @property
-    def level(self) -> bytes:
+    def level(self) -> Level:
         """The level the joint's diagnostics publish (the health's, WARN for a REG_PARA1 note)."""
         return max(self.health.level, WARN if self.para1_note else OK)
 

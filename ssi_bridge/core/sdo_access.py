@@ -29,12 +29,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from typing import Any
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.core.bridge import ENCODER_CONFIG, Bridge
 from ssi_bridge.core.frame_watch import CAM_ENABLE, CAM_HIGH, CAM_LOW, CAM_POLARITY, read_cam
 from ssi_bridge.core.joint import Joint
+from ssi_bridge.core.ports import DictionaryEntry, RawSdo, StationClient
 from ssi_bridge.exceptions import BusError, ConfigError
 from ssi_bridge.protocol.dictionary import (
     PROCESS_OUTPUT, RPDO_COM, SIM_ACTIVE, SIM_RATE, DataType,
@@ -150,7 +150,7 @@ class ObjectAccess:
         self.bridge = bridge
 
     # -- where and what --------------------------------------------------------------------
-    def station(self, node_id: int, joint: str) -> Any:
+    def station(self, node_id: int, joint: str) -> StationClient:
         """The client of station ``node_id`` (0: the station of ``joint``, empty = the first).
 
         Raises ConfigError for an unknown joint or a node id that is none of the node's
@@ -158,7 +158,7 @@ class ObjectAccess:
         """
         if node_id == 0:
             return self.bridge.client_of(self.bridge.joint(joint).name)
-        clients = {}
+        clients: dict[int, StationClient] = {}
         for name in self.bridge.joints:
             client = self.bridge.client_of(name)
             clients.setdefault(int(client.node_id), client)
@@ -167,7 +167,7 @@ class ObjectAccess:
                               f"{sorted(clients)}; 0 = the station of the joint)")
         return clients[node_id]
 
-    def slot_joint(self, client: Any, slot: int) -> Joint | None:
+    def slot_joint(self, client: StationClient, slot: int) -> Joint | None:
         """The configured joint whose module sits in ``slot`` of ``client``'s station."""
         for joint in self.bridge.joints.values():
             if joint.slot == slot and self.bridge.client_of(joint.name) is client:
@@ -175,25 +175,27 @@ class ObjectAccess:
         return None
 
     @staticmethod
-    def entry(client: Any, index: int, subindex: int) -> Any:
-        """The dictionary's variable of ``index:subindex`` (None if the EDS has none)."""
-        node = getattr(client, "node", None)
+    def entry(client: StationClient, index: int, subindex: int) -> DictionaryEntry | None:
+        """The dictionary's variable of ``index:subindex`` (None if the EDS has none, or the
+        client has no dictionary: a listen-only one)."""
+        node = getattr(client, "node", None)  # canopen's RemoteNode of a BridgeClient
         if node is None:
             return None
         try:
             obj = node.object_dictionary[index]
-            return obj if not hasattr(obj, "subindices") else obj[subindex]
+            entry: DictionaryEntry = obj if not hasattr(obj, "subindices") else obj[subindex]
+            return entry
         except (KeyError, ValueError):
             return None
 
-    def _type(self, client: Any, index: int, subindex: int, named: DataType | None
+    def _type(self, client: StationClient, index: int, subindex: int, named: DataType | None
               ) -> tuple[DataType | None, str]:
         """The type to use (the named one, else the EDS's) and the object's EDS name."""
         var = self.entry(client, index, subindex)
         name = f" ({var.name})" if var is not None else ""
         if named is not None:
             return named, name
-        if var is None:
+        if var is None or var.data_type is None:  # (None: an EDS entry without DataType)
             return None, name
         try:
             return DataType(var.data_type), name
@@ -203,10 +205,10 @@ class ObjectAccess:
                               "name a type") from None
 
     @staticmethod
-    def _sdo(client: Any, index: int, subindex: int, write: bool) -> Any:
+    def _sdo(client: StationClient, index: int, subindex: int, write: bool) -> RawSdo:
         """The client's SDO access; the client's own refusal when it has none (a listen-only
         client raises "... refused: listen-only: another master drives this bus")."""
-        sdo = getattr(client, "sdo", None)
+        sdo: RawSdo | None = getattr(client, "sdo", None)  # a connected BridgeClient's
         if sdo is None:
             if write:
                 client.write_object(index, subindex, b"")
@@ -276,7 +278,7 @@ class ObjectAccess:
         return dtype, text
 
     @staticmethod
-    def _write_preset(sdo: Any, joint: Joint, index: int, subindex: int, data: bytes) -> None:
+    def _write_preset(sdo: RawSdo, joint: Joint, index: int, subindex: int, data: bytes) -> None:
         """0x6810 = REG_OFFSET moves the zero point: no sample across the write enters the
         velocity estimate (as ``Bridge.set_preset``)."""
         estimator = joint.velocity
