@@ -73,6 +73,9 @@ class CanMaster:
         self.network: MasterNetwork | None = None
         #: one sender at a time on the network (SYNC, RPDOs of every station)
         self.send_lock = threading.Lock()
+        #: one SYNC at a time (the cycle's and a register handshake's own): each one's exact
+        #: wire time goes to its own sequence number
+        self._sync_lock = threading.Lock()
         self.clients: list[Attached] = []
         #: the stations' slot tables share it: the cycle's waiter wakes once per cycle
         self.gate = CycleGate()
@@ -177,6 +180,12 @@ class CanMaster:
         """
         if self.network is None:
             raise BusError("master not connected")
+        with self._sync_lock:
+            return self._sync()
+
+    def _sync(self) -> float:
+        """:meth:`sync` under the SYNC lock."""
+        assert self.network is not None
         t = wire_now()
         with self.gate.cond:
             self.gate.open(len(self.clients))

@@ -31,4 +31,11 @@ def last_sync(client: Tabled) -> int:
     return client.table.sync_seq
 
 
-__all__ = ["Tabled", "feed_frames", "last_sync"]
+def sync_number(client: Tabled, t: float) -> int:
+    """The number of the SYNC ``client`` recorded at wire time ``t`` (what its ``sync()``
+    returned): not the newest one, which a register handshake's own SYNC, sent from another
+    thread meanwhile, may be (its sample is not latched at ``t``)."""
+    return client.table.seq_at(t)
+
+
+__all__ = ["Tabled", "feed_frames", "last_sync", "sync_number"]

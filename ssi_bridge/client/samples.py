@@ -329,6 +329,15 @@ class SlotTable:
         self._gate.pending -= 1
         return self._gate.pending <= 0
 
+    def seq_at(self, t: float) -> int:
+        """The number of the newest SYNC recorded at wire time ``t`` (the current one if none:
+        ``t`` fell out of the kept times)."""
+        with self.cond:
+            for seq in range(self.sync_seq, max(self.sync_seq - _KEEP_SYNC_TIMES, 0), -1):
+                if self._times.get(seq) == t:
+                    return seq
+            return self.sync_seq
+
     def latest(self, slot: int) -> ChannelSample | None:
         """The newest complete sample of ``slot`` or None before the first one."""
         with self.cond:

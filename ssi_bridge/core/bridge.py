@@ -165,7 +165,17 @@ class Bridge:
         check_address(address)
         if address == Reg.REG_PARA1:
             return self.change_para1(joint.name, value, "~/write_register")
-        self.client_of(joint.name).write_register(joint.slot, address, value)
+        if address == Reg.REG_OFFSET:
+            # the zero point moves, not the shaft: hold the speed as a preset does, so no
+            # velocity window spans the change (000 "Offset function")
+            estimator = joint.velocity
+            estimator.reset(after=math.inf, hold=True)
+            try:
+                self.client_of(joint.name).write_register(joint.slot, address, value)
+            finally:
+                estimator.reset(after=wire_now() + 0.05, hold=True)
+        else:
+            self.client_of(joint.name).write_register(joint.slot, address, value)
         return f"{register_name(address)} <- 0x{value:08X} accepted"
 
     def set_preset(self, joint: Joint, position: float) -> tuple[int, float, str]:

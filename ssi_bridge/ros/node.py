@@ -32,7 +32,7 @@ from ssi_bridge_msgs.msg import Status
 from ssi_bridge.base.realtime import pin_process
 from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
-from ssi_bridge.client.cycle_feed import feed_frames, last_sync
+from ssi_bridge.client.cycle_feed import feed_frames, sync_number
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.client.one_master import ensure_node_alone
@@ -308,7 +308,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         assert self.master is not None
         self.master.wait_cycle(*cycle_waits(1.0 / self.settings.publish_rate, self.cycle_wire_s))
         self._cycle_times.append(time.monotonic())  # the achieved rate: an interval
-        self._publish_cycle(t_sync, last_sync(self.client))
+        self._publish_cycle(t_sync, sync_number(self.client, t_sync))
 
     def _on_observed(self, cycle: ObservedCycle) -> None:
         """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""

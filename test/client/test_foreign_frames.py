@@ -1,7 +1,7 @@
 """SYNC and NMT frames of another node are seen, and a cycle uses only the master's SYNCs.
 
 CiA 301 allows one SYNC producer (COB-ID 0x080) and one NMT master
-(COB-ID 0x000) per network. Another node on the test's virtual channel sends SYNC at 200 Hz
+(COB-ID 0x000) per network. Another node on the test's virtual channel sends SYNC at 50 Hz
 while the master cycles at 2 ms: the station answers every SYNC (000 chapter 4: TPDOs of
 type 1 after each SYNC), latching its module at that SYNC. The master counts the foreign
 SYNCs, and the cycle core's frame log (``core/cycle_log.py``, fed by the master's slot table as
@@ -85,11 +85,12 @@ def test_a_second_sync_producer_is_counted_and_its_answers_not_taken(
     # node sees every frame in one order, as on a CAN wire
     other = wire_bus(BusConfig(channel=channel, node_id=NODE))
 
-    def produce() -> None:  # another SYNC producer at 200 Hz (at 1 kHz no two windows in
-        # a row are the master's own, and nothing is vouched for: tests/core cover that)
+    def produce() -> None:  # another SYNC producer at 50 Hz (each takes the two or three
+        # cycles after it; at 1 kHz no two windows in a row are the master's own, and nothing
+        # is vouched for: test/core covers that)
         while not stop.is_set():
             other.send(can.Message(arbitration_id=0x080, is_extended_id=False))
-            time.sleep(0.005)
+            time.sleep(0.02)
 
     producer = threading.Thread(target=produce, daemon=True)
     producer.start()
@@ -99,7 +100,7 @@ def test_a_second_sync_producer_is_counted_and_its_answers_not_taken(
         stop.set()
         producer.join(2.0)
         other.shutdown()
-    assert client.counters.foreign_syncs > 40
+    assert client.counters.foreign_syncs > 15
     assert client.counters.foreign_sync_answers > 0
     # most of the master's SYNCs come while the station still answers a foreign one: those
     # cycles are set aside (docs/node.md); the ones in step between them are vouched for
