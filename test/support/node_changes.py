@@ -39,10 +39,12 @@ class Change:
     oracle: TruthOracle
 
 
-def timed(name: str, call: Callable[[], Any], oracle_of: Callable[[Any], TruthOracle]
-          ) -> tuple[Change, Any]:
-    """Run ``call`` and return the :class:`Change` it made (``oracle_of`` its result gives
-    the truth after it) and the result."""
+def timed(run: Run, name: str, call: Callable[[], Any],
+          oracle_of: Callable[[Any], TruthOracle]) -> tuple[Change, Any]:
+    """Run ``call`` as the disturbance ``name`` of ``run`` (:meth:`Run.phase`) and return
+    the :class:`Change` it made (``oracle_of`` its result gives the truth after it) and the
+    result."""
+    run.phase(name)
     w0 = time.time()
     result = call()
     w1 = time.time()
@@ -145,4 +147,4 @@ def stamp_gaps(run: Run, w0: float, w1: float) -> float:
     the edges: how long the node published nothing."""
     stamps = sorted(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in run.joints)
     inside = [w0] + [s for s in stamps if w0 <= s <= w1] + [w1]
-    return max(b - a for a, b in zip(inside, inside[1:]))
+    return float(max(b - a for a, b in zip(inside, inside[1:])))
