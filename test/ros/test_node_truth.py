@@ -154,20 +154,20 @@ def test_reg_para1_and_a_preset_written_during_motion_move_the_truth_at_the_call
     those stamped during it against either (or NaN)."""
     p = params(channel)
     run = Run(running, probe, p)
-    time.sleep(1.0)
+    time.sleep(0.5)
     t0 = time.monotonic()
     epoch = epochs(probe, run.node, [1])
     lsb1 = {**p, "joint1.para1": PARA1_LSB1}
     para1, _ = timed(run, "joint1.para1 := 0x19010100",
                      lambda: set_integer(probe, run.node, "joint1.para1", PARA1_LSB1),
                      lambda _r: TruthOracle.from_params(lsb1, epoch))
-    time.sleep(1.0)
+    time.sleep(0.5)
     preset, res = timed(run, "~/set_preset 1.0 rad", lambda: probe.call(
         SetPreset, run.node.topic("~/set_preset"),
         SetPreset.Request(joint="joint1", position=1.0), timeout=30.0),
         lambda r: TruthOracle.from_params(lsb1, epoch, offsets={"joint1": r.offset}))
     assert res.success, res.message
-    time.sleep(1.0)
+    time.sleep(0.5)
     hold_changes(run, [para1, preset], "para1_and_preset_during_motion", t0)
 
 
@@ -184,7 +184,7 @@ def test_reg_offset_written_during_motion_moves_the_truth_at_the_call(running, p
     probe may miss the few messages whose velocity window spans one.)"""
     p = params(channel)
     run = Run(running, probe, p)
-    time.sleep(1.0)
+    time.sleep(0.5)
     t0 = time.monotonic()
     epoch = epochs(probe, run.node, [1])
     changes = []
@@ -196,7 +196,7 @@ def test_reg_offset_written_during_motion_moves_the_truth_at_the_call(running, p
             lambda _r, o=offset: TruthOracle.from_params(p, epoch, offsets={"joint1": o}))
         assert res.success, res.message
         changes.append(change)
-        time.sleep(0.6)
+        time.sleep(0.5)
     hold_changes(run, changes, "reg_offset_during_motion", t0)
 
 
@@ -206,7 +206,7 @@ def test_deactivate_publishes_nothing_and_activate_publishes_the_truth_again(
     nothing is stamped or received while it is inactive, and every sample after the
     activation holds the rule (against the station's epoch read again after it)."""
     run = Run(running, probe, params(channel))
-    time.sleep(1.0)
+    time.sleep(0.5)
     t0 = time.monotonic()
 
     def change(transition: int) -> None:
@@ -217,13 +217,13 @@ def test_deactivate_publishes_nothing_and_activate_publishes_the_truth_again(
     w0 = time.time()
     change(Transition.TRANSITION_DEACTIVATE)
     m_off, w_off = time.monotonic(), time.time()
-    time.sleep(1.5)
+    time.sleep(1.0)
     m_on, w_on = time.monotonic(), time.time()
     run.phase("activate")
     change(Transition.TRANSITION_ACTIVATE)
     w1 = time.time()
     run.published_again(time.monotonic())
-    time.sleep(1.5)
+    time.sleep(1.0)
     cycle = Change("deactivate .. activate", w0, w1,
                    TruthOracle.from_params(run.params, epochs(probe, run.node, [1])))
     stamped = [s.stamp for s in run.samples() if w_off < s.stamp < w_on]
