@@ -142,9 +142,18 @@ def read_burst(probe: Any, node: Any, calls: int, clients: int, timeout: float,
             probe.node.destroy_client(client)
 
 
-def stamp_gaps(run: Run, w0: float, w1: float) -> float:
-    """The longest gap (s) between consecutive joint_states stamps in [w0, w1], including
-    the edges: how long the node published nothing."""
-    stamps = sorted(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, m in run.joints)
-    inside = [w0] + [s for s in stamps if w0 <= s <= w1] + [w1]
-    return float(max(b - a for a, b in zip(inside, inside[1:])))
+def published(run: Run, w0: float, w1: float) -> tuple[float, float]:
+    """The rate (samples/s) at which the node published the first joint in [w0, w1] (wire
+    time), by the ``samples`` count of its ``~/status`` channel (what the node published,
+    whether or not this probe received it all: a starved probe loses messages beyond the
+    publisher's history), and the longest time (s) without a joint_states message this
+    probe received."""
+    def stamp(m: Any) -> float:
+        return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+    counts = sorted((stamp(m), ch.samples) for _, m in run.status if w0 <= stamp(m) <= w1
+                    for ch in m.channels if ch.joint == run.first)
+    assert len(counts) >= 2, f"no ~/status in [{w0:.3f}, {w1:.3f}]"
+    (a, na), (b, nb) = counts[0], counts[-1]
+    edges = [w0] + sorted(s for _, m in run.joints if w0 <= (s := stamp(m)) <= w1) + [w1]
+    return (nb - na) / (b - a), float(max(y - x for x, y in zip(edges, edges[1:])))
