@@ -219,6 +219,8 @@ SLOW = {
         "soak: the disturbance matrix on eight joints, held to the truth",
     "test/ros/test_node_truth_matrix.py::test_a_station_killed_and_started_again_on_the_same_bus":
         "stress: a station killed and another started on the same bus",
+    "test/ros/test_node_truth_matrix.py::test_a_burst_of_1000_service_calls_during_motion":
+        "stress: 1000 service calls at once during motion, held to the truth",
     "test/ros/test_node_load.py": "load: 60 s at 1 kHz beside two CPU burners",
     "test/ros/test_node_two_hosts.py": "two hosts: three network namespaces",
     "test/ros/test_node_stop.py::"

@@ -18,7 +18,8 @@ import time
 import pytest
 import yaml
 
-from support.node_truth import RATE, Run, eight_joints, epochs, matrix, two_stations
+from support.node_changes import published, read_burst
+from support.node_truth import RATE, Run, eight_joints, epochs, matrix, params, two_stations
 from support.truth import TruthOracle
 
 from .conftest import installed_executable, station_channel
@@ -107,3 +108,28 @@ def test_a_station_killed_and_started_again_on_the_same_bus(start_node, probe, t
             if proc is not None and proc.poll() is None:
                 os.kill(proc.pid, signal.SIGKILL)
                 proc.wait(5)
+
+
+def test_a_burst_of_1000_service_calls_during_motion(running, probe, channel):
+    """1000 ``~/read_register`` calls sent at once from four clients: the node queues up to
+    100 and answers the rest "busy" (docs/node.md "Services"); every call is answered,
+    joint_states keeps coming at the rate it had before the burst (by the node's own count
+    on ~/status: a loaded machine may hold it below 200 Hz whatever the services do), and
+    every sample holds the rule."""
+    run = Run(running, probe, params(channel))
+    w_base = time.time()
+    time.sleep(2.0)
+    t0, w0 = time.monotonic(), time.time()
+    run.phase("1000 ~/read_register calls")
+    outcomes, took = read_burst(probe, run.node, 1000, 4, timeout=120.0, joint="joint1")
+    w1 = time.time()
+    time.sleep(0.5)
+    base_rate, base_gap = published(run, w_base, w0)
+    rate, gap = published(run, w0, w1)
+    print(f"burst: {dict(outcomes)} in {took:.2f} s; published {rate:.0f}/s, longest gap "
+          f"received {gap * 1e3:.1f} ms (before: {base_rate:.0f}/s, {base_gap * 1e3:.1f} ms)")
+    run.check("service_burst_1000", t0)
+    assert outcomes["unanswered"] == 0, outcomes
+    assert outcomes["ok"] > 0 and set(outcomes) <= {"ok", "busy", "unanswered"}, outcomes
+    assert rate >= 0.8 * base_rate, (f"joint1 published at {rate:.0f}/s during the burst, "
+                                     f"{base_rate:.0f}/s before")

@@ -123,16 +123,26 @@ class Run:
 
         ``case``/``t0``: the disturbance's name and start (monotonic), for the bench's figures.
         """
-        samples = self._seen_whole(samples_from_joint_states(m for _, m in self.joints))
-        report = self.oracle.check(samples, self.bound)
+        self.hold(self.samples(), self.oracle, case, t0)
+
+    def samples(self) -> list[Any]:
+        """Every sample received so far, velocities NaN where this probe missed part of the
+        node's window (:meth:`_seen_whole`)."""
+        return self._seen_whole(samples_from_joint_states(m for _, m in self.joints))
+
+    def hold(self, samples: list[Any], oracle: TruthOracle, case: str = "",
+             t0: float | None = None) -> None:
+        """``samples`` hold the rule against ``oracle``; a failure lists the worst (see
+        :meth:`check`)."""
+        report = oracle.check(samples, self.bound)
         self._report(case, t0, report)
         dump = os.environ.get("SSI_BRIDGE_TRUTH_DUMP")
         if dump and not report.ok:
             with open(dump, "a", encoding="utf-8") as out:
                 for sm in samples:
                     out.write(json.dumps([case, sm.stamp, sm.joint, sm.position, sm.velocity,
-                                          self.oracle.residual(sm.joint, sm.stamp, sm.position),
-                                          self.oracle.velocity(sm.joint, sm.stamp)]) + "\n")
+                                          oracle.residual(sm.joint, sm.stamp, sm.position),
+                                          oracle.velocity(sm.joint, sm.stamp)]) + "\n")
                 for v in report.violations:
                     out.write(json.dumps(["VIOLATION", case, v.stamp, v.joint, v.kind,
                                           v.velocity_error, v.bound]) + "\n")
