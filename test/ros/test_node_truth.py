@@ -171,17 +171,14 @@ def test_reg_para1_and_a_preset_written_during_motion_move_the_truth_at_the_call
     hold_changes(run, [para1, preset], "para1_and_preset_during_motion", t0)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core/bridge.py Bridge.write_register writes REG_OFFSET (address 50) without holding the "
-    "velocity estimate across the zero-point move as set_preset, LD48 and the 0x6810 SDO "
-    "write do: a window spanning the write publishes 1000 counts / 20 ms = 38 rad/s for a "
-    "shaft at 1.571 rad/s"))
 def test_reg_offset_written_during_motion_moves_the_truth_at_the_call(running, probe, channel):
     """REG_OFFSET itself (``~/write_register`` address 50, 000 "Offset function":
     REG_SSI_POS = encoder - REG_OFFSET) written three times while the shaft turns: the
     samples stamped before a write hold the rule against the offset before it, those after
     it returned against the new one, those during it against either. (Three writes: the
-    probe may miss the few messages whose velocity window spans one.)"""
+    probe may miss the few messages whose velocity window spans one.) Before the estimate was
+    held across the write as a preset holds it, a window spanning it published 38 rad/s for
+    a shaft at 1.571 rad/s."""
     p = params(channel)
     run = Run(running, probe, p)
     time.sleep(0.5)
