@@ -105,7 +105,7 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     finally:
         stop.set()
     t1 = time.monotonic()
-    assert sent >= 0.2 * rate * seconds  # a loaded test process sends fewer, still a flood
+    assert sent >= 0.1 * rate * seconds  # a test process starved beside burners sends fewer
     run.published_again(t1 + 0.5)
     time.sleep(0.5)
     run.check(f"foreign_sync_{rate:g}hz", t0)
