@@ -1,7 +1,7 @@
 """The master's side of the cycle core: where a client's frames go, and its SYNC count.
 
 The node wires each station's client to its frame log (``core/cycle_log.StationLog``, a
-:class:`~ssi_bridge.client.frame_sink.FrameSink`) and asks which SYNC it sent last, through
+:class:`~ssi_bridge.client.frame_sink.FrameSink`) and asks which number its SYNC had, through
 these two calls, so that nothing outside ``client/`` reaches into a client's slot table.
 """
 
@@ -26,11 +26,6 @@ def feed_frames(client: Tabled, sink: FrameSink | None) -> None:
     client.table.sink = sink
 
 
-def last_sync(client: Tabled) -> int:
-    """The sequence number of the newest SYNC ``client`` sent or observed (0: none yet)."""
-    return client.table.sync_seq
-
-
 def sync_number(client: Tabled, t: float) -> int:
     """The number of the SYNC ``client`` recorded at wire time ``t`` (what its ``sync()``
     returned): not the newest one, which a register handshake's own SYNC, sent from another
@@ -38,4 +33,4 @@ def sync_number(client: Tabled, t: float) -> int:
     return client.table.seq_at(t)
 
 
-__all__ = ["Tabled", "feed_frames", "last_sync", "sync_number"]
+__all__ = ["Tabled", "feed_frames", "sync_number"]

@@ -20,8 +20,6 @@ from ssi_bridge.protocol.images import ProcessInput
 POSITION_PAIR = struct.Struct("<ii")
 #: SYNC times remembered to stamp late samples
 _KEEP_SYNC_TIMES = 64
-#: bits of SlotState.answered: which of a slot's two TPDOs answered a SYNC
-IMAGE, POSITION = 1, 2
 
 
 @dataclass(frozen=True)
@@ -108,24 +106,6 @@ class SlotState:
     pulse_seq: int | None = None  # clear pulse armed at this sync sequence
     pulse_resends: int = 0  # times the current clear pulse was sent again (lost RPDO)
     release_seq: int | None = None  # CLR released at this sync sequence: sent once more
-    #: SYNC sequence -> frames received that answered it (IMAGE | POSITION), the recent ones
-    answered: dict[int, int] = field(default_factory=dict)
-
-
-def _mark(st: SlotState, bit: int, seq: int) -> None:
-    """A frame (``bit``) answered SYNC ``seq``; forget the SYNCs older than the kept times."""
-    st.answered[seq] = st.answered.get(seq, 0) | bit
-    st.answered.pop(seq - _KEEP_SYNC_TIMES, None)
-
-
-def _move(st: SlotState, bit: int, seq: int, to: int) -> None:
-    """A frame counted for SYNC ``seq`` answered ``to`` (its wire time says so)."""
-    left = st.answered.get(seq, 0) & ~bit
-    if left:
-        st.answered[seq] = left
-    else:
-        st.answered.pop(seq, None)
-    _mark(st, bit, to)
 
 
 class CycleGate:
@@ -227,11 +207,9 @@ class SlotTable:
                 if st.image_seq == seq and 0.0 < st.image_time < at:
                     st.image_seq = seq - 1
                     self._due += 1
-                    _move(st, IMAGE, seq, seq - 1)
                 if st.position_seq == seq and 0.0 < st.position_time < at:
                     st.position_seq = seq - 1
                     self._due += 1
-                    _move(st, POSITION, seq, seq - 1)
             if was_complete and self._due and self._gate is not None:
                 self._gate.pending += 1  # counted as complete too early: not any more
             return at
@@ -276,9 +254,7 @@ class SlotTable:
             completed = False
             if self._late(timestamp):
                 st.image_seq = max(st.image_seq, self.sync_seq - 1)
-                _mark(st, IMAGE, self.sync_seq - 1)
             elif st.image_seq != self.sync_seq:
-                _mark(st, IMAGE, self.sync_seq)
                 st.image_seq = self.sync_seq
                 self._due -= 1
                 completed = self._due == 0
@@ -309,9 +285,7 @@ class SlotTable:
                 st = self._slots[slot]
                 if late:
                     st.position_seq = max(st.position_seq, seq - 1)
-                    _mark(st, POSITION, seq - 1)
                 elif st.position_seq != seq:
-                    _mark(st, POSITION, seq)
                     st.position_seq = seq
                     self._due -= 1
                     completed = completed or self._due == 0
@@ -348,19 +322,6 @@ class SlotTable:
             seq = min(st.image_seq, st.position_seq)
             return ChannelSample(slot, st.position, st.image, self._times.get(seq, 0.0),
                                  st.image_count)
-
-    def loss(self, slot: int, seq: int) -> tuple[float, float] | None:
-        """(wire time, share of the slot's two TPDOs missing) of SYNC ``seq``; None if unknown.
-
-        Asked a cycle later than the SYNC, so an answer that was on the wire in time but
-        handled late (a starved process) counts as received: the share measures the bus.
-        """
-        with self.cond:
-            at = self._times.get(seq)
-            if at is None or seq > self.sync_seq:
-                return None
-            got = self.slot(slot).answered.get(seq, 0)
-            return at, 1.0 - ((got & IMAGE) + (got & POSITION) // 2) / 2
 
     @property
     def answering(self) -> bool:

@@ -47,11 +47,6 @@ class CycleResult:
         """The joints with a sample latched at ``t_sync`` (the message's joints)."""
         return [j for j in self.joints if j.output is not None]
 
-    @property
-    def set_aside(self) -> list[JointCycle]:
-        """The joints left out of this cycle."""
-        return [j for j in self.joints if j.output is None]
-
 
 class Cycle:
     """The cycle decisions of every joint of a bridge.

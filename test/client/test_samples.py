@@ -9,6 +9,7 @@ import time
 import pytest
 
 from ssi_bridge.client.samples import SlotTable
+from ssi_bridge.core.cycle_log import StationLog
 
 IMAGE = bytes(range(8))
 
@@ -97,30 +98,44 @@ def test_handshake_waiter_woken_by_a_single_image() -> None:
     assert got and got[0] is not None and got[0].reg_rd_adr == IMAGE[4] & 0x3F
 
 
+def _loss(log: StationLog, seq: int) -> tuple[float, float] | None:
+    """(wire time, share of slot 1's two TPDOs missing) of SYNC ``seq`` as the cycle's frame
+    log sees it, fed by the table; None for a SYNC it does not know."""
+    at = log.sync_time(seq)
+    return None if at is None else (at, log.verdict(1, seq).missing)
+
+
+def _logged_table() -> tuple[SlotTable, StationLog]:
+    table = SlotTable(1)
+    log = StationLog(latch_bound=0.001)
+    table.sink = log
+    return table, log
+
+
 def test_loss_counts_an_answer_handled_after_the_next_sync_for_its_own_sync() -> None:
     # CiA 301: synchronous TPDOs follow their SYNC on the wire; a master that handles them
     # late (after it sent the next SYNC) still sees by their wire time which SYNC they
     # answered, so a starved process is no lost frame (the stale ratio measures the bus)
-    table = SlotTable(1)
+    table, log = _logged_table()
     t1 = table.on_sync(100.000)
     t2 = table.on_sync(100.001)  # the next SYNC went out before SYNC 1's answers were handled
     table.on_image(1, IMAGE, timestamp=t1 + 0.0002)
     table.on_positions([1], struct.pack("<ii", 7, 0), timestamp=t1 + 0.0003)
-    assert table.loss(1, 1) == (t1, 0.0)
-    assert table.loss(1, 2) == (t2, 1.0)  # nothing answered SYNC 2 yet
+    assert _loss(log, 1) == (t1, 0.0)
+    assert _loss(log, 2) == (t2, 1.0)  # nothing answered SYNC 2 yet
     table.on_image(1, IMAGE, timestamp=t2 + 0.0002)
-    assert table.loss(1, 2) == (t2, 0.5)  # its position frame was lost
-    assert table.loss(1, 3) is None  # no such SYNC yet
+    assert _loss(log, 2) == (t2, 0.5)  # its position frame was lost
+    assert _loss(log, 3) is None  # no such SYNC yet
 
 
 def test_loss_follows_a_frame_the_sync_time_moves_to_the_cycle_before() -> None:
     # a TPDO handled before the SYNC's own wire time was known, that ended on the wire
     # before it, answered the SYNC before (SlotTable.set_sync_time)
-    table = SlotTable(1)
+    table, log = _logged_table()
     t1 = table.on_sync(200.000)
     table.on_sync(200.0008)  # sent; the wire has not yet said when it ended
     table.on_image(1, IMAGE, timestamp=200.0009)  # after the SYNC's send: counted for it ...
-    assert table.loss(1, 2) == (200.0008, 0.5)
+    assert _loss(log, 2) == (200.0008, 0.5)
     t2 = table.set_sync_time(200.001)  # ... but it ended on the wire before that SYNC
-    assert table.loss(1, 1) == (t1, 0.5)
-    assert table.loss(1, 2) == (t2, 1.0)
+    assert _loss(log, 1) == (t1, 0.5)
+    assert _loss(log, 2) == (t2, 1.0)
