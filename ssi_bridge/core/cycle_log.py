@@ -128,8 +128,10 @@ class StationLog:
         self.latch_bound = latch_bound
         #: the station's slots that the master reads: each answers every SYNC it handles
         self.slots = tuple(sorted(set(slots)))
-        #: (t_k, frames received so far) -> whether the station was in step before t_k
-        self._in_step: tuple[float, int, bool] | None = None
+        #: t_k -> (frames received so far, whether the station was in step before t_k), for
+        #: the SYNCs asked about lately: a cycle asks each joint of the station about its SYNC
+        #: and, for the health, the one before
+        self._in_step: dict[float, tuple[int, bool]] = {}
         self._received = 0
         #: windows before the SYNC that must show the station in step (rule 3)
         self.history = history
@@ -142,8 +144,6 @@ class StationLog:
         #: the wire times of the master's own SYNCs in the log (rule 3's windows are theirs)
         self._own_times: set[float] = set()
         self._frames: dict[int, deque[Frame]] = {}
-        #: foreign SYNCs seen (the master counts them too; kept here for the tests' view)
-        self.foreign_syncs = 0
 
     # -- the master's side (client.samples.FrameSink) ---------------------------------------
     def sync(self, seq: int, t: float) -> None:
@@ -168,7 +168,6 @@ class StationLog:
     def foreign_sync(self, t: float) -> None:
         """Another producer's SYNC ended on the wire at ``t``: it opens a window too."""
         with self._lock:
-            self.foreign_syncs += 1
             self._insert(t)
 
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
@@ -229,9 +228,9 @@ class StationLog:
         late or partial answer) is out of step, for all its slots: a slot's frames of one
         window may then belong to different answers. Computed once per SYNC and frame count.
         """
-        cached = self._in_step
-        if cached is not None and cached[0] == t_k and cached[1] == self._received:
-            return cached[2]
+        cached = self._in_step.get(t_k)
+        if cached is not None and cached[0] == self._received:
+            return cached[1]
         back = self.history
         bounds = self._syncs[max(i - back, 0): i + 1]
         # the windows are the master's own: with another producer's SYNC among them, a
@@ -251,7 +250,9 @@ class StationLog:
                 w[2] = min(w[2], f.t)
             ok = all(n_img == 1 and n_pos == 1 and first - t0 <= self.latch_bound
                      for (n_img, n_pos, first), t0 in zip(counts, bounds))
-        self._in_step = (t_k, self._received, ok)
+        if len(self._in_step) >= 4:
+            self._in_step.clear()
+        self._in_step[t_k] = (self._received, ok)
         return ok
 
     def _judge(self, slot: int, t_k: float, in_step: bool, images: list[Frame],
