@@ -23,7 +23,11 @@
   (``Network.subscribers``, and the node scanner's ``on_message_received(can_id)``, whose
   argument differs between canopen's upstream lines), for ``base/rx_guard.py``;
 * :func:`forget_receive_error`: clears a handled receive error from the notifier canopen's
-  ``check`` reads (``Notifier.exception``), for a plain ``canopen.Network``.
+  ``check`` reads (``Notifier.exception``), for a plain ``canopen.Network``;
+* :func:`drop_node`: takes a node out of a network's node table (``Network.nodes``) and
+  nothing else;
+* :func:`forget_values`: drops what was written to a ``LocalNode`` (``LocalNode.data_store``),
+  so its objects read their defaults again.
 
 ``test/gateway/test_library_compat.py`` fails on a canopen whose private names changed.
 """
@@ -186,6 +190,23 @@ def forget_receive_error(network: canopen.Network, exc: BaseException) -> None:
         notifier.exception = None
 
 
+def drop_node(network: canopen.Network, node_id: int) -> None:
+    """Take node ``node_id`` (if there) out of ``network``'s node table, leaving its
+    subscriptions as they are (unlike ``del network[node_id]``)."""
+    network.nodes.pop(node_id, None)
+
+
+def forget_values(node: canopen.LocalNode, index: Callable[[int], bool] | None = None) -> None:
+    """Forget the values written to ``node``'s objects (those whose index ``index`` accepts;
+    None: all), so they read their dictionary defaults again."""
+    store = node.data_store
+    if index is None:
+        store.clear()
+        return
+    for stored in [i for i in store if index(i)]:
+        del store[stored]
+
+
 class OwnListenerNetwork(canopen.Network):
     """canopen's ``Network`` with one listener of its owner's and a hook on every frame sent.
 
@@ -245,5 +266,5 @@ class OwnListenerNetwork(canopen.Network):
 
 
 __all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "OnRaise",
-           "OwnListenerNetwork", "dispatch", "forget_receive_error", "pdo_handler",
-           "set_eds_default", "subscribers"]
+           "OwnListenerNetwork", "dispatch", "drop_node", "forget_receive_error",
+           "forget_values", "pdo_handler", "set_eds_default", "subscribers"]

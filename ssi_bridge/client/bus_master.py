@@ -28,6 +28,7 @@ from ssi_bridge.client.bus import (
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.frame_rules import master_rules
 from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.canopen_compat import drop_node
 from ssi_bridge.base.timebase import wire_now
 
 
@@ -141,7 +142,7 @@ class CanMaster:
             for cob_id in master_rules(client.node_id):
                 self._listener.rules.pop(cob_id, None)
         if self.network is not None:
-            self.network.nodes.pop(client.node_id, None)
+            drop_node(self.network, client.node_id)
 
     def _on_foreign_sync(self, at: float) -> None:
         """Another producer's SYNC at wire time ``at`` (receive thread): no TPDO after it

@@ -1,6 +1,6 @@
 """Every use of rclpy's private API in one place (Jazzy, rclpy 7.1), checked by a canary test.
 
-The node needs five things rclpy does not offer publicly:
+The node needs six things rclpy does not offer publicly:
 
 * :data:`RCLError`: the exception rcl raises when a publish or a take races the context's
   shutdown (``rclpy._rclpy_pybind11``); the node ends a cycle quietly on it during shutdown.
@@ -13,6 +13,8 @@ The node needs five things rclpy does not offer publicly:
 * :func:`parameter_overrides`: the parameters given to a node (params file, ``-p``, the
   ``parameter_overrides`` argument), declared or not (``Node._parameter_overrides``), so a
   typo or an old name is reported instead of silently ignored.
+* :class:`RcutilsLogger`: the class of ``Node.get_logger()``, which rclpy defines in its
+  implementation package (``rclpy.impl``), for the log bridge's annotations.
 
 ``test/ros/test_rclpy_compat.py`` fails on an rclpy whose private names changed.
 """
@@ -23,6 +25,7 @@ from contextlib import ExitStack
 from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 
@@ -70,5 +73,5 @@ def executor_tasks(executor: Any) -> list[Any]:
     return list(getattr(executor, "_futures", ()))
 
 
-__all__ = ["RCLError", "executor_tasks", "parameter_overrides", "service_pointer", "take_request",
+__all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides", "service_pointer", "take_request",
            "wait_for_requests"]

@@ -1,6 +1,6 @@
 """Canaries of the canopen internals behind the one network class of the master and the
 simulated gateway (base/canopen_compat.py ``OwnListenerNetwork``, ``dispatch``,
-``forget_receive_error``): a canopen release that changed one fails here, by name, on a real
+``forget_receive_error``, ``drop_node``, ``forget_values``): a canopen release that changed one fails here, by name, on a real
 canopen ``Network`` on python-can's virtual bus."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import canopen
 import pytest
 
 from ssi_bridge.base.canopen_compat import (
-    OwnListenerNetwork, dispatch, forget_receive_error, subscribers,
+    OwnListenerNetwork, dispatch, drop_node, forget_receive_error, forget_values, subscribers,
 )
 
 
@@ -135,3 +135,34 @@ def test_dispatch_is_canopens_notify_with_each_subscriber_on_its_own() -> None:
     assert network.scanner.nodes == [5], "a TPDO1 of node 5 is seen by the scanner"
     dispatch(network, 0x186, bytearray(), 0.0, lambda *a: None)
     assert network.scanner.nodes == [5, 6]
+
+
+def test_a_dropped_node_leaves_the_table_and_keeps_its_subscriptions() -> None:
+    """``drop_node``: ``Network.nodes`` is the table ``network[node_id]`` reads; dropping
+    leaves the node's SDO subscription (``del network[id]`` would remove it too)."""
+    from ssi_bridge.base.od import build_dictionary
+    network = canopen.Network()
+    node = canopen.RemoteNode(5, build_dictionary(5, 1))
+    network.add_node(node)
+    assert network[5] is node
+    drop_node(network, 5)
+    drop_node(network, 5)  # not there: nothing to do
+    assert 5 not in network
+    assert node.sdo.on_response in subscribers(network, 0x585)
+
+
+def test_forgotten_values_read_their_defaults_again() -> None:
+    """``forget_values``: ``LocalNode.data_store`` holds what was written (index ->
+    subindex -> bytes); without it an object reads its dictionary default."""
+    from ssi_bridge.base.od import build_dictionary
+    node = canopen.LocalNode(5, build_dictionary(5, 1))
+    default = node.get_data(0x1800, 5, check_readable=False)
+    node.set_data(0x1014, 0, b"\x85\x00\x00\x00", check_writable=False)
+    node.set_data(0x1800, 5, b"\x64\x00", check_writable=False)
+    assert node.data_store[0x1014] == {0: b"\x85\x00\x00\x00"}
+    forget_values(node, lambda index: index == 0x1014)
+    assert node.get_data(0x1800, 5, check_readable=False) == b"\x64\x00"
+    assert 0x1014 not in node.data_store
+    forget_values(node)
+    assert node.data_store == {}
+    assert node.get_data(0x1800, 5, check_readable=False) == default != b"\x64\x00"

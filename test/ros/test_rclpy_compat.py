@@ -89,3 +89,14 @@ def test_the_given_parameters_are_read_declared_or_not(domain_id):
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_a_nodes_logger_is_the_class_the_log_bridge_names(domain_id):
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        node = rclpy.create_node("canary_logger", context=context)
+        assert isinstance(node.get_logger(), rclpy_compat.RcutilsLogger)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -126,7 +126,7 @@ class LossyBus(can.BusABC):
         is taken directly: this is the path of every frame the receive thread reads. (The
         step skips python-can's level-9 "Received" trace of the ``can.bus`` logger.)
         """
-        if (self._inner_steps and not self.drop_received and self._filters is None
+        if (self._inner_steps and not self.drop_received and self.filters is None
                 and self._inner.filters is None):
             msg = recv_step_unfiltered(self._inner, timeout)
         else:

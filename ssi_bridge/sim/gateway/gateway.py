@@ -35,6 +35,7 @@ from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.base.canopen_compat import forget_values
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.frame_rules import station_rules
 from ssi_bridge.protocol.settings import BusConfig
@@ -223,12 +224,11 @@ class XnGateway:
     def _boot(self, *, reset_application: bool) -> None:
         self.node.nmt.stop_heartbeat()
         if reset_application:
-            self.node.data_store.clear()
+            forget_values(self.node)
             self.objects.reset()
             self.emergencies.reset()
         else:
-            for index in [i for i in self.node.data_store if 0x1000 <= i < 0x2000]:
-                del self.node.data_store[index]
+            forget_values(self.node, lambda index: 0x1000 <= index < 0x2000)
         self.pdo.reload()
         self._subscribe_sync()
         self.node.nmt.send_command(NMT_CMD_RESET_NODE)  # INITIALISING: boot-up message
