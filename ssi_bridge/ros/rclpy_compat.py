@@ -73,5 +73,5 @@ def executor_tasks(executor: Any) -> list[Any]:
     return list(getattr(executor, "_futures", ()))
 
 
-__all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides", "service_pointer", "take_request",
-           "wait_for_requests"]
+__all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides",
+           "service_pointer", "take_request", "wait_for_requests"]

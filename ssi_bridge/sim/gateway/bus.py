@@ -231,8 +231,9 @@ class BridgeNetwork(OwnListenerNetwork):
         """Send data frames back to back under one lock; return those that failed.
 
         The same frames as :meth:`send_message` for each, in order, with nothing of another
-        thread between them (a station's TPDOs after one SYNC); the lock is taken once. A frame the bus refuses (``can.CanError``) does not stop
-        the others: it is returned with its error. RuntimeError when not connected.
+        thread between them (a station's TPDOs after one SYNC); the lock is taken once. A
+        frame the bus refuses (``can.CanError``) does not stop the others: it is returned with
+        its error. RuntimeError when not connected.
         """
         bus = self.bus
         if not bus:
