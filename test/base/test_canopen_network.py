@@ -1,7 +1,7 @@
 """Canaries of the canopen internals behind the one network class of the master and the
 simulated gateway (base/canopen_compat.py ``OwnListenerNetwork``, ``dispatch``,
-``forget_receive_error``, ``drop_node``, ``forget_values``): a canopen release that changed one fails here, by name, on a real
-canopen ``Network`` on python-can's virtual bus."""
+``forget_receive_error``, ``drop_node``, ``forget_values``): a canopen release that changed
+one fails here, by name, on a real canopen ``Network`` on python-can's virtual bus."""
 
 from __future__ import annotations
 
