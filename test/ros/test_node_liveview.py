@@ -24,6 +24,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import ReadRegister
 
+from support.liveview import free_port
+
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 #: binary server message "Message Data": opcode, subscription id, log time (ns)
 MESSAGE_DATA = struct.Struct("<BIQ")
