@@ -15,7 +15,7 @@
   makes its SDO channels such clients (``add_sdo``, which ``RemoteNode.__init__`` calls
   before it binds the PDO maps to the default channel).
 
-``test/gateway/test_library_compat.py`` fails on a canopen whose private names changed.
+``test/base/test_library_compat.py`` fails on a canopen whose private names changed.
 """
 
 from __future__ import annotations
