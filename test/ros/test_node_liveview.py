@@ -30,13 +30,6 @@ MESSAGE_DATA = struct.Struct("<BIQ")
 OP_MESSAGE_DATA = 0x01
 
 
-def free_port() -> int:
-    """A TCP port nothing listens on right now (the kernel's choice)."""
-    with socket.socket() as s:
-        s.bind(("0.0.0.0", 0))
-        return int(s.getsockname()[1])
-
-
 def non_loopback_address() -> str | None:
     """This host's primary non-loopback IPv4 address (the source of its default route)."""
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
