@@ -19,7 +19,6 @@ import os
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -48,7 +47,7 @@ from ssi_bridge.ros.lifecycle import BridgeLifecycle
 from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.messages import idle_read, joint_state_msg, status_msg, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
-from ssi_bridge.ros.node_status import NodeDiagnostics
+from ssi_bridge.ros.node_status import CycleRate, NodeDiagnostics
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import NodeSettings, declare_parameters
 from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
@@ -58,7 +57,7 @@ from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
 
-class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, LifecycleNode):
+class SsiBridgeNode(BridgeLifecycle, RuntimeParameters, LifecycleNode):
     """Bridge of the XN-1SSI channels of XN-GW-CANOPEN stations to ROS 2 (a lifecycle node).
 
     ``autostart`` is the default of the ``autostart`` parameter: on, the constructor
@@ -112,6 +111,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
+        #: the achieved cycle rate; the cycle appends each cycle's monotonic time
+        self.cycle_rate = CycleRate()
+        self._cycle_times = self.cycle_rate.times
         self._begin(autostart)  # lifecycle.py: configure and activate, or wait unconfigured
 
     @property
@@ -165,10 +167,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self._attach_frame_logs()
         if not s.listen_only:
             self.refresh_cams()
-        self._cycle_times: deque[float] = deque()
-        self._cycle_started = time.monotonic()
-        self._last_levels: tuple = ()
-        self._last_bus_counts: dict = {}
+        self.cycle_rate.restart()
 
     def _attach_frame_logs(self) -> None:
         """A frame log per station, fed by its slot table (every SYNC and TPDO it sees)."""
@@ -222,6 +221,11 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self.liveview = LiveView(self, s, self.handlers)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
+        self.diagnostics = NodeDiagnostics(
+            self, self, self.joints, self.cycle_rate, recorder=self.recorder,
+            liveview=self.liveview, services=self.handlers,
+            publish=lambda msg: self.publish_safe(self.diag_pub, msg),
+            refresh_cams=self.refresh_cams)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
     def _new_cycle(self, s: NodeSettings) -> CycleThread | ObservedCycleThread:
@@ -250,7 +254,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         # Python hands the GIL to a waiting thread only every switch interval (5 ms by
         # default): a service burst's CPU-bound handlers would hold the cycle that long
         sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
-        self._cycle_started = time.monotonic()
+        self.cycle_rate.started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -282,6 +286,15 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
         return self.model_clock()
+
+    def _on_diag_timer(self) -> None:
+        """Diagnostics only while the bus side is open (the CAM objects are read over it)."""
+        if self.configured:
+            self.diagnostics.on_timer()
+
+    def _publish_on_change(self) -> None:
+        """The diagnostics at once when a level changed since the last cycle."""
+        self.diagnostics.publish_on_change()
 
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:
