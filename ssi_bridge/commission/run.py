@@ -135,7 +135,8 @@ def commission(bus: BusConfig | can.BusABC, options: Options,
         raw.shutdown()
         raise
     network = MasterNetwork(raw)
-    network.listeners.append(_Garbage(heard))
+    # canopen types its listeners as its own MessageListener; can.Notifier takes any Listener
+    network.listeners.append(_Garbage(heard))  # type: ignore[arg-type]
     network.connect()
     try:
         _run(network, heard, answered, options, result, say)
