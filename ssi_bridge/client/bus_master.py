@@ -97,17 +97,15 @@ class CanMaster:
         else:
             self._source = None  # a handed-over bus is taken once
         self.bus = ReceiveWatch(inner)
-        self.network = MasterNetwork(self.bus)
+        self.network = MasterNetwork(self.bus, notifier_cycle=NOTIFIER_CYCLE)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self._listener.foreign.on_sync = self._on_foreign_sync
         for client in self.clients:
             self._listener.rules.update(master_rules(client.node_id))
         self._listener.error_frames = self.error_frames
-        self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.network.connect()
+        self.network.start(self._listener)
 
     @property
     def receive_scheduling(self) -> str:

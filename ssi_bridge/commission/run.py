@@ -135,8 +135,7 @@ def commission(bus: BusConfig | can.BusABC, options: Options,
         raw.shutdown()
         raise
     network = MasterNetwork(raw)
-    network.listeners.append(_Garbage(heard))
-    network.connect()
+    network.start(_Garbage(heard), canopens_too=True)
     try:
         _run(network, heard, answered, options, result, say)
     finally:

@@ -142,7 +142,7 @@ class XnGateway:
             self._source = None  # a handed-over bus is taken once
         self.rx_fifo.grace = grace_for(inner) if self.stall_grace is None else self.stall_grace
         self.bus = LossyBus(inner)
-        self.network = BridgeNetwork(self.bus)
+        self.network = BridgeNetwork(self.bus, notifier_cycle=NOTIFIER_CYCLE)
         # subscribers get each frame's handling time through the controller's receive FIFO
         # (a SYNC latches then) and no undecodable datagram, receive error or raising
         # callback stops the station
@@ -155,9 +155,7 @@ class XnGateway:
         self.node.sdo.report = listener.malformed
         #: the station's receive path: its faults by kind (``listener.faults``)
         self.listener = listener
-        self.network.listeners[:] = [listener]
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.network.connect()
+        self.network.start(listener)
         self.network.add_node(self.node)
         self.network.subscribe(0, self._on_nmt)
         with self._lock:
