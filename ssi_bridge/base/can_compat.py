@@ -17,7 +17,7 @@ publicly:
 
 A wrapper that overrides ``BusABC._send_periodic_internal`` (the periodic-task hook,
 ``sim/gateway/bus.py``) relies on its signature, which the canary also checks.
-``test/gateway/test_library_compat.py`` fails on a python-can whose private names changed.
+``test/base/test_library_compat.py`` fails on a python-can whose private names changed.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@
 * :func:`forget_values`: drops what was written to a ``LocalNode`` (``LocalNode.data_store``),
   so its objects read their defaults again.
 
-``test/gateway/test_library_compat.py`` fails on a canopen whose private names changed.
+``test/base/test_library_compat.py`` fails on a canopen whose private names changed.
 """
 
 from __future__ import annotations

@@ -281,9 +281,9 @@ class BagRecorder:
                 except OSError as err:
                     self._fail(err)
             if self._error is not None:
-                for done in (*pending, file):
-                    if done is not None:
-                        done.abandon()
+                for left in (*pending, file):
+                    if left is not None:
+                        left.abandon()
                 raise RecordingError(f"{self._error}; the bag was left without a summary: "
                                      f"`replay --recover {self._directory}` rebuilds it")
         release_free_memory()  # the session's writer and buffers (record/heap.py)

@@ -19,7 +19,7 @@ import struct
 import threading
 from typing import Any, Callable
 
-from ssi_bridge.record.types import message_class
+from ssi_bridge.record.types import message_class, message_fields
 
 #: CDR encapsulation header: representation id CDR_LE (0x0001), options 0
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
@@ -77,7 +77,7 @@ class _Compiler:
                 run.clear()
                 run_values.clear()
 
-        for field, ftype in cls.get_fields_and_field_types().items():
+        for field, ftype in message_fields(cls).items():
             attr = f"m.{field}"
             if ftype in PRIMITIVES:
                 code, size = PRIMITIVES[ftype]

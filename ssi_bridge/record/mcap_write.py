@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import lz4.frame
 import zstandard
@@ -103,7 +103,7 @@ class ChunkBuffers:
         self.records = bytearray(capacity)
         self.used = 0
         #: channel id -> [entries buffer, bytes used]
-        self.indexes: dict[int, list] = {}
+        self.indexes: dict[int, list[Any]] = {}
         self.messages = 0
         self.start_ns = 0
         self.end_ns = 0
@@ -159,7 +159,8 @@ class ChunkBuffers:
         if self.compression == "zstd":
             return zstandard.ZstdCompressor().compress(view)
         if self.compression == "lz4":
-            return lz4.frame.compress(view)
+            compressed: bytes = lz4.frame.compress(view)
+            return compressed
         return view
 
     def write_chunk(self, stream: BinaryIO) -> bytes:

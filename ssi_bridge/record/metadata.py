@@ -165,4 +165,5 @@ def read_metadata(directory: Path) -> dict[str, Any]:
     data = yaml.safe_load((directory / METADATA_FILE).read_text(encoding="utf-8"))
     if not isinstance(data, dict) or "rosbag2_bagfile_information" not in data:
         raise ValueError("no 'rosbag2_bagfile_information' mapping")
-    return data["rosbag2_bagfile_information"]
+    info: dict[str, Any] = data["rosbag2_bagfile_information"]
+    return info

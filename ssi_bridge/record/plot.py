@@ -18,6 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 from ssi_bridge.exceptions import RecordingError  # noqa: E402
 from ssi_bridge.record.reader import Bag  # noqa: E402
@@ -109,18 +110,18 @@ def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
                       fontsize=7)
         ax.set_ylim(-0.6, len(names) - 0.4)
         ax.set_ylabel("diagnostics", fontsize=8)
-        handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in LEVEL_COLOURS.values()]
+        handles = [Rectangle((0, 0), 1, 1, color=c) for c in LEVEL_COLOURS.values()]
         ax.legend(handles, LEVEL_NAMES.values(), fontsize=7, ncol=4, loc="upper right")
         named["diagnostics"] = ax
         row += 1
     if data.events:
         ax = axes[row][0]
-        for i, (t, kind, joint, ok, message) in enumerate(data.events):
+        for i, (when, kind, joint, ok, message) in enumerate(data.events):
             colour = "tab:purple" if ok else "tab:red"
-            ax.plot([t], [0], marker="v", color=colour, ms=8)
+            ax.plot([when], [0], marker="v", color=colour, ms=8)
             for other in axes[:row]:
-                other[0].axvline(t, color=colour, lw=0.6, alpha=0.5)
-            ax.annotate(f"{kind}{'' if ok else ' FAILED'}\n{joint}", (t, 0),
+                other[0].axvline(when, color=colour, lw=0.6, alpha=0.5)
+            ax.annotate(f"{kind}{'' if ok else ' FAILED'}\n{joint}", (when, 0),
                         (0, 8 + 12 * (i % 2)), textcoords="offset points", fontsize=7,
                         ha="center", color=colour)
         ax.set_yticks([])

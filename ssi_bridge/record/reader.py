@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import heapq
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -169,7 +169,7 @@ class Bag:
             self._parts.append(_Part(file, stats.message_start_time, stats.message_end_time))
 
     def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
-                 ) -> Iterator[tuple[str, Message]]:
+                 ) -> Generator[tuple[str, Message], None, None]:
         """Yield ``(topic, record)`` in log-time order, optionally filtered."""
         wanted = list(topics) if topics is not None else list(self.topics)
         parts = sorted((p for p in self._parts if start_ns is None or p.end_ns >= start_ns),

@@ -17,13 +17,16 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from mcap.records import Message
 
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record.player_state import PlayerState
 from ssi_bridge.record.reader import Bag
+
+if TYPE_CHECKING:  # the SDK is imported when a view starts (an optional dependency)
+    from foxglove.websocket import ServerListener, WebSocketServer
 
 logger = logging.getLogger(__name__)
 
@@ -61,16 +64,18 @@ class ReplayView:
         self._last_time = 0.0
         self._context = foxglove.Context()
         try:
-            self.server = foxglove.start_server(
+            server = foxglove.start_server(
                 name=name, host=address, port=port, context=self._context,
                 capabilities=[Capability.Time, Capability.PlaybackControl],
-                server_listener=_Listener(self),
+                # the SDK calls the callbacks a listener has (ServerListener's are optional)
+                server_listener=cast("ServerListener", _Listener(self)),
                 playback_time_range=(state.first_ns, state.end_ns))
         except (RuntimeError, ValueError, OSError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")
             raise RecordingError(f"--foxglove-port {port}: cannot listen on "
                                  f"{address}:{port}: {reason}") from err
-        self.port = int(self.server.port)
+        self.server: WebSocketServer | None = server
+        self.port = int(server.port)
         self.channels: dict[str, Any] = {}
         for topic in topics:
             recorded = bag.topics[topic]

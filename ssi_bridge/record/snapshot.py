@@ -103,9 +103,9 @@ class _Snapshot:
     path: Path
     until_ns: int
     triggers: list[str]
-    queue: deque = field(default_factory=deque)
+    queue: deque[Any] = field(default_factory=deque)
     #: CAN frames (ring bytes) that arrived after the trigger
-    frame_queue: deque = field(default_factory=deque)
+    frame_queue: deque[bytes] = field(default_factory=deque)
     #: no more messages go in (the time after the last trigger is over, or a stop)
     ended: bool = False
     #: a CAN frame stamped after ``until_ns`` arrived: the frames up to it are all in
@@ -241,7 +241,7 @@ class SnapshotKeeper:
             path, n = self.config.root / f"{base}_{n}", n + 1
         return path
 
-    def _write(self, snap: _Snapshot, topics: list[str], entries: list,
+    def _write(self, snap: _Snapshot, topics: list[str], entries: list[Any],
                frames: list[bytes] | None) -> None:
         """Open the bag (and the CAN log), write the rings' copies, then the queued messages
         and frames until the snapshot ends; close them and keep at most ``max_bags``. Errors
@@ -313,7 +313,7 @@ class SnapshotKeeper:
             snap.frame_queue.clear()
         return more
 
-    def _put(self, bag: Any, added: set[str], items: list) -> None:
+    def _put(self, bag: Any, added: set[str], items: list[Any]) -> None:
         for topic, log_ns, pub_ns, data in items:
             if topic not in added:
                 type_name, qos = self._topic_info(topic)

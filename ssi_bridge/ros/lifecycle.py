@@ -98,7 +98,7 @@ class BridgeLifecycle:
     def _failed(self, what: str, err: BaseException) -> TransitionCallbackReturn:
         self._transition_error = err
         if not self._autostarting:
-            problem = self._bus_problem() if self._ros_side else ""  # type: ignore[attr-defined]
+            problem = self.diagnostics.bus_problem() if self._ros_side else ""  # type: ignore
             self.get_logger().error(  # type: ignore[attr-defined]
                 f"{what} failed: {' '.join(str(err).split()) or type(err).__name__}"
                 + (f" ({problem})" if problem else ""))
@@ -164,11 +164,6 @@ class BridgeLifecycle:
         self._stop_cycle()
         self._close_bus_side()
         return TransitionCallbackReturn.SUCCESS
-
-    def _on_diag_timer(self) -> None:
-        """Diagnostics only while the bus side is open (the CAM objects are read over it)."""
-        if self.configured:
-            super()._on_diag_timer()  # type: ignore[misc]
 
     # -- steps -------------------------------------------------------------------------------
     def _stop_cycle(self) -> None:

@@ -14,22 +14,18 @@ at start-up (``ssi_bridge_node``) or leaves that to ``~/change_state``
 
 from __future__ import annotations
 
-import dataclasses
-import os
-import sys
-import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.lifecycle import LifecycleNode
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
-from ssi_bridge.base.realtime import pin_process
 from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.cycle_feed import feed_frames, sync_number
@@ -48,7 +44,8 @@ from ssi_bridge.ros.lifecycle import BridgeLifecycle
 from ssi_bridge.ros.liveview import LiveView
 from ssi_bridge.ros.messages import idle_read, joint_state_msg, status_msg, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
-from ssi_bridge.ros.node_status import NodeDiagnostics
+from ssi_bridge.ros.node_start import bridging_line, prepare_process, replay_settings
+from ssi_bridge.ros.node_status import CycleRate, NodeDiagnostics
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import NodeSettings, declare_parameters
 from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
@@ -58,7 +55,7 @@ from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
 
-class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, LifecycleNode):
+class SsiBridgeNode(BridgeLifecycle, LifecycleNode):
     """Bridge of the XN-1SSI channels of XN-GW-CANOPEN stations to ROS 2 (a lifecycle node).
 
     ``autostart`` is the default of the ``autostart`` parameter: on, the constructor
@@ -73,13 +70,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         autostart = self._declare_autostart(autostart)
-        self.settings: NodeSettings = declare_parameters(self)
-        if self.settings.replay_can_log:
-            # the log is played onto a channel of this process only; the sniffer of a
-            # re-recording and the diagnostics' hardware_id name that channel
-            self.settings = dataclasses.replace(
-                self.settings, bus_interface="virtual",
-                bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
+        self.settings: NodeSettings = replay_settings(declare_parameters(self), self)
         #: the simulated station(s) the node owns while its bus side is open (simulation:
         #: true), else None; the supervisor's class (None on real hardware)
         self.station: Any = None
@@ -99,7 +90,6 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self.stamper = Stamper(self.get_clock(), self.get_logger())
         #: the benchmark's span per cycle (ros/span_probe.py); None unless it asks
         self._span_probe = probe_from_env()
-        self._mirror = threading.local()  # .active: a parameter set mirroring the module
         #: the joints' cores by name, in the configured order (filled by the bus side)
         self.joints: dict[str, Joint] = {}
         #: each station's frame log by node id (filled by the bus side): which SYNC a TPDO
@@ -107,11 +97,16 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self.frame_logs: dict[int, StationLog] = {}
         #: the cycle decisions (core/cycle.py): ros/ only turns its results into messages
         self.cycle_core = Cycle(self.joints, self.frame_logs)
-        self.bridge = Bridge(self.joints, self.client_of, self.mirror_para1)
+        self.bridge = Bridge(self.joints, self.client_of,
+                             lambda joint, value: self.parameters.mirror_para1(joint, value))
+        self.parameters = RuntimeParameters(self, self.joints, self.bridge, self)
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
+        #: the achieved cycle rate; the cycle appends each cycle's monotonic time
+        self.cycle_rate = CycleRate()
+        self._cycle_times = self.cycle_rate.times
         self._begin(autostart)  # lifecycle.py: configure and activate, or wait unconfigured
 
     @property
@@ -165,10 +160,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self._attach_frame_logs()
         if not s.listen_only:
             self.refresh_cams()
-        self._cycle_times: deque[float] = deque()
-        self._cycle_started = time.monotonic()
-        self._last_levels: tuple = ()
-        self._last_bus_counts: dict = {}
+        self.cycle_rate.restart()
 
     def _attach_frame_logs(self) -> None:
         """A frame log per station, fed by its slot table (every SYNC and TPDO it sees)."""
@@ -222,7 +214,13 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self.liveview = LiveView(self, s, self.handlers)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.diagnostics = NodeDiagnostics(
+            self, self, self.joints, self.cycle_rate, recorder=self.recorder,
+            liveview=self.liveview, services=self.handlers,
+            publish=lambda msg: self.publish_safe(self.diag_pub, msg),
+            refresh_cams=self.refresh_cams)
+        self.parameters.attach_events(self.handlers.log_event)
+        self.add_on_set_parameters_callback(self.parameters.on_set)
 
     def _new_cycle(self, s: NodeSettings) -> CycleThread | ObservedCycleThread:
         """The cycle loop (not started): SYNC master, or observer of another master's SYNC."""
@@ -244,13 +242,8 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                 # the bridge still runs; the bus diagnostics show the error until fixed
                 self.recorder.error = f"record.enabled: {err}"
                 self.get_logger().error(self.recorder.error)
-        if s.cpu_affinity:
-            pin_process(s.cpu_affinity)
-            self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
-        # Python hands the GIL to a waiting thread only every switch interval (5 ms by
-        # default): a service burst's CPU-bound handlers would hold the cycle that long
-        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
-        self._cycle_started = time.monotonic()
+        prepare_process(s, self.get_logger().info)
+        self.cycle_rate.started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -258,17 +251,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                                        s.replay_wait_for_subscribers, self.context.ok)
             else:
                 self.player.start()
-        mode = ("simulated station" if s.simulation else
-                f"replay of {s.replay_can_log}" if s.replay_can_log else
-                "listen-only" if s.listen_only else "real station")
-        names = logbridge.clip(str(list(self.joints)), 200)  # echoed input: kept short
-        self.get_logger().info(
-            f"bridging {len(s.joints)} joint(s) {names} on "
-            f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
-            f"({mode}); publishing "
-            f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
-            f"/diagnostics every {s.diagnostics_period:g} s; services under "
-            f"{self.get_fully_qualified_name()}/")
+        self.get_logger().info(bridging_line(s, self.joints, self.joint_pub.topic_name,
+                                             self.status_pub.topic_name,
+                                             self.get_fully_qualified_name()))
 
     def client_of(self, joint: str) -> BridgeClient | ListenOnlyClient:
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
@@ -282,6 +267,23 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
     def sim_time(self) -> float:
         """Seconds since the node started: the clock of the simulated station."""
         return self.model_clock()
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """rclpy's, plus an ~/events record of each change or refusal (node_params.py)."""
+        return self.parameters.set_each(parameter_list, super().set_parameters)
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """rclpy's, plus an ~/events record of the change or the refusal."""
+        return self.parameters.set_atomically(parameter_list, super().set_parameters_atomically)
+
+    def _on_diag_timer(self) -> None:
+        """Diagnostics only while the bus side is open (the CAM objects are read over it)."""
+        if self.configured:
+            self.diagnostics.on_timer()
+
+    def _publish_on_change(self) -> None:
+        """The diagnostics at once when a level changed since the last cycle."""
+        self.diagnostics.publish_on_change()
 
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:

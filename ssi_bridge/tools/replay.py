@@ -115,8 +115,8 @@ def _until(args: argparse.Namespace) -> float | Decimal | None:
     if args.playback_until_nsec is not None:
         return Decimal(args.playback_until_nsec) / 10**9
     if args.playback_until_sec is not None:
-        return args.playback_until_sec
-    return args.playback_until
+        return float(args.playback_until_sec)
+    return None if args.playback_until is None else float(args.playback_until)
 
 
 def _options(args: argparse.Namespace) -> Any:

@@ -53,7 +53,7 @@ class EncoderFrame(NamedTuple):
     #: number of frame bits
     length: int
     #: output value encoded in the position bits (steps, may be negative, 001 §5.2.5)
-    count: int
+    count: int  # type: ignore[assignment]  # the field shadows tuple.count on purpose
     #: ground truth position at the formation time (rev or m)
     position: float
     #: ground truth velocity at the formation time (rev/s or m/s)
