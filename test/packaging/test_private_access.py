@@ -3,8 +3,8 @@
 Each library has one adapter, the only module that may touch what the library does not
 offer publicly, each use with a canary test that fails by name on a release that changed it:
 ``base/can_compat.py`` (test/base/test_can_compat_multicast.py,
-test/gateway/test_library_compat.py), ``base/canopen_compat.py``
-(test/base/test_canopen_network.py, test/gateway/test_library_compat.py) and
+test/base/test_library_compat.py), ``base/canopen_compat.py``
+(test/base/test_canopen_network.py, test/base/test_library_compat.py) and
 ``ros/rclpy_compat.py`` (test/ros/test_rclpy_compat.py).
 
 The rule, checked on the syntax tree of every module of ``ssi_bridge/`` (the scanner:
