@@ -69,8 +69,9 @@ def parameter_overrides(node: Any) -> dict[str, Any]:
 
 
 def executor_tasks(executor: Any) -> list[Any]:
-    """The tasks (callbacks) ``executor`` has started and not yet dropped."""
-    return list(getattr(executor, "_futures", ()))
+    """The tasks (callbacks) ``executor`` has started and not yet dropped (AttributeError on
+    an rclpy that keeps them elsewhere)."""
+    return list(executor._futures)
 
 
 __all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides",
