@@ -9,7 +9,7 @@ test/base/test_library_compat.py), ``base/canopen_compat.py``
 
 The rule, checked on the syntax tree of every module of ``ssi_bridge/`` (the scanner:
 test/support/private_access.py; what is private is read from the installed libraries'
-own sources, not listed). Outside the adapters a module must not:
+own sources by test/support/library_private.py, not listed). Outside the adapters a module must not:
 
 1. read, write or delete ``x._name`` (or ``getattr``/``setattr``/``hasattr``/``delattr``
    with ``"_name"``) where ``_name`` is a private name of the libraries, unless ``x`` is a
