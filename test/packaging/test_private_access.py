@@ -26,14 +26,17 @@ own sources by test/support/library_private.py, not listed). Outside the adapter
    ``.append``, ``del network.nodes[...]``) or replace it by a new container: a registry is
    an attribute the library's own methods change in place (``listeners``, ``subscribers``,
    ``nodes``, ``data_store``, ...), unless the receiver is a module-local object as in 1;
-5. import a private library module or name (``rclpy._rclpy_pybind11``, ``rclpy.impl``);
+5. import or reach a private library module or name (``rclpy._rclpy_pybind11``,
+   ``rclpy.impl``);
 6. (a module that imports rclpy) touch an rclpy object's ``handle`` (its pybind11
    implementation object).
 
 Sound where it matters and simple: a private name is the libraries' by name alone unless
 the module owns it, so a module cannot reach into a library object by choosing an
 unknown receiver. What it does not see: an access built at run time (``getattr`` with a
-computed name), and a library private of the same name as one the module defines itself.
+computed name), a library private of the same name as one the module defines itself, and
+the reading of a library's public-named attributes (``network.subscribers.get``: no rule
+tells a library's undocumented attribute from its documented ones by the name alone).
 """
 
 from __future__ import annotations
@@ -120,6 +123,8 @@ PLANTED = [
     ("implementation package imported",
      "from rclpy.impl.implementation_singleton import rclpy_implementation\n"),
     ("private name imported", "from can.bus import _SelfRemovingCyclicTask\n"),
+    ("implementation package reached", "import rclpy\n\n"
+                                       "LOGGER = rclpy.impl.rcutils_logger.RcutilsLogger\n"),
     ("rclpy handle used", "import rclpy\n\ndef take(service, kind):\n"
                           "    with service.handle:\n"
                           "        return service.handle.service_take_request(kind)\n"),

@@ -130,6 +130,10 @@ class Scanner(ast.NodeVisitor):
         if (self.uses_rclpy and isinstance(node.value, ast.Attribute)
                 and node.value.attr == "handle"):
             self._say(node, f"{ast.unparse(node)}: rclpy's implementation object (handle)")
+        if node.attr in INTERNAL_PARTS and isinstance(node.value, (ast.Name, ast.Attribute)):
+            root = ast.unparse(node.value).split(".")[0]
+            if self.binding.get(root, "").split(".")[0] in LIBRARIES:
+                self._say(node, f"{ast.unparse(node)}: not the library's API")
         self.generic_visit(node)
 
     def visit_Call(self, node: ast.Call) -> None:
