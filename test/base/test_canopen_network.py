@@ -102,6 +102,16 @@ def test_an_unconnected_network_refuses_to_send() -> None:
         OwnListenerNetwork().send_message(0x80, b"")
 
 
+def test_the_send_hook_is_the_one_canopen_sends_through() -> None:
+    """``send_message(can_id, data, remote)`` is the hook canopen's services send through
+    (the SDO client, NMT, SYNC); an override of another signature would not be called."""
+    assert list(inspect.signature(canopen.Network.send_message).parameters) == [
+        "self", "can_id", "data", "remote"]
+    assert "network.send_message(" in inspect.getsource(canopen.sdo.client.SdoClient)
+    assert "network.send_message(" in inspect.getsource(canopen.nmt.NmtMaster)
+    assert "send_message(" in inspect.getsource(canopen.sync.SyncProducer.transmit)
+
+
 def test_dispatch_is_canopens_notify_with_each_subscriber_on_its_own() -> None:
     """canopen's ``notify`` calls ``subscribers[can_id]`` in order and then the node scanner's
     ``on_message_received(can_id)`` (a COB-ID: canopen's other upstream line passes a
