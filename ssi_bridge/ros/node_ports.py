@@ -1,11 +1,10 @@
 """What the node's parts read of the node: small structural types, each part's whole view.
 
-The node (``ros/node.py``) owns its parts (diagnostics, run-time parameters, lifecycle,
-services, recording, live view) and hands each one what it needs at construction. What
-changes over the node's life (the bus side a configure opens and a cleanup closes, the cycle
-an activate builds, the settings a parameter change replaces) is read through one of these
-protocols, which the node meets with its own attributes: a part sees those members, typed,
-and nothing else of the node.
+The node (``ros/node.py``) owns its parts (bus side, diagnostics, run-time parameters,
+lifecycle, services, recording, live view) and hands each one what it needs at construction.
+What changes over the node's life (the cycle an activate builds, the settings a parameter
+change replaces) is read through a protocol the node meets with its own attributes: a part
+sees those members, typed, and nothing else of the node.
 """
 
 from __future__ import annotations
@@ -15,8 +14,6 @@ from typing import Protocol
 
 import can
 
-from ssi_bridge.client.bus_master import CanMaster
-from ssi_bridge.client.listener import ListenOnlyClient
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.core.ports import FaultPort
 from ssi_bridge.protocol.encoder_config import EncoderConfig
@@ -57,51 +54,21 @@ class SimulatedStation(Protocol):
         """Fault injection over the master's SDO clients (one per station node id)."""
 
 
-class BusSide(Protocol):
-    """The bus side a configure opens: the station clients, the master, a simulated station.
-
-    Read before the first configure only where the lifecycle says the side is open.
-    """
+class NodeView(Protocol):
+    """What the diagnostics read of the node beside its bus side: the settings as they are
+    now, the cycle loop and the latch bound."""
 
     @property
     def settings(self) -> NodeSettings:
         """The node's settings as they are now (a run-time parameter change replaces them)."""
 
     @property
-    def client(self) -> BridgeClient | ListenOnlyClient:
-        """The first station's client, or the listener of a listen-only node."""
-
-    @property
-    def master(self) -> CanMaster | None:
-        """The CANopen master (None: listen-only, or the bus side closed)."""
-
-    @property
-    def station_clients(self) -> Mapping[int, BridgeClient]:
-        """One client per station (node id -> client); empty when listen-only or closed."""
-
-    @property
-    def station(self) -> SimulatedStation | None:
-        """The simulated station(s) the node runs, or None (real hardware, closed)."""
-
-
-class CycleSide(BusSide, Protocol):
-    """The bus side and the cycle's figures (the diagnostics' view of the node)."""
-
-    @property
     def cycle(self) -> CycleLoop | None:
         """The cycle loop while the node is active (None: not activated yet, deactivated)."""
-
-    @property
-    def clock_steps(self) -> int:
-        """Header stamps moved forward because the clock stepped back."""
-
-    @property
-    def incomplete_cycles(self) -> int:
-        """Cycles in which at least one joint was left out."""
 
     @property
     def latch_bound_s(self) -> float:
         """The longest a sample's frames may end after its SYNC to be published (s)."""
 
 
-__all__ = ["BusSide", "CycleLoop", "CycleSide", "SimulatedStation", "Step"]
+__all__ = ["CycleLoop", "NodeView", "SimulatedStation", "Step"]

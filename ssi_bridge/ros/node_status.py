@@ -1,9 +1,9 @@
 """The node's /diagnostics: a status per joint, the bus, and each station when there are several.
 
 :class:`NodeDiagnostics` is the node's diagnostics part (``ros/node.py`` owns it): it reads the
-joints, the bus side and the cycle through :class:`~ssi_bridge.ros.node_ports.CycleSide`, the
-figures of the recorder, the live view and the services, and publishes through the node's
-shutdown-safe publish. The levels and messages come from the per-joint core
+joints, the bus side (``ros/bus_side.py``), the cycle (:class:`~ssi_bridge.ros.node_ports.
+NodeView`), the figures of the recorder, the live view and the services, and publishes
+through the node's shutdown-safe publish. The levels and messages come from the per-joint core
 (``core/joint.py``, ``core/health.py``) and ``ros/diagnostics.py`` puts them into
 ``diagnostic_msgs``. Published every ``diagnostics_period`` and at once when a level changes
 (checked each cycle, cheaply). :class:`BusFindings` says what the bus did between two
@@ -22,12 +22,16 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from ssi_bridge.client.bus_master import CanMaster
 from ssi_bridge.client.error_frames import error_frame_keys
+from ssi_bridge.client.listener import ListenOnlyClient
 from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.core.cycle import Cycle
 from ssi_bridge.core.health import ERROR, WARN, Level
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
-from ssi_bridge.ros.node_ports import CycleSide
+from ssi_bridge.ros.bus_side import BusSide
+from ssi_bridge.ros.node_ports import NodeView
+from ssi_bridge.ros.stamps import Stamper
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -145,31 +149,39 @@ class NodeDiagnostics:
 
     :param node: the node whose name the statuses carry, whose clock stamps the message and
         whose context says whether publishing still makes sense
-    :param view: the node's bus side and cycle as they are now
+    :param view: the node's settings and cycle as they are now
+    :param bus: the node's bus side (read while it is open)
     :param joints: the joints' cores by name (the node's own mapping, refilled per configure)
     :param rate: the achieved cycle rate (the cycle feeds it)
+    :param cycle_core: the cycle decisions (its incomplete cycles)
+    :param stamper: the header stamps (its clock steps)
     :param recorder: gives its figures and error; records the message
     :param liveview: gives its figures and error
     :param services: gives the busy refusals and the request worker's rest
     :param publish: publishes a DiagnosticArray on ``/diagnostics``; False when the node is
         shutting down
     :param refresh_cams: re-reads every joint's CAM objects (SDO)
+    :param bus_open: whether the bus side is open (the periodic message waits for it)
     """
 
-    def __init__(self, node: Node, view: CycleSide, joints: Mapping[str, Joint],
-                 rate: CycleRate, *, recorder: SessionRecorder, liveview: LiveView,
+    def __init__(self, node: Node, view: NodeView, bus: BusSide, joints: Mapping[str, Joint],
+                 rate: CycleRate, cycle_core: Cycle, stamper: Stamper, *, recorder: SessionRecorder, liveview: LiveView,
                  services: BridgeServices, publish: Callable[[DiagnosticArray], bool],
-                 refresh_cams: Callable[[], None]) -> None:
+                 refresh_cams: Callable[[], None], bus_open: Callable[[], bool]) -> None:
         self._node = node
         self._view = view
+        self._bus = bus
+        self._bus_open = bus_open
         self._joints = joints
         self._rate = rate
+        self._cycle_core = cycle_core
+        self._stamper = stamper
         self._recorder = recorder
         self._liveview = liveview
         self._services = services
         self._publish = publish
         self._refresh_cams = refresh_cams
-        self.bus = BusFindings(lambda: view.master, lambda: view.settings.diagnostics_period)
+        self.bus = BusFindings(lambda: bus.master, lambda: view.settings.diagnostics_period)
         self._last_levels: tuple[object, ...] = ()
 
     def reset(self) -> None:
@@ -191,8 +203,8 @@ class NodeDiagnostics:
         # every ~/read_register would publish the diagnostics twice
         levels += [(bool(f and f.power_failure), bool(f and f.encoder_error))
                    for j in joints for f in (j.counters.frame,)]
-        levels.extend(int(c.gateway_alive) for c in self._view.station_clients.values())
-        levels.append(int(self._view.client.gateway_alive) * 2 + int(bool(self.bus_problem())))
+        levels.extend(int(c.gateway_alive) for c in self._bus.station_clients.values())
+        levels.append(int(self._client().gateway_alive) * 2 + int(bool(self.bus_problem())))
         return tuple(levels)
 
     def publish_on_change(self) -> None:
@@ -203,9 +215,15 @@ class NodeDiagnostics:
             self.publish()
         self._last_levels = levels
 
+    def _client(self) -> BridgeClient | ListenOnlyClient:
+        """The bus side's (first) client; RuntimeError before the first configure."""
+        if (client := self._bus.client) is None:
+            raise RuntimeError("diagnostics of a bus side never opened")
+        return client
+
     def _statuses(self) -> list[DiagnosticStatus]:
         s = self._view.settings
-        client = self._view.client
+        client = self._client()
         fqn = self._node.get_fully_qualified_name()
         out = []
         for joint in self._joints.values():
@@ -224,7 +242,7 @@ class NodeDiagnostics:
                               else f"{st.message}; {joint.para1_note}")
                 st.level = max(st.level, WARN)
             out.append(st)
-        if len(self._view.station_clients) > 1:
+        if len(self._bus.station_clients) > 1:
             return out + self._station_statuses()
         counters: Figures = dataclasses.asdict(client.counters)
         counters.update(self._recorder.counters())
@@ -247,12 +265,13 @@ class NodeDiagnostics:
         view = self._view
         cycle = view.cycle
         counters: Figures = {
-            "clock_steps": view.clock_steps, "incomplete_cycles": view.incomplete_cycles,
+            "clock_steps": self._stamper.clock_steps,
+            "incomplete_cycles": self._cycle_core.incomplete_cycles,
             "samples_set_aside": sum(j.counters.set_aside for j in self._joints.values()),
             "latch_bound_s": f"{view.latch_bound_s:.6f}",
             "cycles_missed": cycle.missed if isinstance(cycle, CycleThread) else 0,
             "cycle_scheduling": cycle.scheduling if cycle is not None else ""}
-        master = view.master
+        master = self._bus.master
         if master is not None:
             counters["receive_scheduling"] = master.receive_scheduling
             counters.update(master.link_figures())
@@ -265,9 +284,9 @@ class NodeDiagnostics:
     def _station_statuses(self) -> list[DiagnosticStatus]:
         """Several stations: one bus status (master, SYNC, rate) and one per station."""
         s = self._view.settings
-        clients = self._view.station_clients
+        clients = self._bus.station_clients
         fqn = self._node.get_fully_qualified_name()
-        master = self._view.master
+        master = self._bus.master
         assert master is not None
         counters: Figures = dataclasses.asdict(master.counters)
         counters.update(self._recorder.counters())
@@ -302,7 +321,7 @@ class NodeDiagnostics:
     def bus_problem(self) -> str:
         """An error beside the bus state: a lost interface, a bus-off controller, the
         recorder's, the live view's, a simulated station that ended ("" when none)."""
-        station, master = self._view.station, self._view.master
+        station, master = self._bus.station, self._bus.master
         ended = station.problem() if station is not None else None
         link = master.interface_problem() if master is not None else ""
         bus_off = master.error_frames.problem() if master is not None else ""
@@ -310,8 +329,11 @@ class NodeDiagnostics:
                                      ended) if p)
 
     def on_timer(self) -> None:
-        """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
-        master = self._view.master
+        """Periodic diagnostics while the bus side is open; the CAM objects are re-read here
+        (SDO, never in the cycle)."""
+        if not self._bus_open():
+            return
+        master = self._bus.master
         lost = master is not None and master.interface_problem()
         if not self._view.settings.listen_only and not lost and self._node.context.ok():
             self._refresh_cams()
