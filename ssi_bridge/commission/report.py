@@ -71,7 +71,7 @@ def decisions(result: Result) -> list[str]:
     return out
 
 
-def as_dict(result: Result) -> dict[str, Any]:
+def as_dict(result: Result) -> dict[str, object]:
     """The report as a JSON-ready dict."""
     heard = result.heard
     out: dict[str, Any] = {

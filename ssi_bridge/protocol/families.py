@@ -237,7 +237,7 @@ def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
                      "default for rotary encoders (docs/node.md)")
 
 
-def family_config(family: str, **overrides: Any) -> EncoderConfig:
+def family_config(family: str, **overrides: object) -> EncoderConfig:
     """The :class:`EncoderConfig` of a preset with ``overrides`` applied and fixed up."""
     key = family.upper()
     if key not in FAMILIES:

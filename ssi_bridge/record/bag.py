@@ -199,7 +199,7 @@ class BagRecorder:
             self._info.topics.append(topic.info)
             self._topics[name] = topic
 
-    def write(self, topic: str, msg: Any, log_time_ns: int,
+    def write(self, topic: str, msg: object, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
         """Serialize ``msg`` to CDR and append it (log time = receive, publish = send time)."""
         self.write_serialized(topic, cdr.serialize(msg), log_time_ns, publish_time_ns)

@@ -36,7 +36,7 @@ _SEQ = re.compile(r"^sequence<(?P<elem>[^,>]+)(?:, *\d+)?>$")
 _ARRAY = re.compile(r"^(?P<elem>[^\[]+)\[(?P<n>\d+)\]$")
 _STRING = re.compile(r"^w?string(?:<=\d+)?$")
 
-Encoder = Callable[[Any, bytearray], None]
+Encoder = Callable[[object, bytearray], None]
 
 
 def _run_structs(items: list[tuple[str, int, int]]) -> list[struct.Struct]:
@@ -156,7 +156,7 @@ def encoder_for(cls: type) -> Encoder:
             return _cache[cls]
 
 
-def serialize(msg: Any) -> bytes:
+def serialize(msg: object) -> bytes:
     """Serialize an rclpy message to CDR bytes: header, exact body, zeroed padding."""
     body = bytearray()
     encoder_for(type(msg))(msg, body)

@@ -210,7 +210,8 @@ class Bag:
                 if stream in self._open:
                     self._open.remove(stream)
 
-    def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[str, int, Any]]:
+    def decoded(self, topics: Iterable[str] | None = None,
+                ) -> Iterator[tuple[str, int, object]]:
         """Yield ``(topic, log_time_ns, message)`` deserialized with rclpy."""
         from rclpy.serialization import deserialize_message
 

@@ -97,7 +97,7 @@ def _foreground(fd: int) -> bool:
 class Keyboard:
     """Reads control keys from a terminal on stdin in a thread (see the module doc)."""
 
-    def __init__(self, state: PlayerState, stream: Any = None) -> None:
+    def __init__(self, state: PlayerState, stream: TextIO | None = None) -> None:
         self.state = state
         self._stream = sys.stdin if stream is None else stream
         self._saved: Any = None

@@ -26,7 +26,13 @@ from ssi_bridge.record.player_state import PlayerState
 from ssi_bridge.record.reader import Bag
 
 if TYPE_CHECKING:  # the SDK is imported when a view starts (an optional dependency)
-    from foxglove.websocket import ServerListener, WebSocketServer
+    from foxglove import Channel
+    from foxglove.websocket import (
+        PlaybackControlRequest,
+        PlaybackState,
+        ServerListener,
+        WebSocketServer,
+    )
 
 logger = logging.getLogger(__name__)
 
@@ -40,7 +46,7 @@ class _Listener:
     def __init__(self, view: ReplayView) -> None:
         self._view = view
 
-    def on_playback_control_request(self, request: Any) -> Any:
+    def on_playback_control_request(self, request: PlaybackControlRequest) -> PlaybackState:
         return self._view.control(request)
 
 
@@ -76,7 +82,7 @@ class ReplayView:
                                  f"{address}:{port}: {reason}") from err
         self.server: WebSocketServer | None = server
         self.port = int(server.port)
-        self.channels: dict[str, Any] = {}
+        self.channels: dict[str, Channel] = {}
         for topic in topics:
             recorded = bag.topics[topic]
             schema = foxglove.Schema(name=recorded.type,
@@ -97,7 +103,8 @@ class ReplayView:
             self._last_time = now
             server.broadcast_time(record.log_time)
 
-    def playback_state(self, request_id: str | None = None, did_seek: bool = False) -> Any:
+    def playback_state(self, request_id: str | None = None, did_seek: bool = False,
+                       ) -> PlaybackState:
         """The time line as Foxglove's PlaybackState."""
         from foxglove.websocket import PlaybackState, PlaybackStatus
 
@@ -108,14 +115,14 @@ class ReplayView:
                              playback_speed=snap.rate, did_seek=did_seek,
                              request_id=request_id)
 
-    def control(self, request: Any) -> Any:
+    def control(self, request: PlaybackControlRequest) -> PlaybackState:
         """Apply a PlaybackControlRequest (seek, speed, play/pause); answer the new state."""
         from foxglove.websocket import PlaybackCommand
 
         self._local.in_request = True
         try:
             did_seek = request.seek_time is not None
-            if did_seek:
+            if request.seek_time is not None:
                 self.state.seek(request.seek_time)
             speed = float(request.playback_speed)
             if speed > 0 and abs(speed - self.state.rate) > 1e-6:

@@ -36,13 +36,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ssi_bridge.base.realtime import normal_this_thread
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record.can_frames import FrameLog
 from ssi_bridge.record.metadata import METADATA_FILE
 from ssi_bridge.record.ring import MessageRing
+
+if TYPE_CHECKING:  # the bag is opened by the caller's ``open_bag``; snapshot stays ROS-free
+    from rclpy.qos import QoSProfile
+
+    from ssi_bridge.record.bag import BagRecorder
 
 logger = logging.getLogger(__name__)
 
@@ -58,9 +63,22 @@ CAN_LOG = "can_0.log"
 FRAME_GRACE_S = 1.0
 
 #: opens a new bag at a path (BagRecorder.open with the session's settings)
-OpenBag = Callable[[Path], Any]
+OpenBag = Callable[[Path], "BagRecorder"]
 #: a topic's (type name ``pkg/msg/Type``, offered QoS or None)
-TopicInfo = Callable[[str], tuple[str, Any]]
+TopicInfo = Callable[[str], tuple[str, "QoSProfile | None"]]
+
+
+class Log(Protocol):
+    """Where a snapshot's outcome is logged (a ``logging.Logger`` or rclpy's node logger)."""
+
+    def info(self, message: str) -> object:
+        """Log ``message`` at INFO."""
+
+    def warning(self, message: str) -> object:
+        """Log ``message`` at WARNING."""
+
+    def error(self, message: str) -> object:
+        """Log ``message`` at ERROR."""
 
 
 @dataclass(frozen=True)
@@ -120,7 +138,7 @@ class SnapshotKeeper:
 
     def __init__(self, config: SnapshotConfig, open_bag: OpenBag, topic_info: TopicInfo,
                  clock_ns: Callable[[], int] = time.time_ns,
-                 log: logging.Logger | Any = logger) -> None:
+                 log: Log = logger) -> None:
         self.config = config
         self.ring = MessageRing(config.duration_s)
         #: the raw CAN frames (``can_log``), else None
@@ -202,7 +220,7 @@ class SnapshotKeeper:
         worker.start()
         return snap.path, False
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> dict[str, int | str]:
         """Figures for the bus diagnostics: the ring's memory and the snapshots."""
         with self._cond:
             return {"snapshot_ring_bytes": self.ring.memory_bytes,
@@ -313,7 +331,7 @@ class SnapshotKeeper:
             snap.frame_queue.clear()
         return more
 
-    def _put(self, bag: Any, added: set[str], items: list[Any]) -> None:
+    def _put(self, bag: BagRecorder, added: set[str], items: list[Any]) -> None:
         for topic, log_ns, pub_ns, data in items:
             if topic not in added:
                 type_name, qos = self._topic_info(topic)
