@@ -116,3 +116,25 @@ def test_readme_explains_the_environment_where_it_shows_the_tools():
     text = (REPO / "README.md").read_text(encoding="utf-8")
     first_tool = text.index("lib/ssi_bridge/replay")
     assert "source scripts/env.sh" in text[:first_tool]
+
+
+def test_architecture_says_where_each_concept_lives():
+    """docs/architecture.md "Where each concept lives" has a line for every module outside
+    ``ros/`` (an ``__init__.py`` only when it defines something), in its folder's table."""
+    text = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## Where each concept lives", 1)[1].split("\n## ", 1)[0]
+    tables = {m.group(1): m.group(2) for m in re.finditer(
+        r"^\*\*`(\w+)/`\*\*.*?\n(.*?)(?=^\*\*`|\Z)", section, re.M | re.S)}
+    missing = []
+    for path in sorted((REPO / "ssi_bridge").rglob("*.py")):
+        parts = path.relative_to(REPO / "ssi_bridge").parts
+        if len(parts) == 1 or parts[0] == "ros":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        if path.name == "__init__.py" and not any(
+                isinstance(n, (ast.FunctionDef, ast.ClassDef)) for n in tree.body):
+            continue
+        name = "/".join(parts[1:])
+        if not re.search(rf"`{re.escape(name)}`", tables.get(parts[0], "")):
+            missing.append("/".join(parts))
+    assert not missing, f"modules without their concept in docs/architecture.md: {missing}"
