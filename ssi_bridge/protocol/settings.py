@@ -123,6 +123,8 @@ def joint_from_values(joint: str, jv: Mapping[str, object], *, slot: int,
     :param station: the station's node id (0: the node's own ``node_id``)
     :returns: the checked settings
     :raises ConfigError: a value of the wrong kind or out of its allowed set, naming the key
+
+    (``TypeError`` inside is turned into that ConfigError.)
     """
 
     def number(key: str, kind: type[int] | type[float], default: object = None) -> float:
@@ -224,6 +226,10 @@ def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str
 
     Sections apply in file order: ``/**``, ``<node_name>``, ``/<node_name>`` and
     ``/<namespace>/<node_name>`` all match; nested keys become dotted names (``bus.channel``).
+
+    :param stream: the params file's text
+    :param node_name: the node's name (the sections that apply to it)
+    :raises ConfigError: not YAML, or not a mapping of sections
     """
     try:
         doc = yaml.safe_load(stream) or {}
@@ -242,7 +248,11 @@ def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str
 
 
 def station_settings(values: Mapping[str, object]) -> StationSettings:
-    """StationSettings from node parameter values (dotted names; absent ones take defaults)."""
+    """StationSettings from node parameter values (dotted names; absent ones take defaults).
+
+    :param values: parameter values by dotted name (unchecked)
+    :raises ConfigError: a value the schema does not allow, naming the parameter
+    """
     v = {**STATION_DEFAULTS, **values}
     names = v["joints"]
     if not isinstance(names, list):

@@ -87,6 +87,11 @@ class Player:
     """Replays one bag through the publishers of ``node`` (None: only through ``sinks``).
 
     Raises RecordingError when the topic selection names a topic the bag lacks or leaves none.
+
+    :param node: the node whose publishers replay the topics
+    :param bag: the open bag
+    :param options: topics, rate, start, end, loop, clock, remaps (``replay``'s options)
+    :param sinks: more consumers of every published record (e.g. the Foxglove view)
     """
 
     def __init__(self, node: Node | None, bag: Bag, options: ReplayOptions,
@@ -153,6 +158,9 @@ class Player:
 
         Without it the last messages of a replay can die with the publisher: DDS drops what a
         destroyed writer has not had acknowledged yet.
+
+        :param timeout_s: longest wait (s)
+        :returns: False when ``timeout_s`` passed first
         """
         from rclpy.duration import Duration
 
@@ -218,7 +226,10 @@ class Player:
             return count
 
     def play(self, progress: Callable[[], None] | None = None) -> int:
-        """Wait for subscribers, then play once, or forever with ``loop``; return the count."""
+        """Wait for subscribers, then play once, or forever with ``loop``; return the count.
+
+        :param progress: called about every 0.1 s (the terminal's progress line)
+        """
         if self.options.wait_for_subscribers > 0 and self.publishers:
             self.wait_for_subscribers()
         while True:

@@ -143,7 +143,12 @@ def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
 
 
 def plot_session(bag: Path, output: Path, dpi: int = 100) -> tuple[Figure, dict[str, object]]:
-    """Load ``bag`` and save its session figure as PNG at ``output``."""
+    """Load ``bag`` and save its session figure as PNG at ``output``.
+
+    :param dpi: the PNG's resolution
+    :returns: the figure and its axes by role (:func:`draw_session`)
+    :raises RecordingError: the bag cannot be read or has no JointState topic
+    """
     data = load_session(bag)
     fig, named = draw_session(data, title=f"ssi_bridge session {Path(bag).name}", dpi=dpi)
     fig.savefig(output, dpi=dpi)

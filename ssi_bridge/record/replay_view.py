@@ -55,6 +55,13 @@ class ReplayView:
 
     Raises RecordingError when the server cannot listen (port in use, bad address) or the
     Foxglove SDK is not installed.
+
+    :param bag: the bag (its topics' schemas are advertised)
+    :param topics: the topics served
+    :param state: the replay's time line Foxglove drives
+    :param address: the address to listen on
+    :param port: the TCP port (0: any free one, see ``port``)
+    :param name: the server's name shown in Foxglove
     """
 
     def __init__(self, bag: Bag, topics: list[str], state: PlayerState, address: str,
@@ -93,7 +100,11 @@ class ReplayView:
         state.on_change(self._changed)
 
     def sink(self, topic: str, record: Message) -> None:
-        """Send one published record to the subscribed clients; broadcast the bag time."""
+        """Send one published record to the subscribed clients; broadcast the bag time.
+
+        :param topic: the record's topic
+        :param record: the MCAP message record as published
+        """
         channel = self.channels.get(topic)
         if channel is not None and channel.has_sinks():
             channel.log(record.data, log_time=record.log_time)
@@ -105,7 +116,11 @@ class ReplayView:
 
     def playback_state(self, request_id: str | None = None, did_seek: bool = False,
                        ) -> PlaybackState:
-        """The time line as Foxglove's PlaybackState."""
+        """The time line as Foxglove's PlaybackState.
+
+        :param request_id: the request this answers (None: unsolicited)
+        :param did_seek: the time line jumped
+        """
         from foxglove.websocket import PlaybackState, PlaybackStatus
 
         snap = self.state.snapshot()
@@ -116,7 +131,11 @@ class ReplayView:
                              request_id=request_id)
 
     def control(self, request: PlaybackControlRequest) -> PlaybackState:
-        """Apply a PlaybackControlRequest (seek, speed, play/pause); answer the new state."""
+        """Apply a PlaybackControlRequest (seek, speed, play/pause); answer the new state.
+
+        :param request: what Foxglove asked; never raises (a failure is logged and the state
+            answered unchanged)
+        """
         from foxglove.websocket import PlaybackCommand
 
         self._local.in_request = True

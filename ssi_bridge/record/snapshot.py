@@ -134,6 +134,11 @@ class SnapshotKeeper:
     """The ring, the snapshot being written, and the snapshot bags on disk (module docstring).
 
     :param clock_ns: the log-time clock (the node's), in ns; ends a snapshot without messages
+
+    :param config: duration before and after, root, bag limits, CAN log
+    :param open_bag: opens a snapshot's bag at a path
+    :param topic_info: a topic's type name and offered QoS
+    :param log: where a snapshot's outcome is logged
     """
 
     def __init__(self, config: SnapshotConfig, open_bag: OpenBag, topic_info: TopicInfo,
@@ -162,7 +167,13 @@ class SnapshotKeeper:
 
     # -- the publishing threads ----------------------------------------------------------------
     def add(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        """One recorded message: into the ring, and into the open snapshot while it runs."""
+        """One recorded message: into the ring, and into the open snapshot while it runs.
+
+        :param topic: the message's topic
+        :param data: its CDR bytes
+        :param log_time_ns: when it was received (ns)
+        :param publish_time_ns: when it was sent (ns)
+        """
         with self._cond:
             self.ring.append(topic, log_time_ns, publish_time_ns, data)
             snap = self._active
@@ -176,7 +187,11 @@ class SnapshotKeeper:
 
     def add_frame(self, wire_time_ns: int, data: bytes) -> None:
         """One CAN frame (``record/can_frames.pack_frame``): into the frame ring, and into the
-        open snapshot while it runs (ignored without ``can_log``)."""
+        open snapshot while it runs (ignored without ``can_log``).
+
+        :param wire_time_ns: the frame's wire time (ns)
+        :param data: the packed frame
+        """
         if self.frames is None:
             return
         with self._cond:
@@ -232,7 +247,10 @@ class SnapshotKeeper:
                        if self.frames is not None else {})}
 
     def close(self, timeout: float = 30.0) -> None:
-        """End the snapshot being written now (node shutdown) and wait for its bag to close."""
+        """End the snapshot being written now (node shutdown) and wait for its bag to close.
+
+        :param timeout: longest wait for the bag to close (s)
+        """
         with self._cond:
             if self._active is not None:
                 self._end(self._active)
