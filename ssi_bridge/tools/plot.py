@@ -74,7 +74,13 @@ def _recorded_frame(bag: Path, joint: str, index: int) -> tuple[int, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``plot`` executable."""
+    """Entry point of the ``plot`` executable: a session, or one SSI frame, as a PNG.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``)
+    :returns: the exit code: 0 written; 2 a bag that cannot be read, bad options or an
+        unwritable output (a RecordingError, ValueError or OSError, its reason on stderr);
+        130 interrupted. Errors never leave as exceptions.
+    """
     args = build_parser().parse_args(argv)
     try:
         if args.frame:
