@@ -60,10 +60,12 @@ class MonitorState:
     statuses: dict[str, Any] = field(default_factory=dict)
 
     def on_joint_states(self, msg: Any) -> None:
+        """Keep the newest ``joint_states`` message ``msg`` (a subscription callback)."""
         self.joint_states = msg
         self.received += 1
 
     def on_diagnostics(self, msg: Any) -> None:
+        """Keep the newest status of each name in the DiagnosticArray ``msg``."""
         for status in msg.status:
             self.statuses[status.name] = status
 

@@ -146,10 +146,12 @@ class SsiEncoder:
 
     @property
     def linear(self) -> bool:
+        """Whether the encoder measures a length (m) rather than an angle (rev)."""
         return self.config.linear
 
     @property
     def measuring_step_m(self) -> float:
+        """The length of one step of a linear encoder (m)."""
         return self.config.measuring_step_m
 
     # -- inputs and faults --------------------------------------------------------------
