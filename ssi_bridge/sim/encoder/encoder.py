@@ -44,7 +44,8 @@ class EncoderFrame(NamedTuple):
     """The frame an encoder latched, with the ground truth it was made from.
 
     A :class:`typing.NamedTuple` (immutable, built once per latch in the scalar hot path,
-    where a frozen dataclass's per-field ``object.__setattr__`` cost about 1.2 µs); use
+    where a frozen dataclass pays an ``object.__setattr__`` per field, docs/encoder_line.md
+    "Performance"); use
     ``frame._replace(...)`` for a modified copy.
     """
 
@@ -145,10 +146,12 @@ class SsiEncoder:
 
     @property
     def linear(self) -> bool:
+        """Whether the encoder measures a length (m) rather than an angle (rev)."""
         return self.config.linear
 
     @property
     def measuring_step_m(self) -> float:
+        """The length of one step of a linear encoder (m)."""
         return self.config.measuring_step_m
 
     # -- inputs and faults --------------------------------------------------------------
