@@ -36,10 +36,12 @@ from ssi_bridge.core.cycle_log import StationLog
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.protocol import wire
 from ssi_bridge.protocol.registers import Reg
-from ssi_bridge.protocol.settings import BusConfig, station_settings
+from ssi_bridge.protocol.settings import (
+    STATION_DEFAULTS, BusConfig, JointSettings, StationSettings, make_joints,
+)
 from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.sim.gateway.station import Station
-from ssi_bridge.sim.supervisor.faults import FaultInjector
+from ssi_bridge.sim.supervisor.faults import FaultInjector, StationFaults
 
 #: the node's defaults (ros/param_table.py): velocity_window, stale_cycles, latch_bound,
 #: publish_rate, bus.sdo_timeout
@@ -67,73 +69,100 @@ class InProcessBridge:
     """
 
     values: Mapping[str, Any] = field(default_factory=dict)
-    station: Station = field(init=False)
+    #: the simulated stations by node id, first station first
+    stations: dict[int, Station] = field(init=False, default_factory=dict)
     master: CanMaster = field(init=False)
     clients: dict[int, BridgeClient] = field(init=False, default_factory=dict)
     joints: dict[str, Joint] = field(init=False, default_factory=dict)
     logs: dict[int, StationLog] = field(init=False, default_factory=dict)
     cycle: Cycle = field(init=False)
     bridge: Bridge = field(init=False)
-    faults: FaultInjector = field(init=False)
+    faults: FaultInjector | StationFaults = field(init=False)
     clock: ModelClock = field(init=False, default_factory=ModelClock)
     #: the results of every cycle run so far
     results: list[CycleResult] = field(init=False, default_factory=list)
     #: the ~/status message of each of those cycles (``ros/messages.py`` ``status_msg``)
     status_msgs: list[Any] = field(init=False, default_factory=list)
+    #: the service events (kind, joint, request, success, message), as ~/events has them
+    service_events: list[tuple[str, str, str, bool, str]] = field(init=False,
+                                                                  default_factory=list)
+    #: unexpected errors the service handlers logged
+    errors: list[str] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
-        values = {"joints": ["joint1"], **self.values, "bus.interface": "virtual",
+        values = {**STATION_DEFAULTS, **self.values, "bus.interface": "virtual",
                   "bus.channel": f"inprocess-{os.getpid()}-{next(_channels)}"}
-        station = station_settings(values)
-        # what the node's parameters add to the station's reading (ros/params.py): each
-        # joint's REG_SSI_MASK written at start-up and its station's node id
-        node_id = station.bus.node_id
-        self.settings = dataclasses.replace(station, joints=tuple(
-            dataclasses.replace(j, ssi_mask=int(values.get(f"{j.name}.ssi_mask", -1)),
-                                station=j.station or node_id) for j in station.joints))
+        self.bus = BusConfig(interface="virtual", channel=str(values["bus.channel"]),
+                             node_id=int(values["bus.node_id"]))
         self.rate = float(values.get("publish_rate", PUBLISH_RATE))
-        joints = self.settings.joints
-        self.bus = BusConfig(interface="virtual", channel=self.settings.bus.channel,
-                             node_id=self.settings.bus.node_id)
-        slots = max(j.slot for j in joints)
-        self.wire_s = wire.frame_seconds(wire.stations_cycle_bits([slots]), self.bus.bitrate)
+        self.settings = self._joints_by_station(values)
+        counts = [max(j.slot for j in joints) for joints in self.settings.values()]
+        self.wire_s = wire.frame_seconds(wire.stations_cycle_bits(counts), self.bus.bitrate)
         # as the node does at start (ros/node.py _start): the GIL goes to a waiting thread
         # (the station's, the master's receive thread) within a quarter of a cycle
         self._switch = sys.getswitchinterval()
         sys.setswitchinterval(min(self._switch, 0.25 / self.rate))
-        self.station = Station(self.settings)
-        # its receive thread answers the SYNCs above the cycle, as the node's in-process
-        # fallback sets it (sim/supervisor/station.py InProcessStation)
-        self.station.gateway.rx_priority = STATION_PRIORITY
-        self.station.start()
         try:
-            self._open_master(values, slots)
+            for sid, joints in self.settings.items():
+                station = Station(StationSettings(joints=joints, bus=dataclasses.replace(
+                    self.bus, node_id=sid)))
+                # its receive thread answers the SYNCs above the cycle, as the node's
+                # in-process fallback sets it (sim/supervisor/station.py InProcessStation)
+                station.gateway.rx_priority = STATION_PRIORITY
+                self.stations[sid] = station
+                station.start()
+            self._open_master(values)
         except BaseException:
             self.close()
             raise
 
-    def _open_master(self, values: Mapping[str, Any], slots: int) -> None:
+    def _joints_by_station(self, values: Mapping[str, Any]) -> dict[int, tuple[JointSettings, ...]]:
+        """Each station's joints as the node's parameters give them (ros/params.py): the
+        station reads slot, family, para1, motion...; the node adds ``<joint>.station``
+        (``stations``, default ``bus.node_id``) and ``<joint>.ssi_mask``."""
+        names = [str(n) for n in values["joints"]]
+        ids = [int(i) for i in values.get("stations") or [self.bus.node_id]]
+        station_of = {n: int(values.get(f"{n}.station", 0)) or ids[0] for n in names}
+        out = {}
+        for sid in ids:
+            own = make_joints([n for n in names if station_of[n] == sid], values)
+            out[sid] = tuple(dataclasses.replace(
+                j, station=sid, ssi_mask=int(values.get(f"{j.name}.ssi_mask", -1)))
+                for j in own)
+        return out
+
+    def _open_master(self, values: Mapping[str, Any]) -> None:
         self.master = CanMaster(self.bus, priority=CYCLE_PRIORITY, opener=open_bus)
-        node_id = self.bus.node_id
-        client = BridgeClient(self.master, node_id, slots,
-                              sdo_timeout=float(values.get("bus.sdo_timeout", SDO_TIMEOUT)))
-        self.clients[node_id] = client
-        client.connect(patience=5.0)
-        for j in self.settings.joints:
-            self.joints[j.name] = Joint(
-                j, velocity_window=int(values.get("velocity_window", VELOCITY_WINDOW)),
+        names = [str(n) for n in values["joints"]]
+        by_name = {j.name: j for joints in self.settings.values() for j in joints}
+        for name in names:  # the configured order
+            self.joints[name] = Joint(
+                by_name[name], velocity_window=int(values.get("velocity_window", VELOCITY_WINDOW)),
                 stale_cycles=int(values.get("stale_cycles", STALE_CYCLES)),
-                max_speed=float(values.get(f"{j.name}.max_speed", -1.0)))
-        log = StationLog(float(values.get("latch_bound", LATCH_BOUND)) + self.wire_s,
-                         slots=tuple(j.slot for j in self.joints.values()))
-        feed_frames(client, log)
-        for joint in self.joints.values():  # keyed as the node keys it: the joint's station
-            self.logs[joint.settings.station] = log
+                max_speed=float(values.get(f"{name}.max_speed", -1.0)))
+        injectors = {}
+        for sid, joints in self.settings.items():
+            client = BridgeClient(self.master, sid, max(j.slot for j in joints),
+                                  sdo_timeout=float(values.get("bus.sdo_timeout", SDO_TIMEOUT)))
+            self.clients[sid] = client
+            client.connect(patience=5.0)
+            log = StationLog(float(values.get("latch_bound", LATCH_BOUND)) + self.wire_s,
+                             slots=tuple(j.slot for j in joints))
+            feed_frames(client, log)
+            self.logs[sid] = log
+            injectors[sid] = FaultInjector(client, {j.name: j for j in joints},
+                                           {n: j.config for n, j in self.joints.items()},
+                                           self.clock)
         self.cycle = Cycle(self.joints, self.logs)
-        self.bridge = Bridge(self.joints, lambda _name: client, lambda _j, _v: None)
-        self.faults = FaultInjector(client, {j.name: j for j in self.settings.joints},
-                                    {n: j.config for n, j in self.joints.items()}, self.clock)
+        self.bridge = Bridge(self.joints, self.client_of, lambda _j, _v: None)
+        self.faults = (next(iter(injectors.values())) if len(injectors) == 1
+                       else StationFaults(injectors, by_name))
         self.bridge.faults = self.faults
+        from ssi_bridge.core.sdo_access import ObjectAccess
+        from ssi_bridge.ros.sdo_services import SdoServices  # rclpy-free handlers
+
+        #: ~/sdo_read and ~/sdo_write's handlers (``.read(request, response)``, ``.write``)
+        self.sdo = SdoServices(ObjectAccess(self.bridge), self._log_event, self.errors.append)
         for joint in self.joints.values():
             self.bridge.configure(joint, idle_read)
         self.bridge.refresh_cams()
@@ -142,6 +171,32 @@ class InProcessBridge:
         self._loop = CycleThread(1.0 / self.rate, self._cycle, name="inprocess_cycle",
                                  priority=CYCLE_PRIORITY)
         self._loop.start()
+
+    def _log_event(self, kind: str, joint: str, request: str, success: bool,
+                   message: str) -> None:
+        self.service_events.append((kind, joint, request, success, message))
+
+    def joint_states(self) -> list[tuple[float, list[str], list[float], list[float]]]:
+        """(stamp s, names, positions, velocities) of each cycle's joint_states as the node
+        publishes them (``header.stamp`` = the SYNC's wire time, only the published joints;
+        a cycle without one sends none): what ``support.truth`` reads."""
+        out = []
+        for result in list(self.results):
+            parts = [p for p in result.published if p.output is not None]
+            if parts:
+                out.append((result.t_sync, [p.joint.name for p in parts],
+                            [p.output.position for p in parts],
+                            [p.output.velocity for p in parts]))
+        return out
+
+    def client_of(self, joint: str) -> BridgeClient:
+        """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
+        return self.clients[self.joints[joint].settings.station]
+
+    @property
+    def station(self) -> Station:
+        """The (first) simulated station."""
+        return next(iter(self.stations.values()))
 
     @property
     def client(self) -> BridgeClient:
@@ -236,7 +291,8 @@ class InProcessBridge:
         master = getattr(self, "master", None)
         if master is not None:
             master.close()
-        self.station.stop()
+        for station in self.stations.values():
+            station.stop()
         sys.setswitchinterval(self._switch)
 
 
