@@ -83,6 +83,8 @@ class InProcessBridge:
     results: list[CycleResult] = field(init=False, default_factory=list)
     #: the ~/status message of each of those cycles (``ros/messages.py`` ``status_msg``)
     status_msgs: list[Any] = field(init=False, default_factory=list)
+    #: (SYNC wire time, each joint's level) of every cycle: when a level changed
+    levels: list[tuple[float, dict[str, int]]] = field(init=False, default_factory=list)
     #: the service events (kind, joint, request, success, message), as ~/events has them
     service_events: list[tuple[str, str, str, bool, str]] = field(init=False,
                                                                   default_factory=list)
@@ -215,6 +217,7 @@ class InProcessBridge:
         self.master.wait_cycle(*cycle_waits(1.0 / self.rate, self.wire_s))
         result = self.cycle.run(sync_number(self.client, t_sync), t_sync)
         self.results.append(result)
+        self.levels.append((t_sync, {name: j.level for name, j in self.joints.items()}))
         # ~/status reads the joints' counters as they are now: built each cycle, as the node
         self.status_msgs.append(status_msg(result, Header()))
 
@@ -241,7 +244,8 @@ class InProcessBridge:
         from ssi_bridge.ros.diagnostics import channel_status
 
         j = self.joints[joint]
-        st = channel_status(joint, "inprocess", j.counters, j.health, j.position)
+        extra = {"para1": f"0x{j.para1:08X}", "max_speed": f"{j.max_speed:g}"}  # as the node
+        st = channel_status(joint, "inprocess", j.counters, j.health, j.position, extra)
         if j.para1_note:
             st.message = j.para1_note if st.level < WARN else f"{st.message}; {j.para1_note}"
             st.level = max(st.level, WARN)
