@@ -34,7 +34,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
-from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 
@@ -43,6 +42,7 @@ from ssi_bridge.ros.bus_side import BusSide
 from ssi_bridge.ros.node_ports import CycleLoop, Step
 from ssi_bridge.ros.param_table import NODE_PARAMETERS
 from ssi_bridge.ros.params import NodeSettings
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 
 if TYPE_CHECKING:
     from ssi_bridge.ros.liveview import LiveView
