@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 
 from rclpy.impl.rcutils_logger import RcutilsLogger
-from rclpy.logging import LoggingSeverity
+from rclpy.impl.logging_severity import LoggingSeverity
 
 #: Python loggers bridged: this package and the CAN libraries it drives
 BRIDGED = ("ssi_bridge", "canopen", "can")

@@ -65,7 +65,7 @@ class BridgeServices:
         self._busy_logged = 0.0
         #: (type, resolved name, handler) of every service :meth:`register` created: the
         #: live view offers the same list (ros/liveview_services.py)
-        self.offered: list[tuple[type, str, Callable[[Any, Any], Any]]] = []
+        self.offered: list[tuple[type[Any], str, Callable[[Any, Any], Any]]] = []
 
     def register(self, group: Any = None) -> None:
         """Create every service of the contract; their requests go through :attr:`queue`

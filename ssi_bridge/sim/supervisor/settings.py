@@ -7,7 +7,7 @@ simulator needs nothing of the driver to be started by it.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 from ssi_bridge.protocol.settings import JointSettings
 
@@ -15,15 +15,25 @@ from ssi_bridge.protocol.settings import JointSettings
 class NodeSettings(Protocol):
     """The node's settings the simulated stations are started from."""
 
-    simulation_transport: str
-    simulation_start_timeout: float
-    simulation_station_priority: int
-    bus_interface: str
-    bus_channel: str
-    bus_bitrate: int
-    node_id: int
-    joints: tuple[JointSettings, ...]
-    storage_path: str
+    # read-only: the node's settings are a frozen dataclass
+    @property
+    def simulation_transport(self) -> str: ...
+    @property
+    def simulation_start_timeout(self) -> float: ...
+    @property
+    def simulation_station_priority(self) -> int: ...
+    @property
+    def bus_interface(self) -> str: ...
+    @property
+    def bus_channel(self) -> str: ...
+    @property
+    def bus_bitrate(self) -> int: ...
+    @property
+    def node_id(self) -> int: ...
+    @property
+    def joints(self) -> tuple[JointSettings, ...]: ...
+    @property
+    def storage_path(self) -> str: ...
 
     @property
     def station_ids(self) -> tuple[int, ...]:
@@ -33,4 +43,8 @@ class NodeSettings(Protocol):
         """The joints of ``station``."""
 
 
-__all__ = ["NodeSettings"]
+#: the node's own settings class, whatever it is: a changed copy is of the same class
+AnySettings = TypeVar("AnySettings", bound=NodeSettings)
+
+
+__all__ = ["AnySettings", "NodeSettings"]
