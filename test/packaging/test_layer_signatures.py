@@ -369,3 +369,16 @@ def test_every_executable_states_its_contract() -> None:
         if ":returns:" not in doc or "exit code" not in doc:
             gaps.append(f"{module}.{func}: its exit codes")
     assert not gaps, gaps
+
+
+#: layers where every public name, not only what other layers call, states its contract
+WHOLLY_DOCUMENTED = frozenset({"protocol", "core", "tools"})
+
+
+def test_every_public_name_of_protocol_core_and_tools_states_its_contract() -> None:
+    modules = _load()
+    gaps = [f"{mod.name}.{g}" for mod in modules.values()
+            if mod.layer in WHOLLY_DOCUMENTED and mod.name not in CONTRACT_PENDING
+            for name in mod.defs if not name.startswith("_")
+            for g in _contract_gaps(mod, name)]
+    assert not gaps, "docstrings that do not state their contract:\n  " + "\n  ".join(gaps)
