@@ -372,7 +372,7 @@ def test_every_executable_states_its_contract() -> None:
 
 
 #: layers where every public name, not only what other layers call, states its contract
-WHOLLY_DOCUMENTED = frozenset({"protocol", "core", "client", "commission", "tools"})
+WHOLLY_DOCUMENTED = frozenset({"protocol", "core", "client", "commission", "record", "tools"})
 
 
 def test_every_public_name_of_the_wholly_documented_layers_states_its_contract() -> None:
