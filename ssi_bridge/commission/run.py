@@ -142,9 +142,7 @@ def commission(bus: BusConfig | can.BusABC, options: Options,
         raw.shutdown()
         raise
     network = MasterNetwork(raw)
-    # canopen types its listeners as its own MessageListener; can.Notifier takes any Listener
-    network.listeners.append(_Garbage(heard))  # type: ignore[arg-type]
-    network.connect()
+    network.start(_Garbage(heard), canopens_too=True)
     try:
         _run(network, heard, answered, options, result, say)
     finally:

@@ -24,17 +24,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import ReadRegister
 
+from support.liveview import free_port
+
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 #: binary server message "Message Data": opcode, subscription id, log time (ns)
 MESSAGE_DATA = struct.Struct("<BIQ")
 OP_MESSAGE_DATA = 0x01
-
-
-def free_port() -> int:
-    """A TCP port nothing listens on right now (the kernel's choice)."""
-    with socket.socket() as s:
-        s.bind(("0.0.0.0", 0))
-        return int(s.getsockname()[1])
 
 
 def non_loopback_address() -> str | None:
@@ -253,10 +248,3 @@ def test_off_by_default_and_described_with_a_port_range(running, probe):
     bus = next(s for _, d in diags for s in d.status if s.name == "/ssi_bridge: bus")
     assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == "0"
     assert "live view" not in node.log()
-
-
-def test_a_port_out_of_range_stops_the_start_with_the_reason(start_node):
-    node = start_node({"foxglove.port": 70000})
-    assert node.proc.wait(30) == 1, node.log()
-    log = node.log()
-    assert "cannot start" in log and "foxglove.port" in log and "Traceback" not in log, log

@@ -1,4 +1,4 @@
-"""What the installed node prints: a warning-free default, one line per start-up error, typos
+"""What the installed node prints: a warning-free default, typos
 named with the closest parameter, echoed input kept short, EMCY floods summarised, library
 messages (canopen, python-can) under the node's logger, a silent listen-only bus reported."""
 
@@ -56,24 +56,6 @@ def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_no
     assert any(name == "ssi_bridge.client.master" for _, name, _ in parsed), log
     assert "Failed to publish log message to rosout" not in log
     assert all(LINE.match(line) for line in log.splitlines() if line.strip()), log
-
-
-@pytest.mark.parametrize("content, words", [
-    (None, "No such file"),
-    ("/**:\n  ros__parameters:\n    joints: [a\n", "not valid YAML"),
-    ("- 1\n- 2\n", "expected a mapping"),
-    ("/**:\n  ros__parameters:\n    joints: []\n", "joints is empty"),
-])
-def test_params_file_problems_are_one_line_and_exit_1(start_node, tmp_path: Path, content,
-                                                      words):
-    path = tmp_path / "given.yaml"
-    if content is not None:
-        path.write_text(content)
-    node = start_node(params_file=path)
-    assert node.proc.wait(60) == 1
-    out = [line for line in node.log().splitlines() if line.strip()]
-    assert len(out) == 1, out
-    assert out[0].startswith("ssi_bridge_node: cannot start:") and words in out[0], out
 
 
 def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
@@ -135,4 +117,3 @@ def test_listen_only_on_a_silent_bus_says_so(start_node):
     assert time.monotonic() - started >= SILENT_WARNING_S - 1.0, "not before the documented time"
     log = stop(node)
     assert log.count("no SYNC on the bus") == 1, "one warning, not one per period"
-

@@ -3,7 +3,8 @@
 Two nodes with the same parameters (``bus.channel`` included), started as the launch file's
 ``namespace`` argument starts them (``-r __ns:=/a``, ``/b``): each simulated station gets a
 udp_multicast group and port derived from the node's fully qualified name as well, so both
-bridges come up and publish, each its own joint_states and its own /diagnostics names. Before,
+bridges come up and publish, each its own joint_states and its own /diagnostics names
+(``<node FQN>: <item>``, each naming its own hardware). Before,
 both stations came up on the same derived group, each master saw the other's station boot,
 and both exited 1 (a CAN bus has one master, CiA 301). The same for one bridge started on two
 ``ROS_DOMAIN_ID``s: the derived group and port depend on the domain too.
@@ -41,6 +42,12 @@ def test_two_bridges_in_namespaces_both_publish(start_node, probe, domain_id):
     assert {"/a/ssi_bridge: joint1", "/b/ssi_bridge: joint1"} <= names, names
     hw = buses()
     assert hw["/a/ssi_bridge: bus"] != hw["/b/ssi_bridge: bus"], hw  # two buses, not one
+    # each status names its own hardware (from test_node_diagnostics.py, merged here: the
+    # same two namespaced bridges)
+    hw = {st.name: st.hardware_id for _t, m in diags for st in m.status}
+    assert hw["/a/ssi_bridge: joint1"] != hw["/b/ssi_bridge: joint1"], hw
+    assert "slot 1" in hw["/a/ssi_bridge: joint1"], hw
+    assert "node 1" in hw["/b/ssi_bridge: bus"], hw
     assert a.proc.poll() is None and b.proc.poll() is None
     for node in (a, b):
         assert "did not answer" not in node.log(), node.log()[-2000:]

@@ -5,7 +5,8 @@ ros2cli's ``ros2 param dump`` nests parameter names on ``.`` (ros2param's ``inse
 ...}}``. A name that is both a value and the prefix of another (the node once declared
 ``simulation`` beside ``simulation.transport``) breaks it: the dump raised ``TypeError: 'bool'
 object does not support item assignment``, and no nested params file can hold both. The
-renamed parameter's old name is refused at start-up in one line that names the new one.
+renamed parameter's old name is refused at start-up in one line that names the new one
+(test_node_start_refusals.py, with the joint names that would make a value a prefix).
 """
 
 from __future__ import annotations
@@ -103,22 +104,3 @@ def test_every_parameter_dumps_nested_and_the_dump_starts_a_node(
         assert "not a parameter of this node" not in second.log(), second.log()[-2000:]
     finally:
         assert second.stop() == 0, second.log()[-2000:]
-
-
-@pytest.mark.parametrize("how", ["params file", "command line"])
-def test_the_old_name_is_refused_in_one_line_naming_the_new_one(start_node, how: str) -> None:
-    node = (start_node({"simulation": False}) if how == "params file" else
-            start_node(args=("-p", "simulation:=false")))
-    assert node.proc.wait(30) == 1, node.log()
-    lines = [line for line in node.log().splitlines() if line.strip()]
-    assert len(lines) == 1 and "'simulation'" in lines[0], node.log()
-    assert "simulation.enabled" in lines[0] and "Traceback" not in node.log(), node.log()
-
-
-@pytest.mark.parametrize("joint", ["publish_rate", "use_sim_time", "a.slot"])
-def test_a_joint_name_that_makes_a_value_a_prefix_is_refused(start_node, joint: str) -> None:
-    """``publish_rate.slot`` beside ``publish_rate``: the dump could not nest them."""
-    node = start_node({"joints": sorted({"a", joint})})
-    assert node.proc.wait(30) == 1, node.log()
-    lines = [line for line in node.log().splitlines() if line.strip()]
-    assert len(lines) == 1 and "prefix" in lines[0] and "name the joint" in lines[0], node.log()

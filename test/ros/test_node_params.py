@@ -3,7 +3,6 @@ module's ERR_PARA reason, 000 Table 19) and the process life cycle (clean exit c
 
 from __future__ import annotations
 
-import pytest
 
 import signal
 from pathlib import Path
@@ -74,51 +73,6 @@ def test_stop_recording_without_a_session_is_refused(shared_node, shared_probe):
     node = shared_node()  # refused: the node is unchanged
     res = shared_probe.call(StopRecording, node.topic("~/stop_recording"), StopRecording.Request())
     assert not res.success and "no recording is running" in res.message
-
-
-def test_a_station_that_does_not_answer_exits_nonzero_with_the_reason(start_node):
-    """Nobody serves node 1 on this virtual channel: one line names the first SDO transfer
-    of the start-up configuration and the bound that bus.sdo_timeout sets."""
-    node = start_node({"simulation.enabled": False, "bus.sdo_timeout": 0.3})
-    code = node.proc.wait(30)
-    assert code == 1, node.log()
-    log = node.log()
-    assert "cannot start" in log and "Traceback" not in log, log
-    assert "node 1 did not answer within 0.300 s" in log, log
-
-
-def test_a_bad_params_file_exits_nonzero_with_the_reason(start_node):
-    # `joints: [y]` is a YAML 1.1 boolean array, not names: a type error, said in one line
-    node = start_node({"joints": [True]})
-    assert node.proc.wait(30) == 1, node.log()
-    log = node.log()
-    assert "cannot start" in log and "joints" in log and "Traceback" not in log, log
-
-
-def test_duplicate_slots_are_refused_at_start(start_node):
-    node = start_node({"joints": ["a", "b"], "a.slot": 2, "b.slot": 2})
-    assert node.proc.wait(30) == 1, node.log()
-    assert "share a module slot" in node.log(), node.log()
-
-
-def test_a_code_the_family_does_not_offer_is_refused_at_start_with_the_offered_list(start_node):
-    """001 §5.2.4.2: the TR check-sum encoder sends binary only; a Gray joint of that family
-    is refused in one line that names what the family does offer."""
-    node = start_node({"joints": ["a"], "a.family": "TR_CHECKSUM", "a.code": "gray"})
-    assert node.proc.wait(30) == 1, node.log()
-    lines = [line for line in node.log().splitlines() if line.strip()]
-    assert len(lines) == 1 and "cannot start" in lines[0] and "binary" in lines[0], node.log()
-    assert "Traceback" not in node.log()
-
-
-@pytest.mark.parametrize("name", ["bus", "station 3"])
-def test_a_joint_named_like_another_diagnostics_status_is_refused_at_start(start_node, name):
-    """/diagnostics names a status '<node>: <joint>', '<node>: bus' and '<node>: station <id>':
-    a joint called 'bus' made two statuses of one name."""
-    node = start_node({"joints": [name]})
-    assert node.proc.wait(30) == 1, node.log()
-    lines = [line for line in node.log().splitlines() if line.strip()]
-    assert len(lines) == 1 and f"joint name {name!r}" in lines[0], node.log()
 
 
 def test_publish_rate_change_takes_effect_at_once(running, probe):

@@ -78,16 +78,6 @@ def test_qos_overrides_from_a_params_file_reach_the_publishers_and_the_bag(start
     assert counts[status_topic] == recorded[status_topic]
 
 
-def test_an_unknown_policy_value_is_one_clear_start_error(start_node, tmp_path: Path):
-    pfile = _params_file(tmp_path, {"/joint_states": {"publisher": {"reliability": "bogus"}}})
-    node = start_node(params_file=pfile)
-    assert node.proc.wait(timeout=60) == 1, node.log()[-3000:]
-    log = node.log()
-    assert ("cannot start: qos_overrides of /joint_states: Unexpected QoS override for policy "
-            "`reliability`: `bogus` (reliability: reliable | best_effort") in log, log[-3000:]
-    assert "Traceback" not in log, log[-3000:]
-
-
 def test_a_misspelt_override_is_named_not_silently_ignored(start_node, probe, tmp_path: Path):
     pfile = _params_file(tmp_path, {
         "/joint_state": {"publisher": {"reliability": "best_effort"}},

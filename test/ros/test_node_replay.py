@@ -104,17 +104,3 @@ def test_replay_exits_at_the_end_when_asked_and_records_again(recorded_log, star
     counts = {t["topic_metadata"]["name"]: t["message_count"]
               for t in info["rosbag2_bagfile_information"]["topics_with_message_count"]}
     assert counts.get("/joint_states", 0) >= 150, counts
-
-
-@pytest.mark.parametrize("flag, value", [("bus.listen_only", True),
-                                         ("replay.can_log", "/nowhere/can_0.log")])
-def test_listen_only_needs_real_mode(start_node, flag: str, value: object) -> None:
-    node = start_node({flag: value})
-    assert node.proc.wait(30) == 1
-    assert f"{flag} needs simulation.enabled:=false" in node.log(), node.log()[-2000:]
-
-
-def test_replay_of_a_missing_log_is_refused(start_node, tmp_path: Path) -> None:
-    node = start_node({"simulation.enabled": False, "replay.can_log": str(tmp_path / "none.log")})
-    assert node.proc.wait(30) == 1
-    assert "does not exist" in node.log(), node.log()[-2000:]

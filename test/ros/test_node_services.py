@@ -1,118 +1,23 @@
-"""Every service of the contract against the installed node: success paths and each failure.
+"""The services of the contract against the installed node: each failure's answer, the
+diagnostics rate during reads, the recorder's refusal, the service queue under bursts.
 
-Register semantics from 000 chapter 1: REG_OFFSET (50) is subtracted from the encoder value
-("Offset function"), REG_SF (4) with "LD48" 0x6C643438 restores the retentive registers but
-REG_PARA1 ("Resetting the register bank"), register 5 is reserved, addresses stop at 63.
+Register semantics from 000 chapter 1: register 5 is reserved, addresses stop at 63. What
+the register services do at the module (set_preset, reset_registers, set_control) and the bits
+of ~/status run in process: test/core/test_inprocess_services.py (docs/testing.md).
 """
 
 from __future__ import annotations
 
-import math
 import time
 
 import pytest
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
-from ssi_bridge_msgs.msg import Status
 from ssi_bridge_msgs.srv import (
     ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording, WriteRegister,
 )
 
-REG_CMP1, REG_OFFSET, REG_LOWER_LIMIT = 34, 50, 48
-
-
-def _latest_status(msgs, joint):
-    for _, m in reversed(msgs):
-        for ch in m.channels:
-            if ch.joint == joint:
-                return ch
-    return None
-
-
-def test_set_preset_moves_the_zero_point(running, probe):
-    node = running({"joints": ["j"], "j.motion.kind": "still", "j.motion.start": 1.25})
-    res = probe.call(SetPreset, node.topic("~/set_preset"), SetPreset.Request(position=0.5))
-    assert res.success, res.message
-    # encoder value 1.25 rev * 8192 = 10240 counts; target 0.5 rad -> 651.9 -> 652 counts
-    assert res.offset == 10240 - round(0.5 / (2 * math.pi / 8192)), res.message
-    assert res.position == pytest.approx(0.5, abs=2 * math.pi / 8192)
-    off = probe.call(ReadRegister, node.topic("~/read_register"),
-                     ReadRegister.Request(address=REG_OFFSET))
-    assert off.success and off.value == res.offset
-    msgs = probe.subscribe(JointState, node.topic("joint_states"))
-    probe.wait_for(lambda: len(msgs) > 2, 5.0, "joint_states after the preset", node)
-    assert msgs[-1][1].position[0] == pytest.approx(0.5, abs=2 * math.pi / 8192)
-
-    negative = probe.call(SetPreset, node.topic("~/set_preset"), SetPreset.Request(position=-3.0))
-    assert negative.success, negative.message
-    assert negative.position == pytest.approx(-3.0, abs=2 * math.pi / 8192), \
-        "REG_SSI_POS below zero must read as a negative Integer32 position (object 0x6820)"
-
-
-@pytest.mark.parametrize("position, words", [
-    (float("nan"), "not a finite number"),
-    (float("inf"), "not a finite number"),
-    (1e12, "Integer32"),
-])
-def test_set_preset_refuses_bad_positions(shared_node, shared_probe, position, words):
-    node = shared_node()  # a refusal changes nothing: one node serves every case
-    res = shared_probe.call(SetPreset, node.topic("~/set_preset"), SetPreset.Request(position=position))
-    assert not res.success and words in res.message, res.message
-
-
-def test_reset_registers_ld48_keeps_para1_ld20_restores_it(running, probe):
-    node = running({"joint1.para1": 0x19020000})  # 250 kbit/s, not the factory 500 kbit/s
-    write = probe.call(WriteRegister, node.topic("~/write_register"),
-                       WriteRegister.Request(address=REG_LOWER_LIMIT, value=77))
-    assert write.success, write.message
-    ld48 = probe.call(ResetRegisters, node.topic("~/reset_registers"),
-                      ResetRegisters.Request(include_parameters=False))
-    assert ld48.success, ld48.message
-
-    def read(addr):
-        r = probe.call(ReadRegister, node.topic("~/read_register"), ReadRegister.Request(address=addr))
-        assert r.success, r.message
-        return r.value
-
-    assert read(REG_LOWER_LIMIT) == 0, "LD48 restores REG_LOWER_LIMIT's default"
-    assert read(20) == 0x19020000, "LD48 keeps REG_PARA1"
-    ld20 = probe.call(ResetRegisters, node.topic("~/reset_registers"),
-                      ResetRegisters.Request(include_parameters=True))
-    assert ld20.success, ld20.message
-    assert read(20) == 0x19010000, "LD20 restores REG_PARA1's default 0x19010000"
-
-
-def test_set_control_stop_and_comparator(running, probe):
-    node = running({"joints": ["j"], "j.motion.kind": "still", "j.motion.start": 0.5})
-    status = probe.subscribe(Status, node.topic("~/status"))
-    # REG_SSI_POS = 0.5 rev * 8192 = 4096: put CMP1 there so it matches (000 comparator table)
-    assert probe.call(WriteRegister, node.topic("~/write_register"),
-                      WriteRegister.Request(address=REG_CMP1, value=4096)).success
-    res = probe.call(SetControl, node.topic("~/set_control"),
-                     SetControl.Request(enable_cmp1=True))
-    assert res.success, res.message
-    probe.wait_for(lambda: (ch := _latest_status(status, "j")) is not None and ch.sts_cmp1,
-                   5.0, "STS_CMP1 = 1 with REG_SSI_POS = REG_CMP1", node)
-    ch = _latest_status(status, "j")
-    assert ch.flag_cmp1 and ch.rel_cmp1 and ch.reg_ssi_pos == 4096
-
-    stop = probe.call(SetControl, node.topic("~/set_control"), SetControl.Request(stop=True))
-    assert stop.success, stop.message
-    probe.wait_for(lambda: _latest_status(status, "j").sts_stop, 5.0, "STS_STOP = 1", node)
-    assert not _latest_status(status, "j").sts_cmp1, "EN_CMP1 = 0 zeroes STS/REL/FLAG_CMP1"
-
-
-def test_status_carries_the_raw_frame_and_every_bit(running, probe):
-    node = running({"joints": ["j"], "j.motion.kind": "still", "j.motion.start": 0.5})
-    status = probe.subscribe(Status, node.topic("~/status"))
-    probe.wait_for(lambda: (ch := _latest_status(status, "j")) is not None and ch.ssi_frame_valid,
-                   5.0, "a status with REG_SSI_FRAME", node)
-    ch = _latest_status(status, "j")
-    # GENERIC 25-bit binary frame: REG_SSI_FRAME = the position itself (000 register 33)
-    assert ch.ssi_frame == 4096 and ch.reg_ssi_pos == 4096
-    assert ch.reg_rd_adr == 33 and not ch.reg_rd_abort
-    assert len(ch.process_input) == 8 and ch.process_input[4] == 33
-    assert not (ch.err_ssi or ch.err_para or ch.sts_stop)
+REG_CMP1 = 34
 
 
 @pytest.mark.parametrize("srv, request_, words", [
@@ -123,12 +28,14 @@ def test_status_carries_the_raw_frame_and_every_bit(running, probe):
     (WriteRegister, WriteRegister.Request(address=20, value=0x21010000), "SSI_FRAME_LEN"),
     (ResetRegisters, ResetRegisters.Request(joint="x"), "unknown joint"),
     (SetControl, SetControl.Request(joint="x"), "unknown joint"),
+    (SetPreset, SetPreset.Request(position=float("nan")), "not a finite number"),
 ])
 def test_each_failure_has_a_distinct_clear_message(shared_node, shared_probe, srv, request_,
                                                    words):
     node = shared_node()  # a refusal changes nothing: one node serves every case
     name = {ReadRegister: "~/read_register", WriteRegister: "~/write_register",
-            ResetRegisters: "~/reset_registers", SetControl: "~/set_control"}[srv]
+            ResetRegisters: "~/reset_registers", SetControl: "~/set_control",
+            SetPreset: "~/set_preset"}[srv]
     res = shared_probe.call(srv, node.topic(name), request_)
     assert not res.success
     assert words in res.message, res.message

@@ -199,11 +199,3 @@ def test_split_parameters_are_described_with_ranges(session) -> None:  # type: i
     assert "bytes" in size.description and "seconds" in duration.description
     assert size.integer_range[0].from_value == 0 and duration.integer_range[0].from_value == 0
     assert size.read_only and duration.read_only
-
-
-def test_a_split_size_below_the_minimum_is_refused_at_start(start_node) -> None:  # type: ignore[no-untyped-def]
-    node = start_node({"record.max_size": 1000})
-    assert node.proc.wait(30) == 1, node.log()
-    log = node.log()
-    assert "cannot start" in log and "record.max_size 1000" in log and "65536" in log, log
-    assert "Traceback" not in log, log

@@ -1,8 +1,8 @@
 """Bit noise at 1 % per bit: which corrupted samples each configuration lets through unflagged.
 
 Station level (encoder -> SSI line with seeded noise -> XN-1SSI -> the bridge's frame check),
-because counting thousands of cycles through the node would take minutes; the node test
-(test/ros/test_node_frame_status.py) shows the same flags through the installed executable.
+because counting thousands of cycles through the node would take minutes; the in-process
+test (test/core/test_inprocess_frame_status.py) shows the same flags through the bridge.
 
 A sample is *corrupted* when the frame the module read (REG_SSI_FRAME) differs from the frame
 the encoder sent (a noise-free twin encoder at the same latch time), and *flagged* when the
@@ -31,7 +31,7 @@ from ssi_bridge.protocol.images import ModuleStatus as M
 from ssi_bridge.protocol.registers import Para1, Reg
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-CONFIG = Path(__file__).resolve().parents[2] / "config" / "noise_guard.yaml"
+CONFIG = Path(__file__).resolve().parents[3] / "config" / "noise_guard.yaml"
 N = 4000
 RATE = 0.01
 PERIOD = 0.001
