@@ -183,8 +183,8 @@ class WireBus(can.BusABC):
 
     ``send`` puts the frame on the :class:`Wire` after whatever is on it (SOF to IFS with its
     actual stuff bits, ``protocol/wire.py``), stamps it with its end and hands it to the
-    receivers only then (sleeping, not spinning: Python sleeps ~0.05-0.1 ms late, which does
-    not add up over a burst because every frame's end is computed, not measured).
+    receivers only then (sleeping, not spinning: a late wake-up, docs/canopen.md "Time and
+    the wire", does not add up over a burst because every frame's end is computed).
     :meth:`send_batch` sends frames that are ready together in arbitration order (lowest
     identifier first), as CAN arbitration would. Frames two nodes make ready within the same
     bit time are sent in the order they were handed over (first come), not arbitrated.
