@@ -105,6 +105,9 @@ def decode_area(cfg: EncoderConfig, area: int) -> int:
 
     With ``shift_right`` the LSB is lost on the wire (004 §3.4), so the value comes back
     with its LSB cleared (binary; in the other codes the last code bit is lost).
+
+    :param cfg: the encoder's layout
+    :param area: the position area's bits
     """
     if cfg.shift_right:
         area <<= 1
@@ -128,7 +131,12 @@ def decode_area(cfg: EncoderConfig, area: int) -> int:
 
 
 def assemble(cfg: EncoderConfig, area: int, levels: list[int]) -> int:
-    """Frame bits: the position area followed by the special-bit levels and zero fill."""
+    """Frame bits: the position area followed by the special-bit levels and zero fill.
+
+    :param cfg: the encoder's layout
+    :param area: the position area's bits
+    :param levels: the wire level of each special bit, in the layout's order
+    """
     frame = area
     for level in levels:
         frame = (frame << 1) | level
@@ -136,7 +144,11 @@ def assemble(cfg: EncoderConfig, area: int, levels: list[int]) -> int:
 
 
 def split(cfg: EncoderConfig, frame: int) -> tuple[int, dict[SpecialBit, int]]:
-    """Position area and the wire level of each special bit (ZERO fillers dropped)."""
+    """Position area and the wire level of each special bit (ZERO fillers dropped).
+
+    :param cfg: the encoder's layout
+    :param frame: the frame's bits, first transmitted = MSB
+    """
     n_spec = len(cfg.special_bits)
     fill = cfg.frame_bits - cfg.position_bits - n_spec
     body = frame >> fill
