@@ -95,7 +95,8 @@ class InProcessBridge:
         values = {**STATION_DEFAULTS, **self.values, "bus.interface": "virtual",
                   "bus.channel": f"inprocess-{os.getpid()}-{next(_channels)}"}
         self.bus = BusConfig(interface="virtual", channel=str(values["bus.channel"]),
-                             node_id=int(values["bus.node_id"]))
+                             bitrate=int(values["bus.bitrate"]), node_id=int(values["bus.node_id"]))
+        self.frame_id = str(values.get("frame_id", ""))
         self.rate = float(values.get("publish_rate", PUBLISH_RATE))
         self.settings = self._joints_by_station(values)
         counts = [max(j.slot for j in joints) for joints in self.settings.values()]
@@ -190,6 +191,34 @@ class InProcessBridge:
                             [p.output.position for p in parts],
                             [p.output.velocity for p in parts]))
         return out
+
+    def joint_state_msgs(self) -> list[Any]:
+        """Each cycle's joint_states message as the node builds it (``ros/messages.py``
+        ``joint_state_msg``, stamped with the SYNC's wire time, ``frame_id``); a cycle
+        without a published joint sends none."""
+        from ssi_bridge.base.timebase import to_ros_ns
+        from ssi_bridge.ros.messages import joint_state_msg, time_msg
+
+        out = []
+        for result in list(self.results):
+            msg = joint_state_msg(result, time_msg(to_ros_ns(result.t_sync)), self.frame_id)
+            if msg.name:
+                out.append(msg)
+        return out
+
+    def station_status(self, node_id: int) -> Any:
+        """Station ``node_id``'s DiagnosticStatus as ``ros/node_status.py`` builds it for
+        several stations (``ros/diagnostics.py`` ``station_status``: heartbeat, NMT state,
+        EMCY history)."""
+        from ssi_bridge.ros.diagnostics import station_status
+
+        client = self.clients[node_id]
+        node = client.node
+        emcy = ([f"0x{e.code:04X} reg 0x{e.register:02X} {e.get_desc()}".strip()
+                 for e in node.emcy.log] if node is not None else [])
+        return station_status(f"station {node_id}", "inprocess", alive=client.gateway_alive,
+                              nmt_state=str(node.nmt.state if node is not None else "UNKNOWN"),
+                              emcy=emcy, counters={})
 
     def client_of(self, joint: str) -> BridgeClient:
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
