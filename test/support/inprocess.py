@@ -88,6 +88,8 @@ class InProcessBridge:
     #: the service events (kind, joint, request, success, message), as ~/events has them
     service_events: list[tuple[str, str, str, bool, str]] = field(init=False,
                                                                   default_factory=list)
+    #: each joint's ``<joint>.para1`` parameter as the node mirrors it from the module
+    para1: dict[str, int] = field(init=False, default_factory=dict)
     #: unexpected errors the service handlers logged
     errors: list[str] = field(init=False, default_factory=list)
 
@@ -157,7 +159,7 @@ class InProcessBridge:
                                            {n: j.config for n, j in self.joints.items()},
                                            self.clock)
         self.cycle = Cycle(self.joints, self.logs)
-        self.bridge = Bridge(self.joints, self.client_of, lambda _j, _v: None)
+        self.bridge = Bridge(self.joints, self.client_of, self._mirror_para1)
         self.faults = (next(iter(injectors.values())) if len(injectors) == 1
                        else StationFaults(injectors, by_name))
         self.bridge.faults = self.faults
@@ -174,6 +176,10 @@ class InProcessBridge:
         self._loop = CycleThread(1.0 / self.rate, self._cycle, name="inprocess_cycle",
                                  priority=CYCLE_PRIORITY)
         self._loop.start()
+
+    def _mirror_para1(self, joint: str, value: int) -> None:
+        """What the node mirrors into ``<joint>.para1`` (ros/node_params.py)."""
+        self.para1[joint] = value
 
     def _log_event(self, kind: str, joint: str, request: str, success: bool,
                    message: str) -> None:
