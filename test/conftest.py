@@ -207,11 +207,14 @@ def _bags_in_log_time_order(request: pytest.FixtureRequest) -> Iterator[None]:
 
 
 # -- test tiers: the markers come from here, not from each file ------------------------------
+#: markers only this file sets; a test or module that sets one by hand stops the collection
+TIER_MARKERS = frozenset({"node", "slow", "smoke", "load", "integration"})
 #: a test with a DDS domain of its own starts a ROS node as a subprocess (the bridge, the
 #: managed node or a ROS tool) and talks to it: ``node``
 NODE_FIXTURES = frozenset({"ros_domain", "module_domain"})
 #: load, stress, soak and two-host tests: ``slow``, left out of ``make test``, run by
 #: ``make test-all``. A file names all its tests, ``file::test`` every case of that test.
+#: An entry whose reason starts with ``load:`` (the node beside CPU burners) is also ``load``.
 SLOW = {
     "test/ros/test_node_truth_matrix.py::test_the_disturbance_matrix_on_two_stations_beside_two_burners":
         "load: the disturbance matrix beside two CPU burners, held to the truth",
@@ -270,8 +273,24 @@ def _check_lists(root: Path) -> None:
             raise pytest.UsageError(f"test/conftest.py lists {entry}, which does not exist")
 
 
+def _reason(item: pytest.Item, names: dict[str, str]) -> str:
+    test = item.nodeid.split("[")[0]
+    return names.get(test) or names.get(test.split("::")[0], "")
+
+
+def _check_hand_set(items: list[pytest.Item]) -> None:
+    """No test, class or module sets a tier marker itself: they come from this file only."""
+    by_hand = sorted({f"{item.nodeid.split('[')[0]}: {mark.name}" for item in items
+                      for mark in item.iter_markers() if mark.name in TIER_MARKERS})
+    if by_hand:
+        raise pytest.UsageError("tier markers are set by test/conftest.py, not by hand "
+                                "(node: by fixture; slow, smoke, load: its lists): "
+                                + "; ".join(by_hand))
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     _check_lists(Path(_REPO))
+    _check_hand_set(items)
     for item in items:
         if NODE_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.node)
@@ -279,6 +298,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.smoke)
         if _listed(item, SLOW):
             item.add_marker(pytest.mark.slow)
+            if _reason(item, SLOW).startswith("load:"):
+                item.add_marker(pytest.mark.load)
             if item.get_closest_marker("timeout") is None:
                 item.add_marker(pytest.mark.timeout(SLOW_TIMEOUT))
 

@@ -13,9 +13,23 @@
   ``responses`` queue ``on_response`` fills), so that a frame which does not answer the
   current request is set aside instead of ending the transfer; :class:`CheckedRemoteNode`
   makes its SDO channels such clients (``add_sdo``, which ``RemoteNode.__init__`` calls
-  before it binds the PDO maps to the default channel).
+  before it binds the PDO maps to the default channel);
+* :class:`OwnListenerNetwork`: the one canopen ``Network`` of the master (``client/bus.py``)
+  and of the simulated gateway (``sim/gateway/bus.py``): its owner's listener in place of
+  canopen's ``MessageListener`` (``Network.listeners``), its notifier's wake-up period
+  (``NOTIFIER_CYCLE``), no re-raise of a handled receive error (``Network.check``, which reads
+  ``notifier.exception``), and ``send_message`` returning the frame it sent;
+* :func:`dispatch`: canopen's ``Network.notify`` with each subscriber called on its own
+  (``Network.subscribers``, and the node scanner's ``on_message_received(can_id)``, whose
+  argument differs between canopen's upstream lines), for ``base/rx_guard.py``;
+* :func:`forget_receive_error`: clears a handled receive error from the notifier canopen's
+  ``check`` reads (``Notifier.exception``), for a plain ``canopen.Network``;
+* :func:`drop_node`: takes a node out of a network's node table (``Network.nodes``) and
+  nothing else;
+* :func:`forget_values`: drops what was written to a ``LocalNode`` (``LocalNode.data_store``),
+  so its objects read their defaults again.
 
-``test/gateway/test_library_compat.py`` fails on a canopen whose private names changed.
+``test/base/test_library_compat.py`` fails on a canopen whose private names changed.
 """
 
 from __future__ import annotations
@@ -25,6 +39,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
+import can
 import canopen
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.client import SdoClient
@@ -150,5 +165,106 @@ class CheckedRemoteNode(canopen.RemoteNode):
         return client
 
 
-__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "pdo_handler",
-           "set_eds_default", "subscribers"]
+#: a subscriber that raised, the frame's COB-ID and data, and what it raised (:func:`dispatch`)
+OnRaise = Callable[[Callable[..., Any], int, bytearray, Exception], None]
+
+
+def dispatch(network: canopen.Network, can_id: int, data: bytearray, timestamp: float,
+             on_raise: OnRaise) -> None:
+    """canopen's ``Network.notify`` for one frame, each subscriber on its own: one that raises
+    goes to ``on_raise`` (with the frame and its exception) and the others still get the
+    frame; then the network's node scanner notes ``can_id``."""
+    for callback in network.subscribers.get(can_id, ()):  # as canopen's notify (no copy)
+        try:
+            callback(can_id, data, timestamp)
+        except Exception as err:  # noqa: BLE001 - one subscriber must not stop the others
+            on_raise(callback, can_id, data, err)
+    network.scanner.on_message_received(can_id)
+
+
+def forget_receive_error(network: canopen.Network, exc: BaseException) -> None:
+    """``exc``, a receive error a listener handled, is not raised by ``network.check()`` at
+    the next send (canopen raises the notifier's last exception there)."""
+    notifier = network.notifier
+    if notifier is not None and notifier.exception is exc:
+        notifier.exception = None
+
+
+def drop_node(network: canopen.Network, node_id: int) -> None:
+    """Take node ``node_id`` (if there) out of ``network``'s node table, leaving its
+    subscriptions as they are (unlike ``del network[node_id]``)."""
+    network.nodes.pop(node_id, None)
+
+
+def forget_values(node: canopen.LocalNode, index: Callable[[int], bool] | None = None) -> None:
+    """Forget the values written to ``node``'s objects (those whose index ``index`` accepts;
+    None: all), so they read their dictionary defaults again."""
+    store = node.data_store
+    if index is None:
+        store.clear()
+        return
+    for stored in [i for i in store if index(i)]:
+        del store[stored]
+
+
+class OwnListenerNetwork(canopen.Network):
+    """canopen's ``Network`` with one listener of its owner's and a hook on every frame sent.
+
+    :meth:`start` connects it with ``listener`` as the only listener of its notifier, in place
+    of canopen's ``MessageListener`` (which calls ``notify`` unguarded: a subscriber that
+    raises stops the others); that listener handles every receive error, so :meth:`check`
+    has nothing to raise. ``send_message`` is canopen's documented hook for a custom back
+    end: everything canopen sends (NMT, SYNC, SDO, EMCY, PDOs) goes out through it
+    unchanged, under the same lock, is handed to :attr:`on_sent` and returned, so a caller
+    can read its timestamp (on a simulated wire its end on the wire). A subclass makes its
+    own frames (:meth:`make_frame`).
+
+    :param bus: the bus (None: connect opens one)
+    :param notifier_cycle: the receive thread's wake-up period (s), which bounds how long
+        stopping the network takes (None: canopen's)
+    """
+
+    #: called with every frame :meth:`send_message` sent (the bus load)
+    on_sent: Callable[[can.Message], None] | None = None
+
+    def __init__(self, bus: can.BusABC | None = None, *,
+                 notifier_cycle: float | None = None) -> None:
+        super().__init__(bus)
+        if notifier_cycle is not None:
+            self.NOTIFIER_CYCLE = notifier_cycle
+
+    def start(self, *listeners: can.Listener, canopens_too: bool = False) -> None:
+        """Connect with ``listeners`` as the network's listeners, after canopen's own
+        ``MessageListener`` when ``canopens_too`` (raises what ``Network.connect`` raises)."""
+        own: list[can.Listener] = list(self.listeners[:1]) if canopens_too else []
+        self.listeners[:] = [*own, *listeners]  # type: ignore[list-item]  # canopen: its own
+        self.connect()
+
+    def check(self) -> None:
+        """Nothing to check: the owner's listener (``base/rx_guard.GuardedListener``) handles
+        every receive error and keeps receiving, so none is left to raise."""
+
+    def make_frame(self, can_id: int, data: bytes, remote: bool) -> can.Message:
+        """The frame :meth:`send_message` sends: a ``can.Message`` as canopen makes it."""
+        return can.Message(arbitration_id=can_id, is_extended_id=can_id > 0x7FF, data=data,
+                           is_remote_frame=remote)
+
+    # canopen declares the hook -> None; returning the frame adds to that (canopen's own
+    # callers ignore the value), which mypy counts as an incompatible override
+    def send_message(  # type: ignore[override]
+            self, can_id: int, data: bytes, remote: bool = False) -> can.Message:
+        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
+        connected)."""
+        if not self.bus:
+            raise RuntimeError("Not connected to CAN bus")
+        frame = self.make_frame(can_id, data, remote)
+        with self.send_lock:
+            self.bus.send(frame)
+        if self.on_sent is not None:
+            self.on_sent(frame)
+        return frame
+
+
+__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "OnRaise",
+           "OwnListenerNetwork", "dispatch", "drop_node", "forget_receive_error",
+           "forget_values", "pdo_handler", "set_eds_default", "subscribers"]

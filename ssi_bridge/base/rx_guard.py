@@ -30,11 +30,13 @@ import logging
 import time
 import traceback
 from collections import Counter
+from collections.abc import Callable
+from typing import Any
 
 import can
 import canopen
 
-from ssi_bridge.base.canopen_compat import subscribers
+from ssi_bridge.base.canopen_compat import dispatch, forget_receive_error, subscribers
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
 from ssi_bridge.base.udp_bus import UndecodableFrame
@@ -100,21 +102,22 @@ class GuardedListener(WireTimeListener):
         if rule is not None and len(msg.data) != rule.length:
             self.malformed(can_id, msg.data, rule.problem(len(msg.data)) or "")
             return
-        callbacks = subscribers(network, can_id)
-        if callbacks:
-            wire_t = self.handling_time(msg, frame_wire_time(msg))
-            if wire_t is None:
+        wire_t = 0.0
+        if subscribers(network, can_id):
+            handled_at = self.handling_time(msg, frame_wire_time(msg))
+            if handled_at is None:
                 return  # not handled (a receiver that models its controller lost it)
-            for callback in callbacks:  # as canopen's notify (no copy per frame)
-                try:
-                    callback(can_id, msg.data, wire_t)
-                except Exception as err:  # noqa: BLE001 - one subscriber must not stop the bus
-                    self.count(CALLBACK_ERROR)
-                    self._log.error(CALLBACK_ERROR, "%s: frame 0x%03X [%s] raised in %s: %r "
-                                    "at %s; receiving goes on", self.name, can_id,
-                                    msg.data.hex(" "), getattr(callback, "__qualname__", callback),
-                                    err, raised_at(err))
-        network.scanner.on_message_received(can_id)
+            wire_t = handled_at
+        dispatch(network, can_id, msg.data, wire_t, self._raised)
+
+    def _raised(self, callback: Callable[..., Any], can_id: int, data: bytearray,
+                err: Exception) -> None:
+        """A subscriber of frame ``can_id`` raised ``err``: counted as :data:`CALLBACK_ERROR`
+        and logged (at most once per second)."""
+        self.count(CALLBACK_ERROR)
+        self._log.error(CALLBACK_ERROR, "%s: frame 0x%03X [%s] raised in %s: %r at %s; "
+                        "receiving goes on", self.name, can_id, data.hex(" "),
+                        getattr(callback, "__qualname__", callback), err, raised_at(err))
 
     def malformed(self, can_id: int, data: bytes | bytearray, why: str) -> None:
         """A frame its service does not allow (receive thread): counted as :data:`MALFORMED`
@@ -133,9 +136,7 @@ class GuardedListener(WireTimeListener):
 
     def on_error(self, exc: Exception) -> None:
         """A receive error (receive thread): counted and logged; receiving goes on."""
-        notifier = getattr(self.network, "notifier", None)
-        if notifier is not None and notifier.exception is exc:
-            notifier.exception = None  # handled: canopen's check() must not raise it
+        forget_receive_error(self.network, exc)  # handled: canopen's check() must not raise it
         if receive_error_kind(exc) == UNDECODABLE:
             self.count(UNDECODABLE)
             self._log.warning(UNDECODABLE, "%s: dropped a datagram that is not a CAN frame: %s",

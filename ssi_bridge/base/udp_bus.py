@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import can
 
 from ssi_bridge.base.can_compat import (
-    SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus, mark_shut_down, unpack_message,
+    SO_TIMESTAMPNS, MulticastBus, MulticastSockets, unpack_message,
 )
 from ssi_bridge.exceptions import ConfigError
 
@@ -196,13 +196,13 @@ def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     return Endpoint(f"{_DERIVED_NET[0]}.{_DERIVED_NET[1]}.{x}.{y}", port, interface).channel
 
 
-class _GroupSockets(GeneralPurposeUdpMulticastBus):
+class _GroupSockets(MulticastSockets):
     """python-can's multicast socket pair logic, joined and sent on one interface address."""
 
     def __init__(self, endpoint: Endpoint, hop_limit: int) -> None:
-        self._endpoint = endpoint
+        self.endpoint = endpoint
         try:
-            super().__init__(endpoint.group, endpoint.port, hop_limit)
+            super().__init__(endpoint.group, endpoint.port, hop_limit, self._open_receive_socket)
         except can.CanInitializationError as err:  # python-can's text hides the OS error
             cause = err.__cause__
             if not isinstance(cause, OSError):
@@ -220,19 +220,19 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
             send.bind((endpoint.interface, 0))
         except OSError as err:
             send.close()
-            self._socket.close()
+            self.receive_socket.close()
             raise can.CanInitializationError(
                 f"cannot send to {endpoint.channel}: {err}") from err
-        self._send_socket = send
+        self.send_socket = send
         #: datagrams from this address are this bus's own frames
         self.own_address = send.getsockname()
 
-    def _create_socket(self, address_family: socket.AddressFamily) -> socket.socket:
+    def _open_receive_socket(self) -> socket.socket:
         """The receive socket: python-can's options, bound to GROUP:PORT (not 0.0.0.0:PORT),
         the group joined on the endpoint's interface only."""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         group = socket.inet_aton(self.group)
-        iface = socket.inet_aton(self._endpoint.interface)
+        iface = socket.inet_aton(self.endpoint.interface)
         try:
             sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL,
                             struct.pack("@I", self.hop_limit))
@@ -253,36 +253,29 @@ class _GroupSockets(GeneralPurposeUdpMulticastBus):
         except OSError as err:
             sock.close()
             raise can.CanInitializationError(
-                f"cannot join {self.group} on {self._endpoint.interface}: {err}") from err
+                f"cannot join {self.group} on {self.endpoint.interface}: {err}") from err
         return sock
 
     def send(self, data: bytes, timeout: float | None = None) -> None:
         try:
-            self._send_socket.sendto(data, (self.group, self.port))
+            self.send_socket.sendto(data, (self.group, self.port))
         except OSError as err:
-            raise can.CanOperationError(f"failed to send to {self._endpoint.channel}: {err}") \
+            raise can.CanOperationError(f"failed to send to {self.endpoint.channel}: {err}") \
                 from err
 
     def shutdown(self) -> None:
         super().shutdown()
-        self._send_socket.close()
+        self.send_socket.close()
 
 
-class UdpCanBus(UdpMulticastBus):
+class UdpCanBus(MulticastBus):
     """python-can's ``udp_multicast`` bus on one :class:`Endpoint`, without its own frames."""
-
-    _multicast: _GroupSockets
 
     def __init__(self, channel: str, hop_limit: int = 1, **kwargs: object) -> None:
         endpoint = parse_channel(channel)
-        # python-can's constructor opens sockets on every interface: replaced right away
-        can.BusABC.__init__(self, endpoint.channel, **kwargs)  # type: ignore[arg-type]
-        try:
-            self._multicast = _GroupSockets(endpoint, hop_limit)
-        except BaseException:
-            mark_shut_down(self)  # nothing opened: no "not properly shut down" warning
-            raise
-        self._can_protocol = can.CanProtocol.CAN_20
+        # python-can's constructor would open sockets on every interface: these instead
+        self.sockets = _GroupSockets(endpoint, hop_limit)
+        super().__init__(endpoint.channel, self.sockets, **kwargs)
         self.endpoint = endpoint
         self.channel_info = f"udp_multicast {endpoint.channel}"
 
@@ -290,14 +283,14 @@ class UdpCanBus(UdpMulticastBus):
     def receive_buffer_bytes(self) -> int:
         """The receive queue the kernel granted (SO_RCVBUF: twice the bytes asked for, up to
         net.core.rmem_max; :data:`RECEIVE_BUFFER_BYTES`)."""
-        return int(self._multicast._socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+        return int(self.sockets.receive_socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        result = self._multicast.recv(timeout)
+        result = self.sockets.recv(timeout)
         if not result:
             return None, False
         data, sender, timestamp = result
-        if sender[:2] == self._multicast.own_address:
+        if sender[:2] == self.sockets.own_address:
             return None, False  # our own frame looped back
         try:
             msg = unpack_frame(data, timestamp)

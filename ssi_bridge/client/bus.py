@@ -19,10 +19,10 @@ import logging
 from collections.abc import Callable
 
 import can
-import canopen
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.base.buses import open_python_can, take_bus
+from ssi_bridge.base.canopen_compat import OwnListenerNetwork
 from ssi_bridge.client.link import ReopeningBus
 from ssi_bridge.protocol.settings import BusConfig
 
@@ -100,42 +100,9 @@ class ReceiveWatch(can.BusABC):
         self._inner.shutdown()
 
 
-class MasterNetwork(canopen.Network):
-    """canopen's ``Network`` that hands every frame it sends to :attr:`on_sent`.
-
-    ``Network.send_message`` is canopen's documented hook for a custom back end; everything
-    canopen sends through it (NMT, SYNC, SDO, PDOs) goes out unchanged, under the same lock.
-    The frame is returned, so a caller can read its timestamp (on a simulated wire its end
-    on the wire).
-    """
-
-    #: called with every frame :meth:`send_message` sent (the master's bus load)
-    on_sent: Callable[[can.Message], None] | None = None
-
-    def check(self) -> None:
-        """Nothing to check: the receive thread never stops on an error.
-
-        canopen raises the receive thread's last exception here at every send; the master's
-        listener (``client/receive.FrameListener``, a ``base/rx_guard.GuardedListener``)
-        handles every receive error and keeps receiving, so none is left to raise.
-        """
-
-    # canopen declares the hook -> None; returning the frame adds to that (canopen's own
-    # callers ignore the value), which mypy counts as an incompatible override
-    def send_message(  # type: ignore[override]
-            self, can_id: int, data: bytes, remote: bool = False) -> can.Message:
-        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
-        connected)."""
-        if not self.bus:
-            raise RuntimeError("Not connected to CAN bus")
-        frame = can.Message(arbitration_id=can_id, is_extended_id=can_id > 0x7FF,
-                            data=data, is_remote_frame=remote)
-        with self.send_lock:
-            self.bus.send(frame)
-        self.check()
-        if self.on_sent is not None:
-            self.on_sent(frame)
-        return frame
+class MasterNetwork(OwnListenerNetwork):
+    """The master's canopen ``Network`` (``base/canopen_compat.OwnListenerNetwork``): its
+    listener is ``client/receive.FrameListener``; :attr:`on_sent` counts the bus load."""
 
 
 __all__ = ["BusOpener", "MasterNetwork", "NOTIFIER_CYCLE", "ReceiveWatch", "open_bus",

@@ -28,6 +28,7 @@ from ssi_bridge.client.bus import (
 from ssi_bridge.protocol.dictionary import SYNC_COB_ID
 from ssi_bridge.protocol.frame_rules import master_rules
 from ssi_bridge.protocol.settings import BusConfig
+from ssi_bridge.base.canopen_compat import drop_node
 from ssi_bridge.base.timebase import wire_now
 
 
@@ -97,17 +98,15 @@ class CanMaster:
         else:
             self._source = None  # a handed-over bus is taken once
         self.bus = ReceiveWatch(inner)
-        self.network = MasterNetwork(self.bus)
+        self.network = MasterNetwork(self.bus, notifier_cycle=NOTIFIER_CYCLE)
         self._listener = FrameListener(self.network, self.counters, self.load, self.priority)
         self._listener.also = [c.counters for c in self.clients if c.counters is not self.counters]
         self._listener.foreign.on_sync = self._on_foreign_sync
         for client in self.clients:
             self._listener.rules.update(master_rules(client.node_id))
         self._listener.error_frames = self.error_frames
-        self.network.listeners[:] = [self._listener]
         self.network.on_sent = self.load.add
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.network.connect()
+        self.network.start(self._listener)
 
     @property
     def receive_scheduling(self) -> str:
@@ -143,7 +142,7 @@ class CanMaster:
             for cob_id in master_rules(client.node_id):
                 self._listener.rules.pop(cob_id, None)
         if self.network is not None:
-            self.network.nodes.pop(client.node_id, None)
+            drop_node(self.network, client.node_id)
 
     def _on_foreign_sync(self, at: float) -> None:
         """Another producer's SYNC at wire time ``at`` (receive thread): no TPDO after it

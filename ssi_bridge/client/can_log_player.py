@@ -34,6 +34,9 @@ class CanLogPlayer:
     :param channel: python-can ``virtual`` channel to send on
     :param rate: speed factor (2.0 = twice as fast); timestamps keep the original spacing
     :param on_end: called (from the player thread) after the last frame, or on a read error
+
+    :raises ConfigError: the log is not a file, or ``rate`` is not positive
+    :raises BusError: the virtual channel cannot be opened
     """
 
     def __init__(self, path: str | Path, channel: str, *, rate: float = 1.0,
@@ -77,7 +80,10 @@ class CanLogPlayer:
         threading.Thread(target=wait, name="replay-wait", daemon=True).start()
 
     def stop(self, timeout: float = 2.0) -> None:
-        """Stop playing and close the bus; safe to call twice."""
+        """Stop playing and close the bus; safe to call twice.
+
+        :param timeout: how long to wait for the player thread (s)
+        """
         self._stop.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)

@@ -69,7 +69,11 @@ def station_frames(node_id: int) -> dict[int, str]:
 
 
 def master_frames(station_ids: tuple[int, ...] | list[int] = ()) -> dict[int, str]:
-    """COB-IDs only the master of these stations sends (SYNC, NMT, SDO requests)."""
+    """COB-IDs only the master of these stations sends (SYNC, NMT, SDO requests).
+
+    :param station_ids: the node ids of the master's stations (SDO requests to them)
+    :returns: COB-ID -> name of the service ("SYNC", "NMT", "SDO request to node 1")
+    """
     frames = {SYNC_COB_ID: "SYNC", NMT_COB_ID: "NMT command"}
     for node_id in station_ids:
         frames.update(station_frames(node_id))
@@ -78,7 +82,12 @@ def master_frames(station_ids: tuple[int, ...] | list[int] = ()) -> dict[int, st
 
 def describe_frame(can_id: int, data: bytes, frames: dict[int, str]) -> str:
     """A frame of :func:`master_frames` in words with its COB-ID ("SYNC on 0x080", "NMT stop
-    (0x02) to node 1 on 0x000", "SDO request to node 1 on 0x601")."""
+    (0x02) to node 1 on 0x000", "SDO request to node 1 on 0x601").
+
+    :param can_id: the frame's COB-ID
+    :param data: its data bytes
+    :param frames: the master's COB-IDs and their names (:func:`master_frames`)
+    """
     if can_id == NMT_COB_ID:
         return f"{describe_nmt(data)} on 0x000"
     return f"{frames.get(can_id, 'frame')} on 0x{can_id:03X}"

@@ -62,7 +62,12 @@ def check_address(addr: int, write: bool) -> None:
 
 
 class Handshake:
-    """One slot's handshake engine over an :class:`ImagePort` (the caller holds the slot lock)."""
+    """One slot's handshake engine over an :class:`ImagePort` (the caller holds the slot lock).
+
+    :param port: the slot's process images (the master's PDO or SDO transport)
+    :param step_timeout: bound of one handshake step (s)
+    :param total_timeout: bound of one whole transaction (s)
+    """
 
     def __init__(self, port: ImagePort, step_timeout: float, total_timeout: float) -> None:
         self.port = port
@@ -95,7 +100,13 @@ class Handshake:
 
     def read(self, slot: int, addr: int) -> int:
         """Read register ``addr`` of ``slot`` through the process images; REG_RD_ADR is then
-        set back to the address it held before (see the module docstring)."""
+        set back to the address it held before (see the module docstring).
+
+        :returns: the register's value (REG_RD_DATA)
+        :raises RegisterReadError: the address is out of range or the module aborted the read
+        :raises HandshakeTimeout: a step got no answer in time
+        :raises GatewayUnavailable: the gateway's heartbeat is not current
+        """
         check_address(addr, write=False)
         deadline = time.monotonic() + self.total_timeout
         before: list[int] = []  # REG_RD_ADR of the output image before this read
@@ -149,7 +160,13 @@ class Handshake:
                            idle, err)
 
     def write(self, slot: int, addr: int, value: int) -> None:
-        """Write ``value`` to register ``addr`` of ``slot`` (000 write handshake)."""
+        """Write ``value`` to register ``addr`` of ``slot`` (000 write handshake).
+
+        :raises RegisterWriteError: the address is out of range or the module refused the value
+            (:class:`ParameterError` for a REG_PARA1 it rejects, with the reason)
+        :raises HandshakeTimeout: a step got no answer in time
+        :raises GatewayUnavailable: the gateway's heartbeat is not current
+        """
         check_address(addr, write=True)
         if not 0 <= value <= VALUE_MAX:
             raise RegisterWriteError(addr, f"value {value} out of range 0..0x{VALUE_MAX:X}")

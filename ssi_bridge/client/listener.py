@@ -74,6 +74,8 @@ class ListenOnlyClient(can.Listener):
     :param slots: number of modules (1-8)
     :param heartbeat_timeout: the gateway is silent after this long without its heartbeat
         or a TPDO (s)
+
+    :raises ValueError: ``slots`` outside 1-8
     """
 
     def __init__(self, bus: BusConfig | can.BusABC, node_id: int, slots: int, *,
@@ -154,7 +156,10 @@ class ListenOnlyClient(can.Listener):
         return self.table.latest(slot)
 
     def wait_cycle(self, timeout: float) -> bool:
-        """True once every slot's image and position arrived since the last observed SYNC."""
+        """True once every slot's image and position arrived since the last observed SYNC.
+
+        :param timeout: longest wait (s); False when it passes first
+        """
         return self.table.wait_cycle(timeout)
 
     def next_cycle(self, timeout: float) -> ObservedCycle | None:
@@ -184,40 +189,79 @@ class ListenOnlyClient(can.Listener):
         return BusError(f"{what} refused: {LISTEN_ONLY}")
 
     def sync(self) -> float:
-        """Refused: the other master produces the SYNC."""
+        """Refused: the other master produces the SYNC.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse("SYNC")
 
     def configure(self) -> None:
-        """Refused: the other master configured the gateway."""
+        """Refused: the other master configured the gateway.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse("gateway configuration")
 
     def read_register(self, slot: int, addr: int) -> int:
-        """Refused: the register handshake writes the process output image."""
+        """Refused: the register handshake writes the process output image.
+
+        Parameters ``slot`` and ``addr`` as :meth:`BridgeClient.read_register`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"slot {slot} register 0x{addr:02X} read handshake")
 
     def write_register(self, slot: int, addr: int, value: int) -> None:
-        """Refused: the register handshake writes the process output image."""
+        """Refused: the register handshake writes the process output image.
+
+        Parameters ``slot``, ``addr``, ``value`` as :meth:`BridgeClient.write_register`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"slot {slot} register 0x{addr:02X} write handshake")
 
     def set_control(self, slot: int, **bits: bool) -> None:
-        """Refused: control bits are part of the process output image."""
+        """Refused: control bits are part of the process output image.
+
+        Parameters ``slot`` and ``bits`` as :meth:`BridgeClient.set_control`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"slot {slot} control bits")
 
     def edit_output(self, slot: int, edit: object) -> None:
-        """Refused: the process output belongs to the other master."""
+        """Refused: the process output belongs to the other master.
+
+        Parameters ``slot`` and ``edit`` as :meth:`BridgeClient.edit_output`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"slot {slot} process output")
 
     def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
-        """Refused: an SDO request is a frame on the bus."""
+        """Refused: an SDO request is a frame on the bus.
+
+        Parameters ``index`` and ``subindex`` as :meth:`BridgeClient.read_object`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"SDO upload of 0x{index:04X}:{subindex:02X}")
 
     def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
-        """Refused: an SDO request is a frame on the bus."""
+        """Refused: an SDO request is a frame on the bus.
+
+        Parameters ``index``, ``subindex`` and ``value`` as :meth:`BridgeClient.write_object`.
+
+        :raises BusError: always (listen-only)
+        """
         raise self._refuse(f"SDO download of 0x{index:04X}:{subindex:02X}")
 
     # -- notifier thread ----------------------------------------------------------------------
     def on_message_received(self, msg: can.Message) -> None:
-        """Dispatch one frame (notifier thread): SYNC, TPDOs, heartbeat, EMCY."""
+        """Dispatch one frame (notifier thread): SYNC, TPDOs, heartbeat, EMCY.
+
+        :param msg: the frame as python-can received it; never raises (a bad frame is counted)
+        """
         counters = self.counters
         counters.frames += 1
         wire_t = frame_wire_time(msg)  # between processes: its sender's end of frame
@@ -257,7 +301,10 @@ class ListenOnlyClient(can.Listener):
 
     def on_error(self, exc: Exception) -> None:
         """A receive error of the bus (a datagram that is no CAN frame, an interface gone
-        down): counted by kind, logged at most once per second, the listener keeps going."""
+        down): counted by kind, logged at most once per second, the listener keeps going.
+
+        :param exc: what the bus raised
+        """
         kind = receive_error_kind(exc)
         setattr(self.counters, kind, getattr(self.counters, kind) + 1)
         self._log.warning(kind, "listen-only receive error (%s): %s", kind, exc)

@@ -11,6 +11,9 @@ reported (``gateway_alive`` False), a boot-up message or a non-OPERATIONAL heart
 an automatic re-configuration, and while no heartbeat comes the gateway is probed over SDO so
 a restarted station whose heartbeat is off again is found as well.
 
+The slots' process output images, the port the handshake runs over, with the control bits
+and their clear pulses, are ``client/images.py``'s :class:`ProcessImages` (``images``).
+
 Threads: ``sync``/``latest``/``wait_cycle`` (timer thread), ``read_register``/
 ``write_register``/``set_control`` (service thread) and the network thread share
 :class:`~ssi_bridge.client.samples.SlotTable`; one handshake per slot at a time (slot lock).
@@ -30,9 +33,9 @@ from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.client.bus_master import CanMaster
 from ssi_bridge.client.emcy_log import EmcySummary
 from ssi_bridge.client.handshake import WRITE_STEPS, Handshake
+from ssi_bridge.client.images import ProcessImages
 from ssi_bridge.client.liveness import HEARTBEAT_OBJECT, Liveness
 from ssi_bridge.client.load import BusLoad
-from ssi_bridge.client.pulses import next_pulse_output
 from ssi_bridge.client.receive import TpdoRoutes
 from ssi_bridge.client.samples import ChannelSample, ClientCounters, SlotTable
 from ssi_bridge.client.sdo import SdoAccess
@@ -41,10 +44,9 @@ from ssi_bridge.exceptions import (BusError, GatewayUnavailable, HandshakeTimeou
 from ssi_bridge.client.bus import BusOpener, ReceiveWatch
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.protocol.dictionary import (
-    MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, PROCESS_INPUT, PROCESS_OUTPUT,
-    SYNC_COB_ID, rpdo_cob_base)
+    MAX_SLOTS, NMT_COB_ID, NMT_ENTER_PRE_OPERATIONAL, NMT_START, SYNC_COB_ID)
 from ssi_bridge.base.od import build_dictionary
-from ssi_bridge.protocol.images import CmpControl, Control, ProcessInput
+from ssi_bridge.protocol.images import ProcessInput
 
 logger = logging.getLogger(__name__)
 __all__ = ["SYNC_COB_ID", "BridgeClient", "CanMaster"]
@@ -67,6 +69,8 @@ class BridgeClient:
     :param assist_after: a handshake sends its own SYNC when none was sent for this long (s)
     :param opener: opens the bus of a :class:`BusConfig` (default: a plain python-can bus;
         a simulated wire's opener puts the master's frames on that wire's time line)
+
+    :raises ValueError: ``slots`` outside 1-8 or an unknown ``transport``
     """
 
     def __init__(self, bus: BusConfig | can.BusABC | CanMaster, node_id: int, slots: int, *,
@@ -100,11 +104,13 @@ class BridgeClient:
         self.network: canopen.Network | None = None
         self.node: canopen.RemoteNode | None = None
         self.sdo: SdoAccess | None = None
-        self._handshake = Handshake(self, handshake_timeout, WRITE_STEPS * handshake_timeout)
+        #: the slots' process images: the handshake's port, control bits, clear pulses
+        self.images = ProcessImages(self, self.master.send_lock)
+        self._handshake = Handshake(self.images, handshake_timeout,
+                                    WRITE_STEPS * handshake_timeout)
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
-        self._send_lock = self.master.send_lock
         self._liveness = Liveness(self)
-        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions,
+        self._routes = TpdoRoutes(node_id, slots, self.images.on_image, self._on_positions,
                                   self._on_malformed)
 
     # -- life cycle -------------------------------------------------------------------------
@@ -206,7 +212,7 @@ class BridgeClient:
                 self._liveness.configuring = False
             self._liveness.started()  # counts as heard: the liveness clock (monotonic)
         for slot in range(1, self.slots + 1):
-            self._send_output(slot, bytes(self.table.slot(slot).output))
+            self.images.send(slot, bytes(self.table.slot(slot).output))
 
     def request_configuration(self) -> None:
         """Have the supervisor thread configure the station again (the bus came back)."""
@@ -233,6 +239,8 @@ class BridgeClient:
         On a simulated wire that is the instant the SYNC's last bit was on the wire, where
         the modules latch (the frame's own timestamp); on a real interface the instant it was
         handed to the driver. One clock, no conversion.
+
+        :raises BusError: the client is not connected, or the frame could not be sent
         """
         if self.network is None:
             raise BusError("client not connected")
@@ -247,6 +255,9 @@ class BridgeClient:
 
         On a master shared by several stations the wake-up comes when every station's cycle
         is complete (one per cycle); use ``master.wait_cycle`` to wait for all of them.
+
+        :param timeout: longest wait (s)
+        :returns: False when ``timeout`` passed first
         """
         return self.table.wait_cycle(timeout)
 
@@ -273,29 +284,44 @@ class BridgeClient:
     def set_control(self, slot: int, *, stop: bool = False, enable_cmp1: bool = False,
                     enable_cmp2: bool = False, clear_cmp1: bool = False,
                     clear_cmp2: bool = False) -> None:
-        """Set output bytes 6/7; CLR_CMPx are sent for one module cycle, then dropped."""
-        bits = CmpControl(0)
-        for on, flag in ((enable_cmp1, CmpControl.EN_CMP1), (enable_cmp2, CmpControl.EN_CMP2),
-                         (clear_cmp1, CmpControl.CLR_CMP1), (clear_cmp2, CmpControl.CLR_CMP2)):
-            if on:
-                bits |= flag
-        with self.table.cond:
-            st = self.table.slot(slot)
-            st.output[6] = int(bits)
-            st.output[7] = int(Control.STOP) if stop else 0
-            st.pulse_seq = self.table.sync_seq if clear_cmp1 or clear_cmp2 else None
-            st.pulse_resends, st.release_seq = 0, None
-            data = bytes(st.output)
-        self._send_output(slot, data)
+        """Set output bytes 6/7; CLR_CMPx are sent for one module cycle, then dropped.
+
+        :param slot: the module's slot (1-8)
+        :param stop: STOP (output byte 7): the module stops clocking its encoder
+        :param enable_cmp1: EN_CMP1 (byte 6): comparator 1 on
+        :param enable_cmp2: EN_CMP2: comparator 2 on
+        :param clear_cmp1: CLR_CMP1: clear comparator 1's flag (a one-cycle pulse)
+        :param clear_cmp2: CLR_CMP2: clear comparator 2's flag (a one-cycle pulse)
+        :raises KeyError: an unknown slot
+        """
+        self.images.set_control(slot, stop=stop, enable_cmp1=enable_cmp1,
+                                enable_cmp2=enable_cmp2, clear_cmp1=clear_cmp1,
+                                clear_cmp2=clear_cmp2)
 
     def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
-        """SDO upload with typed errors (SdoAbortError with the CiA 301 meaning)."""
+        """SDO upload with typed errors (SdoAbortError with the CiA 301 meaning).
+
+        :param index: the object's index
+        :param subindex: its subindex
+        :returns: the value, decoded by the object's data type in the dictionary
+        :raises BusError: the client is not connected
+        :raises SdoAbortError: the gateway aborted the transfer (code and CiA 301 meaning)
+        :raises GatewayUnavailable: no answer within the SDO timeout
+        """
         if self.sdo is None:
             raise BusError("client not connected")
         return self.sdo.read(index, subindex)
 
     def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
-        """SDO download with typed errors."""
+        """SDO download with typed errors.
+
+        :param index: the object's index
+        :param subindex: its subindex
+        :param value: the value, encoded by the object's data type (bytes: as they are)
+        :raises BusError: the client is not connected
+        :raises SdoAbortError: the gateway aborted the transfer (code and CiA 301 meaning)
+        :raises GatewayUnavailable: no answer within the SDO timeout
+        """
         if self.sdo is None:
             raise BusError("client not connected")
         self.sdo.write(index, subindex, value)
@@ -318,60 +344,20 @@ class BridgeClient:
         finally:
             lock.release()
 
-    # -- ImagePort for the handshake ---------------------------------------------------------
+    # -- the handshake's ImagePort (client/images.py) ---------------------------------------
     def edit_output(self, slot: int, edit: Callable[[bytearray], None]) -> None:
-        """Change bytes 0-5 of ``slot``'s output image and send it."""
-        with self.table.cond:
-            st = self.table.slot(slot)
-            scratch = bytearray(st.output)
-            edit(scratch)
-            st.output[0:6] = scratch[0:6]
-            st.edit_seq = self.table.sync_seq
-            data = bytes(st.output)
-        self._send_output(slot, data)
+        """Change bytes 0-5 of ``slot``'s output image with ``edit`` and send it
+        (:meth:`ProcessImages.edit_output`: parameters and errors)."""
+        self.images.edit_output(slot, edit)
 
     def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
-        """An input image produced after the last edit; sends SYNC itself when none comes."""
-        end = time.monotonic() + timeout
-        while (left := end - time.monotonic()) > 0:
-            if self.transport == "sdo":
-                return self._poll_input(slot)
-            image = self.table.next_input(slot, min(left, self.assist_after))
-            if image is not None:
-                return image
-            if time.monotonic() - self.table.synced_at >= self.assist_after:
-                self.sync()
-        return None
+        """An input image of ``slot`` produced after the last edit, or None after ``timeout``
+        s (:meth:`ProcessImages.next_input`)."""
+        return self.images.next_input(slot, timeout)
 
     def alive(self) -> bool:
         """ImagePort: the heartbeat is current."""
         return self.gateway_alive
-
-    def _poll_input(self, slot: int) -> ProcessInput | None:
-        assert self.sdo is not None
-        self.sync()
-        try:
-            data = self.sdo.read_image(PROCESS_INPUT, slot)
-        except GatewayUnavailable:
-            return None
-        self.table.on_image(slot, data)
-        return ProcessInput.decode(data)
-
-    def _send_output(self, slot: int, data: bytes) -> None:
-        if self.network is None:
-            return
-        try:
-            if self.transport == "sdo":
-                assert self.sdo is not None
-                self.sdo.write(PROCESS_OUTPUT, slot, int.from_bytes(data, "little"))
-                return
-            with self._send_lock:
-                self.network.send_message(rpdo_cob_base(slot) + self.node_id, data)
-        except can.CanError as err:
-            self.counters.can_errors += 1
-            logger.warning("slot %d: process output not sent: %s", slot, err)
-        except GatewayUnavailable as err:
-            logger.warning("slot %d: process output not written: %s", slot, err)
 
     # -- network thread callbacks ------------------------------------------------------------
     # TPDOs arrive raw on their COB-IDs (client/receive.py), not through canopen's PdoMaps
@@ -384,15 +370,6 @@ class BridgeClient:
     def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
                       timestamp: float) -> None:
         self.table.on_positions(slots, data, timestamp)
-
-    def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        st = self.table.on_image(slot, data, timestamp)
-        if st.pulse_seq is None and st.release_seq is None:  # re-checked under the lock
-            return
-        with self.table.cond:
-            out = next_pulse_output(slot, st, self.table.sync_seq, data, self.counters)
-        if out is not None:
-            self._send_output(slot, out)
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1

@@ -92,7 +92,13 @@ class MasterSettings(Protocol):
 
 def ensure_node_alone(config: BusConfig, settings: MasterSettings,
                       opener: Callable[[BusConfig], can.BusABC] | None = None) -> None:
-    """:func:`ensure_alone` for a node: its stations, nothing when it only listens."""
+    """:func:`ensure_alone` for a node: its stations, nothing when it only listens.
+
+    :param config: the node's bus
+    :param settings: the node's master settings (its stations, whether it only listens)
+    :param opener: opens the bus (default: a plain python-can bus)
+    :raises BusError: another master's frames were heard, naming them
+    """
     ensure_alone(config, settings.station_ids, opener, listen_only=settings.listen_only)
 
 

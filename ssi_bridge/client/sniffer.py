@@ -113,6 +113,11 @@ class CanSniffer:
 
     ``on_error(reason)`` is called once, from the receiving thread, when writing fails;
     :attr:`error` keeps the reason.
+
+    :param config: the bus to open (its own connection, beside the master's)
+    :param path: the candump log file to write
+    :param on_error: called once with the reason when writing fails
+    :raises BusError: the bus cannot be opened
     """
 
     def __init__(self, config: BusConfig, path: Path,

@@ -158,7 +158,7 @@ def identify(sdo: SdoAccess) -> Identity:
     serves XN-1SSI modules from firmware V3.00 (000 ch. 4, revision 0x00030000).
     Raises GatewayUnavailable when the node does not answer at all.
     """
-    ident = Identity(sdo.node.id)
+    ident = Identity(sdo.node_id)
     ident.device_type = _u32(sdo, 0x1000)
     try:
         ident.name = sdo.upload(0x1008, 0).decode("latin-1").rstrip("\0 ")

@@ -92,7 +92,13 @@ def _direction_line(res: SlotResult) -> str:
 
 
 def render(bus: BusSpec, results: list[SlotResult], source: str = "") -> str:
-    """The params file text for the joints of ``results`` (slots without a joint left out)."""
+    """The params file text for the joints of ``results`` (slots without a joint left out).
+
+    :param bus: the bus the params file names (interface, channel, bit rate)
+    :param results: the judged slots; each with a joint becomes one
+    :param source: where the values came from, written as the file's comment
+    :returns: the YAML text of a ROS 2 params file
+    """
     joints = [r for r in results if r.joint]
     stations = sorted({r.node_id for r in results})
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")

@@ -71,8 +71,12 @@ def decisions(result: Result) -> list[str]:
     return out
 
 
-def as_dict(result: Result) -> dict[str, Any]:
-    """The report as a JSON-ready dict."""
+def as_dict(result: Result) -> dict[str, object]:
+    """The report as a JSON-ready dict.
+
+    :param result: the run's result
+    :returns: the same content as :func:`as_text`, as plain JSON types
+    """
     heard = result.heard
     out: dict[str, Any] = {
         "refusal": result.refusal, "listen_only": result.listen_only,
@@ -105,7 +109,11 @@ def as_json(result: Result) -> str:
 
 
 def as_text(result: Result) -> str:
-    """The report for a person."""
+    """The report for a person.
+
+    :param result: the run's result
+    :returns: lines for a terminal (gateways, slots, the inferred encoders, refusals)
+    """
     if result.refusal:
         return result.refusal
     lines: list[str] = []

@@ -109,7 +109,14 @@ class _Garbage(can.Listener):
 
 def commission(bus: BusConfig | can.BusABC, options: Options,
                progress: Progress | None = None) -> Result:
-    """Run the commissioning on ``bus``; raises BusError only when the bus cannot be opened."""
+    """Run the commissioning on ``bus``; raises BusError only when the bus cannot be opened.
+
+    :param bus: the bus's configuration (opened here) or an open bus (taken over)
+    :param options: node ids, sampling time, listen-only, ...
+    :param progress: called with one line per step, for a person watching
+    :returns: what was heard, found and inferred (a refused run says why in ``refusal``)
+    :raises BusError: the bus cannot be opened
+    """
     say = progress or (lambda text: None)
     raw = take_bus(bus, "commission", open_bus)
     say(f"listening {options.listen:g} s for heartbeats and other masters")
@@ -135,8 +142,7 @@ def commission(bus: BusConfig | can.BusABC, options: Options,
         raw.shutdown()
         raise
     network = MasterNetwork(raw)
-    network.listeners.append(_Garbage(heard))
-    network.connect()
+    network.start(_Garbage(heard), canopens_too=True)
     try:
         _run(network, heard, answered, options, result, say)
     finally:

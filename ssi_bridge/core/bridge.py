@@ -72,7 +72,11 @@ class Bridge:
         self.para1_lock = threading.RLock()
 
     def joint(self, requested: str) -> Joint:
-        """The joint a request means; an empty name means the first configured joint."""
+        """The joint a request means; an empty name means the first configured joint.
+
+        :param requested: a configured joint's name, or empty for the first
+        :raises ConfigError: no joint of that name (the message lists the configured ones)
+        """
         if not requested:
             return next(iter(self.joints.values()))
         if requested not in self.joints:
@@ -82,7 +86,12 @@ class Bridge:
 
     # -- REG_PARA1 --------------------------------------------------------------------------
     def adopt_para1(self, joint: Joint, value: int, since: float) -> None:
-        """The module holds ``value``: the joint follows, the parameter is mirrored."""
+        """The module holds ``value``: the joint follows, the parameter is mirrored.
+
+        :param joint: the joint whose module holds ``value``
+        :param value: the REG_PARA1 read from the module
+        :param since: wire time from which samples are latched under ``value``
+        """
         with self.para1_lock:
             joint.adopt_para1(value, since)
             if self._on_para1 is not None:
@@ -93,6 +102,13 @@ class Bridge:
 
         Checked against the module's rules (000 Table 19, ERR_PARA), written by the handshake;
         samples latched before the write are unknown. Raises ConfigError / SsiBridgeError.
+
+        :param name: the joint's name (empty: the first)
+        :param value: the new REG_PARA1
+        :param via: who asked (a service, a parameter change), for the sentence
+        :returns: the sentence that says what happened
+        :raises ConfigError: an unknown joint or a value the module would refuse
+        :raises SsiBridgeError: the handshake failed (timeout, refusal, silent gateway)
         """
         reason = validate_para1(value)
         if reason:
@@ -156,12 +172,26 @@ class Bridge:
 
     # -- registers --------------------------------------------------------------------------
     def read_register(self, joint: Joint, address: int) -> int:
-        """The register's value through the REG_RD_ADR handshake (000 Table 4)."""
+        """The register's value through the REG_RD_ADR handshake (000 Table 4).
+
+        :param joint: the joint whose module is read
+        :param address: the register (0-63)
+        :raises ConfigError: the address is out of range
+        :raises SsiBridgeError: the handshake failed (timeout, abort, silent gateway)
+        """
         check_address(address)
         return int(self.client_of(joint.name).read_register(joint.slot, address))
 
     def write_register(self, joint: Joint, address: int, value: int) -> str:
-        """REG_WR / REG_WR_AKN / REG_WR_ACCEPT; REG_PARA1 takes :meth:`change_para1`."""
+        """REG_WR / REG_WR_AKN / REG_WR_ACCEPT; REG_PARA1 takes :meth:`change_para1`.
+
+        :param joint: the joint whose module is written
+        :param address: the register (0-63)
+        :param value: the value to write
+        :returns: the sentence that says what happened
+        :raises ConfigError: the address is out of range or the value breaks a rule of 000
+        :raises SsiBridgeError: the handshake failed (timeout, refusal, silent gateway)
+        """
         check_address(address)
         if address == Reg.REG_PARA1:
             return self.change_para1(joint.name, value, "~/write_register")
@@ -183,6 +213,11 @@ class Bridge:
 
         000 "Offset function": REG_SSI_POS = SSI encoder - REG_OFFSET. Returns the offset
         written (Integer32), the position read back and the sentence.
+
+        :param joint: the joint to preset
+        :param position: the position REG_SSI_POS shall read, in joint units (rad or m)
+        :raises ConfigError: ``position`` is not finite or not reachable in Integer32 counts
+        :raises SsiBridgeError: a handshake failed
         """
         if not math.isfinite(position):
             raise ConfigError(f"position {position} is not a finite number")
@@ -211,7 +246,13 @@ class Bridge:
                 f"(requested {position:.6f})")
 
     def reset_registers(self, joint: Joint, include_parameters: bool) -> str:
-        """REG_SF = "LD20" (with parameters) or "LD48" (without), 000 "Resetting the bank"."""
+        """REG_SF = "LD20" (with parameters) or "LD48" (without), 000 "Resetting the bank".
+
+        :param joint: the joint whose module's bank is reset
+        :param include_parameters: also REG_PARA1 and the other parameters (LD20)
+        :returns: the sentence that says what happened
+        :raises SsiBridgeError: the handshake failed
+        """
         client, slot = self.client_of(joint.name), joint.slot
         if not include_parameters:
             estimator = joint.velocity
@@ -238,13 +279,26 @@ class Bridge:
                             if note else ""))
 
     def set_control(self, joint: Joint, **bits: bool) -> str:
-        """STOP, EN_CMPx and one-cycle CLR_CMPx pulses of the process output (000 Table 6)."""
+        """STOP, EN_CMPx and one-cycle CLR_CMPx pulses of the process output (000 Table 6).
+
+        :param joint: the joint whose module's control bits are set
+        :param bits: as :meth:`BridgeClient.set_control` (``stop``, ``enable_cmp1`` ...)
+        :returns: the sentence that says what happened
+        """
         self.client_of(joint.name).set_control(joint.slot, **bits)
         return "control bits set"
 
     # -- faults (simulation only) -----------------------------------------------------------
     def inject_fault(self, joint: Joint, kind: int, rate: float, duration: float) -> str:
-        """A fault in the simulated station; ConfigError on real hardware."""
+        """A fault in the simulated station; ConfigError on real hardware.
+
+        :param joint: the joint whose encoder, line or station is faulted
+        :param kind: the fault (``InjectFault`` constants; 0 clears all)
+        :param rate: probability per frame or cycle, where the kind has one
+        :param duration: seconds, 0 = until cleared
+        :returns: the sentence that says what happened
+        :raises ConfigError: the node drives a real station (no simulation)
+        """
         if self.faults is None:
             raise ConfigError("fault injection needs simulation.enabled:=true; this node drives "
                               "real hardware")

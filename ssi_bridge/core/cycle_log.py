@@ -171,11 +171,22 @@ class StationLog:
             self._insert(t)
 
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
-        """A process input image of ``slot`` ended on the wire at ``t``."""
+        """A process input image of ``slot`` ended on the wire at ``t``.
+
+        :param slot: the module's slot
+        :param t: the frame's wire time (s)
+        :param data: the 8 bytes of the image
+        :param count: images received for the slot so far, this one included
+        """
         self._add(slot, Frame(IMAGE, t, bytes(data), 0, count))
 
     def position(self, slot: int, t: float, value: int) -> None:
-        """A position (REG_SSI_POS) of ``slot`` ended on the wire at ``t``."""
+        """A position (REG_SSI_POS) of ``slot`` ended on the wire at ``t``.
+
+        :param slot: the module's slot
+        :param t: the frame's wire time (s)
+        :param value: REG_SSI_POS as received
+        """
         self._add(slot, Frame(POSITION, t, b"", value, 0))
 
     def _insert(self, t: float) -> None:

@@ -60,7 +60,11 @@ def read_cam(read: Callable[[int], int]) -> CamSettings:
 
 
 class FrameWatch:
-    """Frame checks and status-bit edges of one joint."""
+    """Frame checks and status-bit edges of one joint.
+
+    :param cfg: the joint's encoder layout (None: no frame checks, status bits only)
+    :param para1: the REG_PARA1 in force
+    """
 
     def __init__(self, cfg: EncoderConfig | None, para1: int) -> None:
         self.cfg = cfg
@@ -76,7 +80,10 @@ class FrameWatch:
         self.image = b""
 
     def set_para1(self, para1: int) -> None:
-        """Follow a new REG_PARA1: the frame as read has SSI_FRAME_LEN bits (000 Table 19)."""
+        """Follow a new REG_PARA1: the frame as read has SSI_FRAME_LEN bits (000 Table 19).
+
+        :param para1: the REG_PARA1 now in force
+        """
         if self.cfg is None:
             self.check = None
             return
@@ -84,6 +91,10 @@ class FrameWatch:
         self.check = FrameCheck(self.cfg, frame_len) if 1 <= frame_len <= 32 else None
 
     def set_cam(self, cam: CamSettings) -> None:
+        """Follow the CAM settings of the gateway (object 0x6B00's limits, enable and polarity).
+
+        :param cam: the new settings
+        """
         self.cam = cam
 
     def evaluate(self, image: bytes) -> tuple[FrameVerdict, FrameVerdict] | None:
@@ -99,7 +110,10 @@ class FrameWatch:
         return before, self.verdict
 
     def cam_state(self, reg_ssi_pos: int) -> int:
-        """Object 0x6B00 for this REG_SSI_POS (000 Table 42, 0x01 = inside, polarity applied)."""
+        """Object 0x6B00 for this REG_SSI_POS (000 Table 42, 0x01 = inside, polarity applied).
+
+        :param reg_ssi_pos: the position as the module reports it
+        """
         c = self.cam
         return cam_state(reg_ssi_pos & 0xFFFFFFFF, c.low, c.high, enabled=c.enabled,
                          polarity=c.polarity)

@@ -95,8 +95,16 @@ class FaultPort(Protocol):
         """The faults in force (empty: none)."""
 
     def inject(self, kind: int, joint: str, rate: float = 0.0, duration: float = 0.0) -> str:
-        """Apply fault ``kind`` (InjectFault's constants); the sentence saying what now
-        happens. Raises ConfigError for a kind, joint or rate the station refuses."""
+        """Apply fault ``kind`` (InjectFault's constants) to ``joint``.
+
+        :param kind: the fault, one of InjectFault's constants
+        :param joint: the joint it applies to; empty: the only (or first) configured joint
+            (ignored for bus faults)
+        :param rate: the fault's rate where it has one (e.g. the share of frames lost)
+        :param duration: seconds until the fault expires by itself; 0 keeps it until CLEAR_ALL
+        :returns: the sentence saying what now happens
+        :raises ConfigError: for a kind, joint or rate the station refuses
+        """
 
     def expire(self) -> Sequence[ExpiredFault]:
         """Forget the faults whose duration ran out; those faults."""

@@ -224,6 +224,12 @@ class ObjectAccess:
 
         Raises SdoAbortError (the station's abort code and its CiA 301 meaning),
         GatewayUnavailable, BusError (listen-only) or ConfigError.
+
+        :param node_id: the station (0: the station of ``joint``)
+        :param joint: the joint naming the station when ``node_id`` is 0 (empty: the first)
+        :param index: the object's index
+        :param subindex: its subindex
+        :param data_type: the type to decode with (empty: the EDS's)
         """
         named = type_named(data_type)
         client = self.station(node_id, joint)
@@ -245,6 +251,12 @@ class ObjectAccess:
 
         Raises SdoAbortError, GatewayUnavailable, BusError, ConfigError (a refusal, or a value
         the type or the module's rules do not allow).
+
+        :param node_id: the station (0: the station of ``joint``)
+        :param joint: the joint naming the station when ``node_id`` is 0 (empty: the first)
+        :param index: the object's index
+        :param subindex: its subindex
+        :param data_type: the type to encode with (empty: the EDS's)
         """
         named = type_named(data_type)
         client = self.station(node_id, joint)

@@ -61,7 +61,11 @@ def crc15(data: int, n_bits: int = DATA_BITS) -> int:
 
 
 def code_word(data: int, n_bits: int = DATA_BITS) -> int:
-    """Data followed by its checksum: the ``n_bits + 15`` bits on the wire."""
+    """Data followed by its checksum: the ``n_bits + 15`` bits on the wire.
+
+    :param data: the data bits, first transmitted = MSB
+    :param n_bits: how many data bits
+    """
     return (data << WIDTH) | crc15(data, n_bits)
 
 

@@ -29,7 +29,10 @@ class Code(Enum):
 
 
 def bin_to_gray(value: int) -> int:
-    """Gray code of a non-negative integer (004 §2.4 Table 1)."""
+    """Gray code of a non-negative integer (004 §2.4 Table 1).
+
+    :param value: the binary value (>= 0)
+    """
     return value ^ (value >> 1)
 
 
@@ -38,6 +41,8 @@ def gray_to_bin(gray: int) -> int:
 
     Bit ``i`` of the result is the XOR of Gray bits ``i`` and above; doubling shifts make
     this ``log2(width)`` steps instead of one per bit.
+
+    :param gray: the Gray-coded value (>= 0)
     """
     value = gray
     shift = 1

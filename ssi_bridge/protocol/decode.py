@@ -72,6 +72,11 @@ def decode_frame(data: int, frame_bits: int, *, invalid_lsb: int = 0, invalid_ms
     :param invalid_lsb: bits removed on the LSB side by shifting right
     :param invalid_msb: bits zeroed on the MSB side by masking
     :param gray: the encoder sends Gray code
+
+    :param max_bits: the longest frame allowed (32 for the XN-1SSI)
+    :returns: the position value, LSB-aligned
+    :raises ConfigError: ``frame_bits`` outside 1..``max_bits``, or negative invalid bits, or
+        as many as the frame has
     """
     if not (invalid_lsb or invalid_msb or gray) and 1 <= frame_bits <= max_bits:
         return data & ((1 << frame_bits) - 1)          # the plain frame: mask only

@@ -68,7 +68,12 @@ class DiagEdge:
 
 
 def diag_edges(previous: Diag, current: Diag, slot: int = 0) -> list[DiagEdge]:
-    """Rising and falling edges between two diagnostics bytes, lowest bit first."""
+    """Rising and falling edges between two diagnostics bytes, lowest bit first.
+
+    :param previous: the byte before
+    :param current: the byte now
+    :param slot: the module's slot (named in the edges)
+    """
     out: list[DiagEdge] = []
     for bit in Diag:
         was, now = bit in previous, bit in current
@@ -83,6 +88,9 @@ class DiagTracker:
     The gateway calls :meth:`update` after every module cycle and sends an EMCY (0x7000,
     byte 5 = :attr:`DiagEdge.emcy_value`) for each rising edge, and the error-reset EMCY once
     the byte returns to 0.
+
+    :param slot: the module's slot (named in the edges)
+    :param initial: the byte before the first update
     """
 
     def __init__(self, slot: int = 0, initial: Diag = Diag(0)) -> None:
@@ -110,6 +118,13 @@ def cam_state(pos: int, cam_low: int, cam_high: int, *, enabled: bool, polarity:
     Table 42 prints "outside" for both rows; resolved as 0x00 = outside the range or comparison
     disabled, 0x01 = inside CAM1 Low Limit (REG_CMP2) <= pos <= CAM1 High Limit (REG_CMP1),
     both ends inclusive, compared as Integer32; polarity 0x01 inverts (Table 46).
+
+    :param pos: REG_SSI_POS
+    :param cam_low: CAM1 low limit (REG_CMP2, object 0x6B10)
+    :param cam_high: CAM1 high limit (REG_CMP1, object 0x6B20)
+    :param enabled: the CAM is enabled (object 0x6B01)
+    :param polarity: object 0x6B02 (0x01 inverts)
+    :returns: 0x00 or 0x01
     """
     inside = enabled and to_int32(cam_low) <= to_int32(pos) <= to_int32(cam_high)
     return int(inside) ^ (polarity & 1)

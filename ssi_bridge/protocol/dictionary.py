@@ -124,7 +124,10 @@ def tpdo_cob_base(pdo: int) -> int:
 
 
 def rpdo_cob_base(pdo: int) -> int:
-    """Return the RPDO COB-ID without node id (PDO9-12: 0x260 .. 0x560, 000 Table 15)."""
+    """Return the RPDO COB-ID without node id (PDO9-12: 0x260 .. 0x560, 000 Table 15).
+
+    :param pdo: the PDO's number (1-12), as :func:`tpdo_cob_base`
+    """
     return tpdo_cob_base(pdo) + 0x80
 
 

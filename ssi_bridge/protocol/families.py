@@ -237,8 +237,13 @@ def family_max_speed(family: str, linear: bool | None = None) -> SpeedSpec:
                      "default for rotary encoders (docs/node.md)")
 
 
-def family_config(family: str, **overrides: Any) -> EncoderConfig:
-    """The :class:`EncoderConfig` of a preset with ``overrides`` applied and fixed up."""
+def family_config(family: str, **overrides: object) -> EncoderConfig:
+    """The :class:`EncoderConfig` of a preset with ``overrides`` applied and fixed up.
+
+    :param family: the preset's name (case-insensitive)
+    :param overrides: :class:`EncoderConfig` fields to change
+    :raises ConfigError: an unknown family, or overrides that make no valid configuration
+    """
     key = family.upper()
     if key not in FAMILIES:
         raise ConfigError(f"unknown encoder family {family!r}; known: {', '.join(sorted(FAMILIES))}")

@@ -101,6 +101,16 @@ def encode_input(reg_rd_data: int, reg_rd_adr: int, reg_rd_abort: bool, reg_wr_a
     The one encoder of the image: :meth:`ProcessInput.encode` and the module's cycle, which
     keeps its state as ints, both use it; plain int arithmetic, because an ``IntFlag``
     operation is a Python-level call.  Reserved bits are sent as 0.
+
+    :param reg_rd_data: REG_RD_DATA (bytes 0-3)
+    :param reg_rd_adr: REG_RD_ADR (byte 4, bits 0-5)
+    :param reg_rd_abort: REG_RD_ABORT
+    :param reg_wr_akn: REG_WR_AKN
+    :param reg_wr_accept: REG_WR_ACCEPT
+    :param ssi_sts: the SSI status bits of byte 5
+    :param cmp: the comparator bits of byte 6
+    :param sts: the status bits of byte 7
+    :returns: the 8-byte image
     """
     return IMAGE_STRUCT.pack(
         reg_rd_data & 0xFFFFFFFF,
@@ -144,7 +154,11 @@ class ProcessInput:
 
     @classmethod
     def decode(cls, image: bytes) -> ProcessInput:
-        """Parse 8 bytes; raises ValueError for another length."""
+        """Parse 8 bytes; raises ValueError for another length.
+
+        :param image: the 8 bytes of object 0x2000
+        :raises ValueError: ``image`` is not 8 bytes long
+        """
         _check_len(image)
         data, byte4, byte5, byte6, byte7 = IMAGE_STRUCT.unpack(image)
         return cls(
@@ -199,7 +213,11 @@ class ProcessOutput:
 
     @classmethod
     def decode(cls, image: bytes) -> ProcessOutput:
-        """Parse 8 bytes, ignoring reserved bits; raises ValueError for another length."""
+        """Parse 8 bytes, ignoring reserved bits; raises ValueError for another length.
+
+        :param image: the 8 bytes of object 0x2100
+        :raises ValueError: ``image`` is not 8 bytes long
+        """
         _check_len(image)
         data, byte4, byte5, byte6, byte7 = IMAGE_STRUCT.unpack(image)
         return cls(

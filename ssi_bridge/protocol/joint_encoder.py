@@ -51,6 +51,9 @@ def count_factor(cfg: EncoderConfig, para1: int) -> float:
     ``SSI_FRAME_LEN - frame_bits + lsb - INVALID_BITS_LSB`` of REG_SSI_POS. A Tannenbaum
     step field wider than the resolution ends in zeros (004 §3.4; the 16-bit step field of
     the TR check sum format, 001 §5.2.4.2): the whole value sits ``field - n`` bits higher.
+
+    :param cfg: the encoder's layout
+    :param para1: the REG_PARA1 in force
     """
     p = Para1.decode(para1)
     lsb = cfg.frame_bits - cfg.position_bits - (1 if cfg.shift_right else 0)
@@ -60,7 +63,11 @@ def count_factor(cfg: EncoderConfig, para1: int) -> float:
 
 
 def para1_mismatch(cfg: EncoderConfig, para1: int) -> str | None:
-    """Why REG_PARA1 does not fit an encoder of layout ``cfg`` (a WARN), or None."""
+    """Why REG_PARA1 does not fit an encoder of layout ``cfg`` (a WARN), or None.
+
+    :param cfg: the encoder's layout
+    :param para1: the REG_PARA1 in force
+    """
     p = Para1.decode(para1)
     problems = []
     if p.ssi_frame_len != cfg.frame_bits:

@@ -89,7 +89,10 @@ class Para1:
         )
 
     def encode(self) -> int:
-        """Pack the fields into the 32-bit REG_PARA1 value (reserved bits kept as decoded)."""
+        """Pack the fields into the 32-bit REG_PARA1 value (reserved bits kept as decoded).
+
+        :raises ValueError: a field does not fit its bits
+        """
         fields = (
             (self.ssi_frame_len, _FRAME_LEN_MASK, "ssi_frame_len"),
             (self.ssi_bit_rate, _BIT_RATE_MASK, "ssi_bit_rate"),

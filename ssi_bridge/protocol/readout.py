@@ -5,7 +5,7 @@ module can be unit-tested with a scripted reader and run on the real line model 
 
 :class:`LineReadout` is a :class:`typing.NamedTuple`, not a frozen dataclass: it is built once
 per burst in the scalar hot path (:meth:`SsiLine.read`), and a frozen dataclass pays an
-``object.__setattr__`` per field (about 1.3 µs here against 0.3 µs). It is just as immutable,
+``object.__setattr__`` per field (docs/encoder_line.md "Performance"). It is just as immutable,
 attribute access is unchanged; use ``readout._replace(data=...)`` for a modified copy.
 """
 

@@ -108,7 +108,7 @@ class JointSettings:
     station: int = 0
 
 
-def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
+def joint_from_values(joint: str, jv: Mapping[str, object], *, slot: int,
                       station: int = 0) -> JointSettings:
     """One joint's settings from its values ``{"<key>": value}`` (the keys of JOINT_DEFAULTS).
 
@@ -116,15 +116,35 @@ def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
     the node its declared parameters: one place, so both refuse the same values alike, before
     anything is started: an unknown family and a REG_PARA1 the module would refuse with
     ERR_PARA (000 Table 19) included.
+
+    :param joint: the joint's name (how an error names the key: ``<joint>.<key>``)
+    :param jv: its values, as read from a params file or the node's parameters (unchecked)
+    :param slot: the module's slot on its station (1-based)
+    :param station: the station's node id (0: the node's own ``node_id``)
+    :returns: the checked settings
+    :raises ConfigError: a value of the wrong kind or out of its allowed set, naming the key
+
+    (``TypeError`` inside is turned into that ConfigError.)
     """
+
+    def number(key: str, kind: type[int] | type[float], default: object = None) -> float:
+        value = jv.get(key, default)
+        try:
+            if not isinstance(value, (int, float, str)):
+                raise TypeError(type(value).__name__)
+            return kind(value)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{joint}.{key} {str(value)[:40]!r}: not "
+                              f"{'an integer' if kind is int else 'a number'}") from None
+
+    def integer(key: str, default: object = None) -> int:
+        return int(number(key, int, default))
+
     family = str(jv["family"])
     if family.upper() not in FAMILIES:
         raise ConfigError(f"{joint}.family {family[:40]!r}: unknown encoder family; known: "
                           f"{', '.join(sorted(FAMILIES))}")
-    try:
-        para1 = int(jv["para1"])
-    except (TypeError, ValueError):
-        raise ConfigError(f"{joint}.para1 {str(jv['para1'])[:40]!r}: not an integer") from None
+    para1 = integer("para1")
     reason = validate_para1(para1)
     if reason:
         shown = f"0x{para1:08X}" if para1 >= 0 else str(para1)
@@ -140,14 +160,15 @@ def joint_from_values(joint: str, jv: Mapping[str, Any], *, slot: int,
         raise ConfigError(f"{joint}.direction {jv['direction']}: must be 1 or -1")
     return JointSettings(
         name=joint, slot=slot, station=station, family=str(jv["family"]), code=str(jv["code"]),
-        cable_length=float(jv["cable_length"]), para1=int(jv["para1"]),
-        ssi_mask=int(jv.get("ssi_mask", -1)), steps_per_rev=int(jv["steps_per_rev"]),
-        revolutions=int(jv["revolutions"]), measuring_step=float(jv["measuring_step"]),
-        direction=int(jv["direction"]),
-        motion=MotionSettings(kind=str(jv["motion.kind"]), velocity=float(jv["motion.velocity"]),
-                              amplitude=float(jv["motion.amplitude"]),
-                              frequency=float(jv["motion.frequency"]),
-                              start=float(jv["motion.start"])))
+        cable_length=number("cable_length", float), para1=para1,
+        ssi_mask=integer("ssi_mask", -1), steps_per_rev=integer("steps_per_rev"),
+        revolutions=integer("revolutions"), measuring_step=number("measuring_step", float),
+        direction=integer("direction"),
+        motion=MotionSettings(kind=str(jv["motion.kind"]),
+                              velocity=number("motion.velocity", float),
+                              amplitude=number("motion.amplitude", float),
+                              frequency=number("motion.frequency", float),
+                              start=number("motion.start", float)))
 
 
 def check_joint_names(names: list[str], shown: str = "") -> None:
@@ -200,11 +221,15 @@ def _flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str, Any]:
+def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str, object]:
     """The ``ros__parameters`` a ROS 2 params file gives a node named ``node_name``.
 
     Sections apply in file order: ``/**``, ``<node_name>``, ``/<node_name>`` and
     ``/<namespace>/<node_name>`` all match; nested keys become dotted names (``bus.channel``).
+
+    :param stream: the params file's text
+    :param node_name: the node's name (the sections that apply to it)
+    :raises ConfigError: not YAML, or not a mapping of sections
     """
     try:
         doc = yaml.safe_load(stream) or {}
@@ -222,8 +247,12 @@ def load_params_file(stream: IO[str], node_name: str = "ssi_bridge") -> dict[str
     return values
 
 
-def station_settings(values: Mapping[str, Any]) -> StationSettings:
-    """StationSettings from node parameter values (dotted names; absent ones take defaults)."""
+def station_settings(values: Mapping[str, object]) -> StationSettings:
+    """StationSettings from node parameter values (dotted names; absent ones take defaults).
+
+    :param values: parameter values by dotted name (unchecked)
+    :raises ConfigError: a value the schema does not allow, naming the parameter
+    """
     v = {**STATION_DEFAULTS, **values}
     names = v["joints"]
     if not isinstance(names, list):

@@ -37,7 +37,10 @@ def _bits(value: int, width: int) -> list[int]:
 
 
 def crc15(bits: Iterable[int]) -> int:
-    """The CAN CRC-15 of a bit sequence (ISO 11898-1, polynomial 0x4599, initial 0)."""
+    """The CAN CRC-15 of a bit sequence (ISO 11898-1, polynomial 0x4599, initial 0).
+
+    :param bits: the bits from SOF to the end of the data field, one int (0/1) each
+    """
     crc = 0
     for bit in bits:
         nxt = bit ^ ((crc >> 14) & 1)
@@ -136,7 +139,12 @@ def frame_bits(can_id: int, data: bytes | bytearray = b"", remote: bool = False,
 
     Remembered for the last :data:`FRAME_BITS_CACHE` frame contents: a received frame is
     counted by the wire (its place in time) and by the bus load, and SYNC, heartbeats and
-    unchanged images repeat; the count itself takes ~7 us in Python.
+    unchanged images repeat, and the count walks every bit in Python.
+
+    :param can_id: the 11-bit identifier
+    :param data: the data bytes
+    :param remote: a remote frame (no data field)
+    :param dlc: the DLC of a remote frame (default: ``len(data)``)
     """
     payload = b"" if remote else bytes(data)
     return _frame_bits(can_id, payload, remote, len(payload) if dlc is None else dlc)
@@ -155,7 +163,10 @@ def _frame_bits(can_id: int, payload: bytes, remote: bool, n: int) -> int:
 
 
 def reference_frame_bits(can_id: int, data: bytes = b"", remote: bool = False) -> int:
-    """:func:`frame_bits` spelled out bit by bit (the test compares both)."""
+    """:func:`frame_bits` spelled out bit by bit (the test compares both).
+
+    Parameters ``can_id``, ``data`` and ``remote`` as :func:`frame_bits`.
+    """
     payload = b"" if remote else bytes(data)
     head = [0] + _bits(can_id, 11) + [1 if remote else 0, 0, 0] + _bits(len(payload), 4)
     for byte in payload:
@@ -165,7 +176,10 @@ def reference_frame_bits(can_id: int, data: bytes = b"", remote: bool = False) -
 
 
 def worst_frame_bits(n_bytes: int) -> int:
-    """The classical upper bound of a base frame's bits: 34 + 8n stuffable bits, (34+8n-1)/4 stuff."""
+    """The classical upper bound of a base frame's bits: 34 + 8n stuffable bits, (34+8n-1)/4 stuff.
+
+    :param n_bytes: data bytes (0-8)
+    """
     stuffable = 34 + 8 * n_bytes
     return stuffable + (stuffable - 1) // 4 + TAIL_BITS
 
@@ -176,7 +190,11 @@ def frame_seconds(bits: int, bitrate: int) -> float:
 
 
 def cycle_payloads(slots: int) -> list[int]:
-    """Data bytes of each frame of one SYNC cycle: SYNC, the images, the position PDOs."""
+    """Data bytes of each frame of one SYNC cycle: SYNC, the images, the position PDOs.
+
+    :param slots: the station's modules (1-8)
+    :raises ValueError: ``slots`` outside 1-8
+    """
     if not 1 <= slots <= 8:
         raise ValueError(f"slots {slots} outside 1-8")
     positions = [4 * len([s for s in (2 * g + 1, 2 * g + 2) if s <= slots])
@@ -190,17 +208,28 @@ def cycle_bits(slots: int) -> int:
 
 
 def cycle_seconds(slots: int, bitrate: int) -> float:
-    """Worst-case wire time (s) of SYNC -> end of the last TPDO of one cycle."""
+    """Worst-case wire time (s) of SYNC -> end of the last TPDO of one cycle.
+
+    :param slots: the station's modules (1-8)
+    :param bitrate: the bus's bit rate (bit/s)
+    """
     return frame_seconds(cycle_bits(slots), bitrate)
 
 
 def budget_bits(slots: int) -> int:
-    """The bits a cycle must find room for: the cycle plus the register-traffic reserve."""
+    """The bits a cycle must find room for: the cycle plus the register-traffic reserve.
+
+    :param slots: the station's modules (1-8)
+    """
     return cycle_bits(slots) + SDO_RESERVE_FRAMES * worst_frame_bits(8)
 
 
 def max_cycle_rate(slots: int, bitrate: int) -> float:
-    """Highest SYNC rate (Hz) at which the cycle and the reserve fit the wire, rounded down to 10 Hz."""
+    """Highest SYNC rate (Hz) at which the cycle and the reserve fit the wire, rounded down to 10 Hz.
+
+    :param slots: the station's modules (1-8)
+    :param bitrate: the bus's bit rate (bit/s)
+    """
     return math.floor(bitrate / budget_bits(slots) / 10.0) * 10.0
 
 
@@ -210,7 +239,10 @@ def fits(slots: int, bitrate: int, rate_hz: float) -> bool:
 
 
 def stations_cycle_bits(slot_counts: Sequence[int]) -> int:
-    """Worst-case bits of one cycle of several stations on one bus: ONE SYNC, their TPDOs."""
+    """Worst-case bits of one cycle of several stations on one bus: ONE SYNC, their TPDOs.
+
+    :param slot_counts: each station's modules
+    """
     sync = worst_frame_bits(0)
     return sync + sum(cycle_bits(n) - sync for n in slot_counts)
 
@@ -219,17 +251,26 @@ def stations_budget_bits(slot_counts: Sequence[int]) -> int:
     """:func:`budget_bits` of several stations: their cycle plus one register-traffic reserve.
 
     The node runs one register service at a time, so the reserve is the bus's, not per station.
+
+    :param slot_counts: each station's modules
     """
     return stations_cycle_bits(slot_counts) + SDO_RESERVE_FRAMES * worst_frame_bits(8)
 
 
 def stations_fits(slot_counts: Sequence[int], bitrate: int, rate_hz: float) -> bool:
-    """True when ``rate_hz`` cycles of every station together fit at ``bitrate``."""
+    """True when ``rate_hz`` cycles of every station together fit at ``bitrate``.
+
+    :param slot_counts: each station's modules
+    """
     return rate_hz * stations_budget_bits(slot_counts) <= bitrate
 
 
 def stations_max_cycle_rate(slot_counts: Sequence[int], bitrate: int) -> float:
-    """Highest SYNC rate (Hz, rounded down to 10 Hz) for all stations together."""
+    """Highest SYNC rate (Hz, rounded down to 10 Hz) for all stations together.
+
+    :param slot_counts: each station's modules
+    :param bitrate: the bus's bit rate (bit/s)
+    """
     return math.floor(bitrate / stations_budget_bits(slot_counts) / 10.0) * 10.0
 
 

@@ -5,13 +5,11 @@ profile ``ros2``, one ``ros2msg`` schema per type, ``cdr`` channels carrying
 ``offered_qos_profiles`` and ``topic_type_hash``, zstd/lz4 chunks with message indexes and a
 summary with statistics, a ``rosbag2`` metadata record; and ``<dir>/metadata.yaml``.
 
-Splitting (``max_size`` bytes, ``max_duration_s``; 0 = never), with rosbag2's rule: before a
-message is written, the open file is closed when it holds ``max_size`` bytes or more, or when
-the message is more than ``max_duration_s`` after the file's first message; the message then
-opens ``<dirname>_<k+1>.mcap``. A closed file is a complete MCAP (summary, chunk index,
-statistics) and starts with the configuration metadata record and every schema and channel,
-so each file stands alone. The writer's per-chunk index lives with the open file only, so a
-session's memory does not grow with its length.
+Splitting (``max_size`` bytes, ``max_duration_s``; 0 = never) follows rosbag2's rule
+(``record/split.py``): the message that splits opens ``<dirname>_<k+1>.mcap``. A closed file
+is a complete MCAP (summary, chunk index, statistics) that starts with the configuration
+metadata record and every schema and channel, so each file stands alone; the per-chunk
+index lives with the open file only, so a session's memory does not grow with its length.
 
 Log times never decrease in a bag (``mcap doctor --strict-message-order``; a reader in file
 order sees time order): a message handed over with a log time before the latest one written
@@ -32,7 +30,7 @@ import os
 import shutil
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +45,7 @@ from ssi_bridge.record.mcap_write import ChunkBuffers
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
     BagInfo,
+    BagSummary,
     FileInfo,
     TopicInfo,
     file_name,
@@ -55,12 +54,11 @@ from ssi_bridge.record.metadata import (
 )
 from ssi_bridge.record.qos import qos_text
 from ssi_bridge.record.schema import build_schema
+from ssi_bridge.record.session import create_bag_directory
 from ssi_bridge.record.split import MIN_SPLIT_SIZE, SplitPolicy
 
 __all__ = ["CONFIG_METADATA_NAME", "MIN_SPLIT_SIZE", "BagRecorder", "BagSummary", "SplitPolicy"]
 
-#: bytes of a file name on Linux file systems (ext4, xfs, tmpfs: NAME_MAX)
-NAME_MAX = 255
 logger = logging.getLogger(__name__)
 
 #: the node's compression names -> the Chunk record's
@@ -69,19 +67,6 @@ COMPRESSIONS = {"zstd": "zstd", "lz4": "lz4", "none": "", "": ""}
 DEFAULT_QOS = QoSProfile(depth=10)
 #: name of the MCAP metadata record holding the session configuration
 CONFIG_METADATA_NAME = "ssi_bridge"
-
-
-@dataclass(frozen=True)
-class BagSummary:
-    """Result of :meth:`BagRecorder.close`."""
-
-    directory: Path
-    message_count: int
-    #: log-time span of the recorded messages (s)
-    duration: float
-    topics: dict[str, int] = field(default_factory=dict)
-    #: the bag's MCAP files (relative names) in writing order
-    files: tuple[str, ...] = ()
 
 
 @dataclass
@@ -95,7 +80,11 @@ class _Topic:
 
 
 class BagRecorder:
-    """Write one bag; thread-safe ``write`` from any thread (e.g. the node's 1 kHz timer)."""
+    """Write one bag; thread-safe ``write`` from any thread (e.g. the node's 1 kHz timer).
+
+    Made by :meth:`open` (``directory``, ``info``, ``compression``, ``chunk_size``, ``split``
+    and ``flush_period_s`` as it checked them).
+    """
 
     def __init__(self, directory: Path, info: BagInfo, compression: str,
                  chunk_size: int, split: SplitPolicy, flush_period_s: float) -> None:
@@ -123,24 +112,21 @@ class BagRecorder:
              chunk_size: int = 1024 * 1024, max_size: int = 0,
              max_duration_s: float = 0.0) -> BagRecorder:
         """Create the bag directory and its first MCAP file; refuse an existing or unwritable
-        one, an unknown compression and split limits below the minimum."""
+        one, an unknown compression and split limits below the minimum.
+
+        :param directory: the new bag directory (must not exist)
+        :param compression: "zstd", "lz4", "none" or ""
+        :param metadata: the session configuration, stored as an MCAP metadata record
+        :param flush_period_s: how often data is handed to the OS (s)
+        :param chunk_size: bytes of an MCAP chunk
+        :param max_size: split after this many bytes, ``max_duration_s`` s per file (0: never)
+        :raises RecordingError: any of the refusals above, or an OS error creating the files
+        """
         directory = Path(directory).absolute()
         if compression not in COMPRESSIONS:
             raise RecordingError(f"compression {compression!r}: expected zstd, lz4 or none")
         split = SplitPolicy(max_size, max_duration_s)
-        if directory.exists():
-            raise RecordingError(f"bag directory {directory} already exists; choose a new name")
-        longest = file_name(directory.name, 99999)  # the bag's files are named after it
-        if len(longest.encode()) > NAME_MAX:
-            raise RecordingError(
-                f"bag name of {len(directory.name.encode())} bytes is too long: its files "
-                f"('{directory.name[:20]}..._0.mcap') must fit the file system's {NAME_MAX}-byte "
-                f"names; at most {NAME_MAX - len(longest.encode()) + len(directory.name.encode())} "
-                "bytes")
-        try:
-            directory.mkdir(parents=True)
-        except OSError as err:
-            raise RecordingError(f"cannot create bag {directory}: {err.strerror or err}") from err
+        create_bag_directory(directory)
         info = BagInfo(custom_data={str(k): str(v) for k, v in (metadata or {}).items()})
         rec = cls(directory, info, COMPRESSIONS[compression], chunk_size, split, flush_period_s)
         try:
@@ -176,7 +162,13 @@ class BagRecorder:
         return self._error
 
     def add_topic(self, name: str, type_name: str, qos: QoSProfile | None = None) -> None:
-        """Register a topic (once) with its type ``pkg/msg/Type`` and offered QoS."""
+        """Register a topic (once) with its type ``pkg/msg/Type`` and offered QoS.
+
+        :param name: the topic's name
+        :param type_name: its type ``pkg/msg/Type``
+        :param qos: its offered QoS (default: rclpy's default publisher profile)
+        :raises RecordingError: bag closed or failed, topic known with another type, type absent
+        """
         with self._lock:
             self._check()
             schema = build_schema(type_name)
@@ -199,15 +191,24 @@ class BagRecorder:
             self._info.topics.append(topic.info)
             self._topics[name] = topic
 
-    def write(self, topic: str, msg: Any, log_time_ns: int,
+    def write(self, topic: str, msg: object, log_time_ns: int,
               publish_time_ns: int | None = None) -> None:
-        """Serialize ``msg`` to CDR and append it (log time = receive, publish = send time)."""
+        """Serialize ``msg`` (an rclpy message of the topic's type) to CDR and append it:
+        ``topic``, ``log_time_ns``, ``publish_time_ns`` and errors as :meth:`write_serialized`.
+        """
         self.write_serialized(topic, cdr.serialize(msg), log_time_ns, publish_time_ns)
 
     def write_serialized(self, topic: str, data: bytes, log_time_ns: int,
                          publish_time_ns: int | None = None) -> None:
         """Append a message already serialized to CDR (a snapshot's ring holds such), at
-        ``log_time_ns`` or the latest log time written if that is later."""
+        ``log_time_ns`` or the latest log time written if that is later.
+
+        :param topic: a topic added with :meth:`add_topic`
+        :param data: the CDR bytes
+        :param log_time_ns: when it was received (ns)
+        :param publish_time_ns: when it was sent (ns; default: ``log_time_ns``)
+        :raises RecordingError: the topic is unknown, or the bag is closed or failed
+        """
         with self._lock:
             self._check()
             entry = self._topics.get(topic)
@@ -235,7 +236,9 @@ class BagRecorder:
     def split(self) -> str:
         """Finish the open file now and start the next ``<name>_<k+1>.mcap`` (rosbag2's
         ``~/split_bagfile``); returns the new file's name. Raises RecordingError when the open
-        file holds no message yet (every file of a bag holds at least one)."""
+        file holds no message yet (every file of a bag holds at least one), or when a
+        file-system error fails the bag (the same error on every later call).
+        """
         with self._lock:
             self._check()
             assert self._file is not None
@@ -248,7 +251,10 @@ class BagRecorder:
                 raise self._fail(err) from err
 
     def flush(self) -> None:
-        """Close the open chunk and hand everything to the OS (survives a kill -9)."""
+        """Close the open chunk and hand everything to the OS (survives a kill -9).
+
+        :raises RecordingError: a file-system error (the bag is failed from then on)
+        """
         with self._lock:
             self._check()
             if not self._dirty:
@@ -261,7 +267,12 @@ class BagRecorder:
             self._dirty = False
 
     def close(self) -> BagSummary:
-        """Finish the open MCAP file (summary, statistics, indexes), write metadata.yaml."""
+        """Finish the open MCAP file (summary, statistics, indexes), write metadata.yaml.
+
+        :returns: what was written (directory, files, message count, span)
+        :raises RecordingError: closed twice, or a file-system error left the bag without a
+            summary (``replay --recover`` rebuilds it)
+        """
         self._stop.set()
         if self._flusher.is_alive() and self._flusher is not threading.current_thread():
             self._flusher.join()
@@ -281,9 +292,9 @@ class BagRecorder:
                 except OSError as err:
                     self._fail(err)
             if self._error is not None:
-                for done in (*pending, file):
-                    if done is not None:
-                        done.abandon()
+                for left in (*pending, file):
+                    if left is not None:
+                        left.abandon()
                 raise RecordingError(f"{self._error}; the bag was left without a summary: "
                                      f"`replay --recover {self._directory}` rebuilds it")
         release_free_memory()  # the session's writer and buffers (record/heap.py)

@@ -17,12 +17,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from decimal import Decimal
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mcap.records import Message
 
 from ssi_bridge.record.player_state import Action, PlayerState, select_topics, until_time
 from ssi_bridge.record.reader import Bag
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
 
 logger = logging.getLogger(__name__)
 
@@ -83,9 +87,14 @@ class Player:
     """Replays one bag through the publishers of ``node`` (None: only through ``sinks``).
 
     Raises RecordingError when the topic selection names a topic the bag lacks or leaves none.
+
+    :param node: the node whose publishers replay the topics
+    :param bag: the open bag
+    :param options: topics, rate, start, end, loop, clock, remaps (``replay``'s options)
+    :param sinks: more consumers of every published record (e.g. the Foxglove view)
     """
 
-    def __init__(self, node: Any, bag: Bag, options: ReplayOptions,
+    def __init__(self, node: Node | None, bag: Bag, options: ReplayOptions,
                  sinks: list[Sink] | None = None) -> None:
         self.node, self.bag, self.options = node, bag, options
         self.topics = select_topics(bag.topics, options.topics, options.regex,
@@ -97,15 +106,15 @@ class Player:
                                                      options.playback_duration,
                                                      options.until_is_ros_time))
         self.sinks: list[Sink] = list(sinks or [])
-        self.publishers: dict[str, Any] = {}
-        self.clock_pub = None
+        self.publishers: dict[str, Publisher] = {}
+        self.clock_pub: Publisher | None = None
         if node is not None:
             self._create_publishers(node)
         #: publication lateness (s) of every message of the last pass (not the stepped ones)
         self.lateness: list[float] = []
         self.published = 0
 
-    def _create_publishers(self, node: Any) -> None:
+    def _create_publishers(self, node: Node) -> None:
         from rclpy.qos import QoSProfile
 
         from ssi_bridge.record.qos import parse_qos
@@ -149,6 +158,9 @@ class Player:
 
         Without it the last messages of a replay can die with the publisher: DDS drops what a
         destroyed writer has not had acknowledged yet.
+
+        :param timeout_s: longest wait (s)
+        :returns: False when ``timeout_s`` passed first
         """
         from rclpy.duration import Duration
 
@@ -214,7 +226,10 @@ class Player:
             return count
 
     def play(self, progress: Callable[[], None] | None = None) -> int:
-        """Wait for subscribers, then play once, or forever with ``loop``; return the count."""
+        """Wait for subscribers, then play once, or forever with ``loop``; return the count.
+
+        :param progress: called about every 0.1 s (the terminal's progress line)
+        """
         if self.options.wait_for_subscribers > 0 and self.publishers:
             self.wait_for_subscribers()
         while True:

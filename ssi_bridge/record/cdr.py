@@ -3,7 +3,7 @@
 Why not ``rclpy.serialization.serialize_message``: on these wheels it returns the DDS payload
 with unzeroed alignment padding and up to 4 trailing bytes, which strict readers (rosbags)
 reject as a size mismatch. Why not ``mcap_ros2``'s dynamic encoder: it refuses the numpy
-arrays rclpy uses for fixed-size arrays and costs ~20 us per JointState.
+arrays rclpy uses for fixed-size arrays, and is slower (docs/recording.md "Benchmark").
 
 This module compiles, once per message class, a Python function from the class's rosidl
 introspection (``get_fields_and_field_types()``). Runs of consecutive fixed-size fields are
@@ -19,7 +19,7 @@ import struct
 import threading
 from typing import Any, Callable
 
-from ssi_bridge.record.types import message_class
+from ssi_bridge.record.types import message_class, message_fields
 
 #: CDR encapsulation header: representation id CDR_LE (0x0001), options 0
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
@@ -36,7 +36,7 @@ _SEQ = re.compile(r"^sequence<(?P<elem>[^,>]+)(?:, *\d+)?>$")
 _ARRAY = re.compile(r"^(?P<elem>[^\[]+)\[(?P<n>\d+)\]$")
 _STRING = re.compile(r"^w?string(?:<=\d+)?$")
 
-Encoder = Callable[[Any, bytearray], None]
+Encoder = Callable[[object, bytearray], None]
 
 
 def _run_structs(items: list[tuple[str, int, int]]) -> list[struct.Struct]:
@@ -77,7 +77,7 @@ class _Compiler:
                 run.clear()
                 run_values.clear()
 
-        for field, ftype in cls.get_fields_and_field_types().items():
+        for field, ftype in message_fields(cls).items():
             attr = f"m.{field}"
             if ftype in PRIMITIVES:
                 code, size = PRIMITIVES[ftype]
@@ -146,7 +146,11 @@ _cache: dict[type, Encoder] = {}
 
 
 def encoder_for(cls: type) -> Encoder:
-    """Return the compiled body encoder of a message class (thread-safe, cached)."""
+    """Return the compiled body encoder of a message class (thread-safe, cached).
+
+    :param cls: a generated rclpy message class
+    :raises RecordingError: a field type of the class is not installed
+    """
     try:
         return _cache[cls]
     except KeyError:
@@ -156,8 +160,11 @@ def encoder_for(cls: type) -> Encoder:
             return _cache[cls]
 
 
-def serialize(msg: Any) -> bytes:
-    """Serialize an rclpy message to CDR bytes: header, exact body, zeroed padding."""
+def serialize(msg: object) -> bytes:
+    """Serialize an rclpy message to CDR bytes: header, exact body, zeroed padding.
+
+    :param msg: an rclpy message
+    """
     body = bytearray()
     encoder_for(type(msg))(msg, body)
     return CDR_LE_HEADER + bytes(body)

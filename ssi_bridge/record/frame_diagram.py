@@ -60,7 +60,17 @@ def frame_levels(value: int, n_bits: int, bit_rate_hz: float, monoflop_s: float)
 
 def draw_frame(ax: Axes, value: int, n_bits: int, bit_rate_hz: float, monoflop_s: float,
                error_bits: int = 0, title: str = "") -> FrameLevels:
-    """Draw clock and data on ``ax`` (µs) with latch edge, pause bit, MSB..LSB and tm."""
+    """Draw clock and data on ``ax`` (µs) with latch edge, pause bit, MSB..LSB and tm.
+
+    :param ax: the matplotlib axes to draw on
+    :param value: the frame's bits, first transmitted = MSB
+    :param n_bits: the frame length
+    :param bit_rate_hz: the SSI clock rate
+    :param monoflop_s: the monoflop time tm (s)
+    :param error_bits: how many low bits are error or special bits (highlighted)
+    :param title: the axes' title
+    :returns: the clock and data levels drawn
+    """
     lv = frame_levels(value, n_bits, bit_rate_hz, monoflop_s)
     us = 1e6
     ax.step(lv.clock_t * us, lv.clock + 2.0, where="post", color="tab:blue", lw=1.5)

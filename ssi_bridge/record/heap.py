@@ -1,14 +1,11 @@
 """Give the C heap's free pages back to the OS after a split (glibc ``malloc_trim``).
 
-Why: measured in the node (two encoders, 1 kHz, split every minute, ``SSI_BRIDGE_MEMPROBE``):
-the Python heap (tracemalloc) and the bytes malloc has in use stay flat, but each split
-leaves ~0.3 MB more *free* memory inside glibc's arenas (the last chunk compressed, the
-summary built and the next file's writer allocated on whichever executor thread wrote the
-message that split), below live blocks, so glibc's automatic trim (top of the heap only)
-cannot return it and RSS grew ~4.5 MB per 10 min. ``malloc_trim(0)`` releases every free
-page of every arena (madvise), once per split, on the flush thread. Elsewhere than glibc
-(musl, macOS) this is a no-op; ``SSI_BRIDGE_MALLOC_TRIM=0`` turns it off (to measure the
-difference with ``make bench ONLY=soak``).
+A split leaves free memory inside glibc's arenas below live blocks, which glibc's automatic
+trim (top of a heap only) cannot return, so the RSS of a long recording would grow with
+every split (the measurements: docs/recording.md "Memory over hours"). ``malloc_trim(0)``
+releases every free page of every arena (madvise), once per split, on the flush thread.
+Elsewhere than glibc (musl, macOS) this is a no-op; ``SSI_BRIDGE_MALLOC_TRIM=0`` turns it
+off (to measure the difference with ``make bench ONLY=soak``).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import lz4.frame
 import zstandard
@@ -89,11 +89,10 @@ class ChunkBuffers:
     grow to a chunk's size and are then reused for every chunk of every file of the session
     (not thread-safe: the bag's lock guards it).
 
-    A zstd context is made per chunk, not kept: kept, its ~1.5 MB of tables stay mapped and
-    their resident part changes page by page as chunks hash into them (bench/heap_split.py:
-    other anonymous maps 11.77 -> 12.02 -> 11.75 MB kept, flat per chunk); made per chunk,
-    with the node's fixed mmap threshold, it is one mapping taken and given back (0.5 ms more
-    per chunk, twice a second).
+    A zstd context is made per chunk, not kept: kept, its tables stay mapped and their
+    resident part changes page by page as chunks hash into them; made per chunk, with the
+    node's fixed mmap threshold, it is one mapping taken and given back (the measurements:
+    docs/recording.md "Memory over hours").
     """
 
     def __init__(self, compression: str, capacity: int = INITIAL_CAPACITY) -> None:
@@ -103,7 +102,7 @@ class ChunkBuffers:
         self.records = bytearray(capacity)
         self.used = 0
         #: channel id -> [entries buffer, bytes used]
-        self.indexes: dict[int, list] = {}
+        self.indexes: dict[int, list[Any]] = {}
         self.messages = 0
         self.start_ns = 0
         self.end_ns = 0
@@ -159,7 +158,8 @@ class ChunkBuffers:
         if self.compression == "zstd":
             return zstandard.ZstdCompressor().compress(view)
         if self.compression == "lz4":
-            return lz4.frame.compress(view)
+            compressed: bytes = lz4.frame.compress(view)
+            return compressed
         return view
 
     def write_chunk(self, stream: BinaryIO) -> bytes:

@@ -89,6 +89,19 @@ class BagInfo:
         return max(0, self.end_ns - self.start_ns)
 
 
+
+@dataclass(frozen=True)
+class BagSummary:
+    """Result of :meth:`BagRecorder.close`."""
+
+    directory: Path
+    message_count: int
+    #: log-time span of the recorded messages (s)
+    duration: float
+    topics: dict[str, int] = field(default_factory=dict)
+    #: the bag's MCAP files (relative names) in writing order
+    files: tuple[str, ...] = ()
+
 def file_name(bag_name: str, index: int) -> str:
     """rosbag2's name of the ``index``-th file of bag directory ``bag_name``: ``<name>_<i>.mcap``."""
     return f"{bag_name}_{index}.mcap"
@@ -165,4 +178,5 @@ def read_metadata(directory: Path) -> dict[str, Any]:
     data = yaml.safe_load((directory / METADATA_FILE).read_text(encoding="utf-8"))
     if not isinstance(data, dict) or "rosbag2_bagfile_information" not in data:
         raise ValueError("no 'rosbag2_bagfile_information' mapping")
-    return data["rosbag2_bagfile_information"]
+    info: dict[str, Any] = data["rosbag2_bagfile_information"]
+    return info

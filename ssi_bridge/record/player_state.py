@@ -216,11 +216,13 @@ class PlayerState:
 
     @property
     def paused(self) -> bool:
+        """Whether playback is paused."""
         with self._cond:
             return self._paused
 
     @property
     def rate(self) -> float:
+        """The playback rate (1.0 = recorded speed)."""
         with self._cond:
             return self._rate
 
@@ -275,6 +277,7 @@ class PlayerState:
 
     @property
     def stopped(self) -> bool:
+        """Whether playback was stopped (:meth:`stop`): nothing more is played."""
         with self._cond:
             return self._stopped
 

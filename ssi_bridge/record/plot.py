@@ -18,6 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 from ssi_bridge.exceptions import RecordingError  # noqa: E402
 from ssi_bridge.record.reader import Bag  # noqa: E402
@@ -50,7 +51,15 @@ def _topic_of(bag: Bag, type_name: str) -> list[str]:
 
 
 def load_session(path: Path) -> SessionData:
-    """Read joint states, diagnostics and events of a bag (ours or rosbag2's)."""
+    """Read joint states, diagnostics and events of a bag (ours or rosbag2's).
+
+    :raises RecordingError: the bag cannot be read or has no JointState topic
+    """
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+
+    from ssi_bridge_msgs.msg import Event
+
     with Bag(path) as bag:
         data = SessionData(start_ns=bag.start_ns, end_s=(bag.end_ns - bag.start_ns) / 1e9)
         js = _topic_of(bag, "sensor_msgs/msg/JointState")
@@ -60,17 +69,17 @@ def load_session(path: Path) -> SessionData:
             raise RecordingError(f"{bag.path}: no sensor_msgs/msg/JointState topic to plot")
         for topic, stamp, msg in bag.decoded(js + diag + ev):
             t = (stamp - bag.start_ns) / 1e9
-            if topic in js:
+            if isinstance(msg, JointState):
                 for k, name in enumerate(msg.name):
                     series = data.joints[name]
                     series[0].append(t)
                     series[1].append(msg.position[k] if k < len(msg.position) else float("nan"))
                     series[2].append(msg.velocity[k] if k < len(msg.velocity) else float("nan"))
-            elif topic in diag:
+            elif isinstance(msg, DiagnosticArray):
                 for st in msg.status:
                     level = st.level if isinstance(st.level, int) else st.level[0]
                     data.diagnostics[st.name].append((t, int(level)))
-            else:
+            elif isinstance(msg, Event):
                 data.events.append((t, msg.kind, msg.joint, bool(msg.success), msg.message))
     return data
 
@@ -109,18 +118,18 @@ def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
                       fontsize=7)
         ax.set_ylim(-0.6, len(names) - 0.4)
         ax.set_ylabel("diagnostics", fontsize=8)
-        handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in LEVEL_COLOURS.values()]
+        handles = [Rectangle((0, 0), 1, 1, color=c) for c in LEVEL_COLOURS.values()]
         ax.legend(handles, LEVEL_NAMES.values(), fontsize=7, ncol=4, loc="upper right")
         named["diagnostics"] = ax
         row += 1
     if data.events:
         ax = axes[row][0]
-        for i, (t, kind, joint, ok, message) in enumerate(data.events):
+        for i, (when, kind, joint, ok, message) in enumerate(data.events):
             colour = "tab:purple" if ok else "tab:red"
-            ax.plot([t], [0], marker="v", color=colour, ms=8)
+            ax.plot([when], [0], marker="v", color=colour, ms=8)
             for other in axes[:row]:
-                other[0].axvline(t, color=colour, lw=0.6, alpha=0.5)
-            ax.annotate(f"{kind}{'' if ok else ' FAILED'}\n{joint}", (t, 0),
+                other[0].axvline(when, color=colour, lw=0.6, alpha=0.5)
+            ax.annotate(f"{kind}{'' if ok else ' FAILED'}\n{joint}", (when, 0),
                         (0, 8 + 12 * (i % 2)), textcoords="offset points", fontsize=7,
                         ha="center", color=colour)
         ax.set_yticks([])
@@ -134,7 +143,12 @@ def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
 
 
 def plot_session(bag: Path, output: Path, dpi: int = 100) -> tuple[Figure, dict[str, object]]:
-    """Load ``bag`` and save its session figure as PNG at ``output``."""
+    """Load ``bag`` and save its session figure as PNG at ``output``.
+
+    :param dpi: the PNG's resolution
+    :returns: the figure and its axes by role (:func:`draw_session`)
+    :raises RecordingError: the bag cannot be read or has no JointState topic
+    """
     data = load_session(bag)
     fig, named = draw_session(data, title=f"ssi_bridge session {Path(bag).name}", dpi=dpi)
     fig.savefig(output, dpi=dpi)

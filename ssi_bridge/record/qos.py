@@ -26,7 +26,7 @@ from rclpy.qos import (
 INFINITE_SEC, INFINITE_NSEC = 9223372036, 854775807
 _INFINITE_NS = INFINITE_SEC * 1_000_000_000 + INFINITE_NSEC
 
-_POLICIES: dict[str, type] = {
+_POLICIES: dict[str, Any] = {
     "history": HistoryPolicy, "reliability": ReliabilityPolicy,
     "durability": DurabilityPolicy, "liveliness": LivelinessPolicy,
 }

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import heapq
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Generator, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -128,6 +128,10 @@ class Bag:
     Every file's summary is checked on opening; the topics are the union of the files' (the
     counts summed), the span from the first message of any file to the last. Messages come
     in log-time order across files, with at most the files whose spans overlap open at once.
+
+    :param path: a bag directory or one MCAP file
+    :raises RecordingError: no MCAP file there, or one without a readable summary
+        (``replay --recover`` rebuilds it)
     """
 
     def __init__(self, path: Path) -> None:
@@ -169,8 +173,12 @@ class Bag:
             self._parts.append(_Part(file, stats.message_start_time, stats.message_end_time))
 
     def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
-                 ) -> Iterator[tuple[str, Message]]:
-        """Yield ``(topic, record)`` in log-time order, optionally filtered."""
+                 ) -> Generator[tuple[str, Message], None, None]:
+        """Yield ``(topic, record)`` in log-time order, optionally filtered.
+
+        :param topics: the topics to read (default: all)
+        :param start_ns: skip messages logged before this time (ns)
+        """
         wanted = list(topics) if topics is not None else list(self.topics)
         parts = sorted((p for p in self._parts if start_ns is None or p.end_ns >= start_ns),
                        key=lambda p: p.start_ns)
@@ -210,8 +218,13 @@ class Bag:
                 if stream in self._open:
                     self._open.remove(stream)
 
-    def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[str, int, Any]]:
-        """Yield ``(topic, log_time_ns, message)`` deserialized with rclpy."""
+    def decoded(self, topics: Iterable[str] | None = None,
+                ) -> Iterator[tuple[str, int, object]]:
+        """Yield ``(topic, log_time_ns, message)`` deserialized with rclpy.
+
+        :param topics: the topics to read (default: all)
+        :raises RecordingError: a topic's message type is not installed
+        """
         from rclpy.serialization import deserialize_message
 
         from ssi_bridge.record.types import message_class

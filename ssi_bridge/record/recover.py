@@ -28,11 +28,11 @@ from mcap.summary import Summary
 from mcap.writer import CompressionType, Writer
 
 from ssi_bridge.exceptions import RecordingError
-from ssi_bridge.record.bag import BagSummary
 from ssi_bridge.record.metadata import (
     METADATA_FILE,
     ROS_DISTRO,
     BagInfo,
+    BagSummary,
     FileInfo,
     TopicInfo,
     metadata_text,
@@ -85,6 +85,12 @@ def recover_bag(directory: Path, compression: str = "zstd") -> BagSummary:
     The files of a split session that are complete (footer and summary: every file but the
     one open at the crash) are kept as they are and only read for metadata.yaml; a cut file
     is rewritten from its complete records with indexes and summary.
+
+    :param directory: the bag directory
+    :param compression: the compression of rewritten files ("zstd", "lz4", "none")
+    :returns: what the bag holds now
+    :raises RecordingError: not a bag directory, a file that is no MCAP file, or one of which
+        no channel record survived (the bag is left unchanged)
     """
     directory = Path(directory).absolute()
     if not directory.is_dir():

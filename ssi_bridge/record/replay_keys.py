@@ -48,6 +48,7 @@ class ProgressLine:
         self.drawn = False
 
     def __call__(self) -> None:
+        """Redraw the progress line (bag time, rate, paused) over the previous one."""
         self.stream.write("\r" + progress_text(self.state.snapshot()) + "\x1b[K")
         self.stream.flush()
         self.drawn = True
@@ -95,9 +96,14 @@ def _foreground(fd: int) -> bool:
 
 
 class Keyboard:
-    """Reads control keys from a terminal on stdin in a thread (see the module doc)."""
+    """Reads control keys from a terminal on stdin in a thread (see the module doc).
 
-    def __init__(self, state: PlayerState, stream: Any = None) -> None:
+    :param state: the replay's time line the keys move
+    :param stream: the terminal (default: stdin); nothing is read unless it is a terminal
+        in the foreground
+    """
+
+    def __init__(self, state: PlayerState, stream: TextIO | None = None) -> None:
         self.state = state
         self._stream = sys.stdin if stream is None else stream
         self._saved: Any = None

@@ -17,9 +17,12 @@ bag. The node must be spun (tools/replay.py runs an executor thread).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ssi_bridge.record.player_state import NS, PlayerState
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
 
 
 def _at(state: PlayerState, bag_ns: int) -> str:
@@ -30,7 +33,7 @@ def _at(state: PlayerState, bag_ns: int) -> str:
 class ReplayServices:
     """Creates the player services of ``node`` on ``state``; keeps them alive."""
 
-    def __init__(self, node: Any, state: PlayerState) -> None:
+    def __init__(self, node: Node, state: PlayerState) -> None:
         from ssi_bridge_msgs.srv import Seek, SetRate
         from std_srvs.srv import Trigger
 

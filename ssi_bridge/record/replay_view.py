@@ -17,13 +17,22 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from mcap.records import Message
 
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record.player_state import PlayerState
 from ssi_bridge.record.reader import Bag
+
+if TYPE_CHECKING:  # the SDK is imported when a view starts (an optional dependency)
+    from foxglove import Channel
+    from foxglove.websocket import (
+        PlaybackControlRequest,
+        PlaybackState,
+        ServerListener,
+        WebSocketServer,
+    )
 
 logger = logging.getLogger(__name__)
 
@@ -37,7 +46,7 @@ class _Listener:
     def __init__(self, view: ReplayView) -> None:
         self._view = view
 
-    def on_playback_control_request(self, request: Any) -> Any:
+    def on_playback_control_request(self, request: PlaybackControlRequest) -> PlaybackState:
         return self._view.control(request)
 
 
@@ -46,6 +55,13 @@ class ReplayView:
 
     Raises RecordingError when the server cannot listen (port in use, bad address) or the
     Foxglove SDK is not installed.
+
+    :param bag: the bag (its topics' schemas are advertised)
+    :param topics: the topics served
+    :param state: the replay's time line Foxglove drives
+    :param address: the address to listen on
+    :param port: the TCP port (0: any free one, see ``port``)
+    :param name: the server's name shown in Foxglove
     """
 
     def __init__(self, bag: Bag, topics: list[str], state: PlayerState, address: str,
@@ -61,17 +77,19 @@ class ReplayView:
         self._last_time = 0.0
         self._context = foxglove.Context()
         try:
-            self.server = foxglove.start_server(
+            server = foxglove.start_server(
                 name=name, host=address, port=port, context=self._context,
                 capabilities=[Capability.Time, Capability.PlaybackControl],
-                server_listener=_Listener(self),
+                # the SDK calls the callbacks a listener has (ServerListener's are optional)
+                server_listener=cast("ServerListener", _Listener(self)),
                 playback_time_range=(state.first_ns, state.end_ns))
         except (RuntimeError, ValueError, OSError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")
             raise RecordingError(f"--foxglove-port {port}: cannot listen on "
                                  f"{address}:{port}: {reason}") from err
-        self.port = int(self.server.port)
-        self.channels: dict[str, Any] = {}
+        self.server: WebSocketServer | None = server
+        self.port = int(server.port)
+        self.channels: dict[str, Channel] = {}
         for topic in topics:
             recorded = bag.topics[topic]
             schema = foxglove.Schema(name=recorded.type,
@@ -82,7 +100,11 @@ class ReplayView:
         state.on_change(self._changed)
 
     def sink(self, topic: str, record: Message) -> None:
-        """Send one published record to the subscribed clients; broadcast the bag time."""
+        """Send one published record to the subscribed clients; broadcast the bag time.
+
+        :param topic: the record's topic
+        :param record: the MCAP message record as published
+        """
         channel = self.channels.get(topic)
         if channel is not None and channel.has_sinks():
             channel.log(record.data, log_time=record.log_time)
@@ -92,8 +114,13 @@ class ReplayView:
             self._last_time = now
             server.broadcast_time(record.log_time)
 
-    def playback_state(self, request_id: str | None = None, did_seek: bool = False) -> Any:
-        """The time line as Foxglove's PlaybackState."""
+    def playback_state(self, request_id: str | None = None, did_seek: bool = False,
+                       ) -> PlaybackState:
+        """The time line as Foxglove's PlaybackState.
+
+        :param request_id: the request this answers (None: unsolicited)
+        :param did_seek: the time line jumped
+        """
         from foxglove.websocket import PlaybackState, PlaybackStatus
 
         snap = self.state.snapshot()
@@ -103,14 +130,18 @@ class ReplayView:
                              playback_speed=snap.rate, did_seek=did_seek,
                              request_id=request_id)
 
-    def control(self, request: Any) -> Any:
-        """Apply a PlaybackControlRequest (seek, speed, play/pause); answer the new state."""
+    def control(self, request: PlaybackControlRequest) -> PlaybackState:
+        """Apply a PlaybackControlRequest (seek, speed, play/pause); answer the new state.
+
+        :param request: what Foxglove asked; never raises (a failure is logged and the state
+            answered unchanged)
+        """
         from foxglove.websocket import PlaybackCommand
 
         self._local.in_request = True
         try:
             did_seek = request.seek_time is not None
-            if did_seek:
+            if request.seek_time is not None:
                 self.state.seek(request.seek_time)
             speed = float(request.playback_speed)
             if speed > 0 and abs(speed - self.state.rate) > 1e-6:

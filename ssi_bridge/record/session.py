@@ -1,4 +1,4 @@
-"""Choose the directory of a new recording session under the configured recording root.
+"""Choose and create the directory of a new recording session under the recording root.
 
 The ``~/start_recording`` service takes an optional path from a remote caller, so it is
 confined to the root: an absolute path or ``..`` that leaves the root, a name that already
@@ -13,7 +13,10 @@ from datetime import datetime
 from pathlib import Path
 
 from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.record.metadata import file_name
 
+#: bytes of a file name on Linux file systems (ext4, xfs, tmpfs: NAME_MAX)
+NAME_MAX = 255
 #: rosbag2's default bag name pattern (``rosbag2_YYYY_MM_DD-HH_MM_SS``), with our prefix
 NAME_FORMAT = "ssi_bridge_%Y_%m_%d-%H_%M_%S"
 
@@ -28,6 +31,10 @@ def resolve_bag_path(root: Path, requested: str, *, now: datetime | None = None)
 
     Raises :class:`RecordingError` when the path leaves the root, the bag exists, or the
     root is missing / not writable. The directory itself is not created here.
+
+    :param root: the recording root
+    :param requested: a path relative to the root, or empty
+    :param now: the time a timestamped name is made from (default: now)
     """
     root = Path(root).expanduser().resolve()
     requested = requested.strip()
@@ -53,3 +60,25 @@ def resolve_bag_path(root: Path, requested: str, *, now: datetime | None = None)
         raise RecordingError(f"recording directory {existing} is not writable by this process"
                              f" (uid {os.getuid()})")
     return candidate
+
+
+def create_bag_directory(directory: Path) -> None:
+    """Create a new bag directory whose files (``<name>_<k>.mcap``) the file system can name.
+
+    :param directory: the bag directory (absolute); its parents are created as needed
+    :raises RecordingError: it exists, its name leaves no room for its files' names, or the
+        OS refuses to create it
+    """
+    if directory.exists():
+        raise RecordingError(f"bag directory {directory} already exists; choose a new name")
+    name = len(directory.name.encode())
+    longest = len(file_name(directory.name, 99999).encode())  # the files are named after it
+    if longest > NAME_MAX:
+        raise RecordingError(
+            f"bag name of {name} bytes is too long: its files ('{directory.name[:20]}..._0.mcap') "
+            f"must fit the file system's {NAME_MAX}-byte names; at most "
+            f"{NAME_MAX - longest + name} bytes")
+    try:
+        directory.mkdir(parents=True)
+    except OSError as err:
+        raise RecordingError(f"cannot create bag {directory}: {err.strerror or err}") from err

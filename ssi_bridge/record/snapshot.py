@@ -36,13 +36,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from ssi_bridge.base.realtime import normal_this_thread
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record.can_frames import FrameLog
 from ssi_bridge.record.metadata import METADATA_FILE
 from ssi_bridge.record.ring import MessageRing
+
+if TYPE_CHECKING:  # the bag is opened by the caller's ``open_bag``; snapshot stays ROS-free
+    from rclpy.qos import QoSProfile
+
+    from ssi_bridge.record.bag import BagRecorder
 
 logger = logging.getLogger(__name__)
 
@@ -58,9 +63,22 @@ CAN_LOG = "can_0.log"
 FRAME_GRACE_S = 1.0
 
 #: opens a new bag at a path (BagRecorder.open with the session's settings)
-OpenBag = Callable[[Path], Any]
+OpenBag = Callable[[Path], "BagRecorder"]
 #: a topic's (type name ``pkg/msg/Type``, offered QoS or None)
-TopicInfo = Callable[[str], tuple[str, Any]]
+TopicInfo = Callable[[str], tuple[str, "QoSProfile | None"]]
+
+
+class Log(Protocol):
+    """Where a snapshot's outcome is logged (a ``logging.Logger`` or rclpy's node logger)."""
+
+    def info(self, message: str) -> object:
+        """Log ``message`` at INFO."""
+
+    def warning(self, message: str) -> object:
+        """Log ``message`` at WARNING."""
+
+    def error(self, message: str) -> object:
+        """Log ``message`` at ERROR."""
 
 
 @dataclass(frozen=True)
@@ -103,9 +121,9 @@ class _Snapshot:
     path: Path
     until_ns: int
     triggers: list[str]
-    queue: deque = field(default_factory=deque)
+    queue: deque[Any] = field(default_factory=deque)
     #: CAN frames (ring bytes) that arrived after the trigger
-    frame_queue: deque = field(default_factory=deque)
+    frame_queue: deque[bytes] = field(default_factory=deque)
     #: no more messages go in (the time after the last trigger is over, or a stop)
     ended: bool = False
     #: a CAN frame stamped after ``until_ns`` arrived: the frames up to it are all in
@@ -116,11 +134,16 @@ class SnapshotKeeper:
     """The ring, the snapshot being written, and the snapshot bags on disk (module docstring).
 
     :param clock_ns: the log-time clock (the node's), in ns; ends a snapshot without messages
+
+    :param config: duration before and after, root, bag limits, CAN log
+    :param open_bag: opens a snapshot's bag at a path
+    :param topic_info: a topic's type name and offered QoS
+    :param log: where a snapshot's outcome is logged
     """
 
     def __init__(self, config: SnapshotConfig, open_bag: OpenBag, topic_info: TopicInfo,
                  clock_ns: Callable[[], int] = time.time_ns,
-                 log: logging.Logger | Any = logger) -> None:
+                 log: Log = logger) -> None:
         self.config = config
         self.ring = MessageRing(config.duration_s)
         #: the raw CAN frames (``can_log``), else None
@@ -144,7 +167,13 @@ class SnapshotKeeper:
 
     # -- the publishing threads ----------------------------------------------------------------
     def add(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        """One recorded message: into the ring, and into the open snapshot while it runs."""
+        """One recorded message: into the ring, and into the open snapshot while it runs.
+
+        :param topic: the message's topic
+        :param data: its CDR bytes
+        :param log_time_ns: when it was received (ns)
+        :param publish_time_ns: when it was sent (ns)
+        """
         with self._cond:
             self.ring.append(topic, log_time_ns, publish_time_ns, data)
             snap = self._active
@@ -158,7 +187,11 @@ class SnapshotKeeper:
 
     def add_frame(self, wire_time_ns: int, data: bytes) -> None:
         """One CAN frame (``record/can_frames.pack_frame``): into the frame ring, and into the
-        open snapshot while it runs (ignored without ``can_log``)."""
+        open snapshot while it runs (ignored without ``can_log``).
+
+        :param wire_time_ns: the frame's wire time (ns)
+        :param data: the packed frame
+        """
         if self.frames is None:
             return
         with self._cond:
@@ -202,7 +235,7 @@ class SnapshotKeeper:
         worker.start()
         return snap.path, False
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> dict[str, int | str]:
         """Figures for the bus diagnostics: the ring's memory and the snapshots."""
         with self._cond:
             return {"snapshot_ring_bytes": self.ring.memory_bytes,
@@ -214,7 +247,10 @@ class SnapshotKeeper:
                        if self.frames is not None else {})}
 
     def close(self, timeout: float = 30.0) -> None:
-        """End the snapshot being written now (node shutdown) and wait for its bag to close."""
+        """End the snapshot being written now (node shutdown) and wait for its bag to close.
+
+        :param timeout: longest wait for the bag to close (s)
+        """
         with self._cond:
             if self._active is not None:
                 self._end(self._active)
@@ -241,7 +277,7 @@ class SnapshotKeeper:
             path, n = self.config.root / f"{base}_{n}", n + 1
         return path
 
-    def _write(self, snap: _Snapshot, topics: list[str], entries: list,
+    def _write(self, snap: _Snapshot, topics: list[str], entries: list[Any],
                frames: list[bytes] | None) -> None:
         """Open the bag (and the CAN log), write the rings' copies, then the queued messages
         and frames until the snapshot ends; close them and keep at most ``max_bags``. Errors
@@ -313,7 +349,7 @@ class SnapshotKeeper:
             snap.frame_queue.clear()
         return more
 
-    def _put(self, bag: Any, added: set[str], items: list) -> None:
+    def _put(self, bag: BagRecorder, added: set[str], items: list[Any]) -> None:
         for topic, log_ns, pub_ns, data in items:
             if topic not in added:
                 type_name, qos = self._topic_info(topic)

@@ -20,7 +20,21 @@ def message_class(type_name: str) -> type:
     pkg, name = parts[0], parts[-1]
     try:
         module = importlib.import_module(f"{pkg}.msg")
-        return getattr(module, name)
+        cls: type = getattr(module, name)
+        return cls
     except (ImportError, AttributeError) as err:
         raise RecordingError(f"message type {type_name} is not installed (is the workspace "
                              f"providing {pkg} sourced?)") from err
+
+
+def message_fields(cls: type) -> dict[str, str]:
+    """Field name -> rosidl type name of a generated message class, in wire order.
+
+    Raises:
+        RecordingError: ``cls`` is not a generated rosidl message class.
+    """
+    fields = getattr(cls, "get_fields_and_field_types", None)
+    if fields is None:
+        raise RecordingError(f"{cls.__name__} is not a generated ROS message class")
+    result: dict[str, str] = fields()
+    return result

@@ -9,6 +9,7 @@ WARN.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -81,7 +82,7 @@ def _with_frame_findings(level: int, message: str, frame: Any) -> tuple[int, str
 
 
 def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,
-               achieved_rate: float, publish_rate: float, counters: dict[str, int],
+               achieved_rate: float, publish_rate: float, counters: Mapping[str, object],
                extra_error: str = "") -> DiagnosticStatus:
     """The bus/gateway status: liveness, achieved vs configured rate and CAN counters."""
     if not connected:
@@ -104,7 +105,7 @@ def bus_status(name: str, hardware_id: str, *, alive: bool, connected: bool,
 
 
 def station_status(name: str, hardware_id: str, *, alive: bool, nmt_state: str,
-                   emcy: list[str], counters: dict[str, int]) -> DiagnosticStatus:
+                   emcy: list[str], counters: Mapping[str, object]) -> DiagnosticStatus:
     """One station (XN-GW-CANOPEN) of several on the bus: heartbeat, NMT state, EMCY history.
 
     ERROR while its heartbeat is missing (the station's joints go stale with it), WARN while

@@ -1,5 +1,11 @@
 """The node's lifecycle: what each standard transition opens, starts, stops and closes.
 
+:class:`NodeLifecycle` is the node's lifecycle part: rclpy calls the transition callbacks on
+the node (``on_configure`` ...), which hand them to it; it keeps the state (configured,
+active), runs the node's steps (:class:`LifecycleSteps`) and closes the bus side
+(``ros/bus_side.py``) and the ROS side's parts (:class:`RosParts`) in order, and reports a
+failure.
+
 The bridge is one rclpy ``LifecycleNode`` (ROS 2 managed-node design, lifecycle_msgs), driven
 through ``~/change_state`` / ``~/get_state`` like any managed driver: configure opens the bus
 side (the simulated station, the master's connection and the gateway's configuration; the
@@ -24,69 +30,120 @@ by its timer, which publishes while the bus side is open (inactive and active).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
-from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.node import Node
 
 from ssi_bridge.ros import logbridge
+from ssi_bridge.ros.bus_side import BusSide
+from ssi_bridge.ros.node_ports import CycleLoop, Step
 from ssi_bridge.ros.param_table import NODE_PARAMETERS
+from ssi_bridge.ros.params import NodeSettings
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 
-#: one step of a shutdown: (what, callable); a failing step is logged, the next still runs
-Step = tuple[str, Callable[[], object]]
+if TYPE_CHECKING:
+    from ssi_bridge.ros.liveview import LiveView
+    from ssi_bridge.ros.node_status import NodeDiagnostics
+    from ssi_bridge.ros.recording import SessionRecorder
+    from ssi_bridge.ros.services import BridgeServices
 
 
-class BridgeLifecycle:
-    """The transitions of the node (a part of :class:`~ssi_bridge.ros.node.SsiBridgeNode`).
+def declare_autostart(node: Node, default: bool) -> bool:
+    """Declare the read-only ``autostart`` parameter with ``default`` (the executable's: a
+    params file or ``-p`` still decides) and return its value; declared before the others
+    (ros/params.py then takes it as declared)."""
+    _, descriptor = NODE_PARAMETERS["autostart"]
+    descriptor.name = "autostart"
+    return bool(node.declare_parameter("autostart", default, descriptor).value)
 
-    The node provides the steps (``_open_bus_side``, ``_create_ros_side``, ``_new_cycle``,
-    ``_start``) and the parts they fill (``settings``, ``station``, ``master``, ``client``,
-    ``station_clients``, ``cycle``, ``player``, ``recorder``, ``handlers``, ``liveview``).
+
+def run_steps(steps: Sequence[Step], error: Callable[[str], object]) -> None:
+    """Run every step even if an earlier one fails; a failure is one ``error`` line."""
+    for what, step in steps:
+        try:
+            step()
+        except Exception as err:  # noqa: BLE001 - the remaining steps must still run
+            error(f"stopping the {what} failed: {err}")
+
+
+@dataclass(frozen=True)
+class RosParts:
+    """The parts of the ROS side the transitions stop and close (made by the first configure,
+    kept until the end)."""
+
+    recorder: SessionRecorder
+    services: BridgeServices
+    liveview: LiveView
+    diagnostics: NodeDiagnostics
+
+
+class LifecycleSteps(Protocol):
+    """What the transitions ask of the node (ros/node.py)."""
+
+    @property
+    def settings(self) -> NodeSettings:
+        """The node's settings as they are now."""
+
+    def open_bus_side(self) -> None:
+        """Configure: the joints' cores and the bus side. Raises what failed; the lifecycle
+        then closes what is open."""
+
+    def create_ros_side(self) -> RosParts:
+        """The first configure, after the bus side: publishers, services, timers, a cycle.
+        Raises what failed."""
+
+    def renew_cycle(self) -> None:
+        """A later configure: a new cycle loop (not started) on the new bus side."""
+
+    def start_cycle(self) -> None:
+        """Activate: start SYNC / the cycle, publishing and (record.enabled) recording.
+        Raises what failed."""
+
+    def release_cycle(self) -> CycleLoop | None:
+        """Deactivate: the node lets go of its cycle loop (a thread runs once: activate
+        builds the next one) and returns it to be stopped."""
+
+
+class NodeLifecycle:
+    """The transitions of the node (see the module docstring).
+
+    :param steps: the node's steps the transitions run
+    :param bus: the node's bus side (closed by cleanup)
+    :param logger: the node's logger (a failed transition, each transition's result)
     """
 
-    settings: Any
-    station: Any
-    master: Any
-    client: Any
-    station_clients: dict
-    cycle: Any
-    player: Any
-    recorder: Any
-    handlers: Any
-    liveview: Any
-    #: the bus side is open (configure done, cleanup not yet)
-    configured: bool = False
-    #: the cycle runs (activate done, deactivate not yet)
-    active: bool = False
-    #: publishers, services, timers exist (made by the first configure, kept until the end)
-    _ros_side: bool = False
-    #: autostart is running configure and activate: a failure is raised, not logged
-    _autostarting: bool = False
-    #: the error of the last failed transition
-    _transition_error: BaseException | None = None
+    def __init__(self, steps: LifecycleSteps, bus: BusSide, logger: RcutilsLogger) -> None:
+        self._steps = steps
+        self._bus = bus
+        self._log = logger
+        #: the bus side is open (configure done, cleanup not yet)
+        self.configured = False
+        #: the cycle runs (activate done, deactivate not yet)
+        self.active = False
+        #: the ROS side's parts (made by the first configure, kept until the end)
+        self._ros: RosParts | None = None
+        #: autostart is running configure and activate: a failure is raised, not logged
+        self._autostarting = False
+        #: the error of the last failed transition
+        self._transition_error: BaseException | None = None
 
     # -- start-up ----------------------------------------------------------------------------
-    def _declare_autostart(self, default: bool) -> bool:
-        """Declare the read-only ``autostart`` parameter with ``default`` (the executable's:
-        a params file or ``-p`` still decides) and return its value; declared before the
-        others (ros/params.py then takes it as declared)."""
-        _, descriptor = NODE_PARAMETERS["autostart"]
-        descriptor.name = "autostart"
-        return bool(self.declare_parameter(  # type: ignore[attr-defined]
-            "autostart", default, descriptor).value)
+    def begin(self, autostart: bool,
+              triggers: Sequence[Callable[[], TransitionCallbackReturn]]) -> None:
+        """End of the node's construction: run ``triggers`` (the node's trigger_configure and
+        trigger_activate) with ``autostart``, or wait unconfigured.
 
-    def _begin(self, autostart: bool) -> None:
-        """End of construction: configure and activate (autostart), or wait unconfigured.
-
-        Raises the failed transition's error (the bus side closed again) if autostart fails.
+        :raises BaseException: the failed transition's error (everything closed again)
         """
         if not autostart:
-            self.get_logger().info(  # type: ignore[attr-defined]
-                "managed node: unconfigured; configure opens the bus")
+            self._log.info("managed node: unconfigured; configure opens the bus")
             return
         self._autostarting = True
         try:
-            for trigger in (self.trigger_configure, self.trigger_activate):  # type: ignore
+            for trigger in triggers:
                 if trigger() != TransitionCallbackReturn.SUCCESS:
                     error = self._transition_error or RuntimeError("autostart failed")
                     self.shutdown()
@@ -98,77 +155,71 @@ class BridgeLifecycle:
     def _failed(self, what: str, err: BaseException) -> TransitionCallbackReturn:
         self._transition_error = err
         if not self._autostarting:
-            problem = self._bus_problem() if self._ros_side else ""  # type: ignore[attr-defined]
-            self.get_logger().error(  # type: ignore[attr-defined]
+            problem = self._ros.diagnostics.bus_problem() if self._ros is not None else ""
+            self._log.error(
                 f"{what} failed: {' '.join(str(err).split()) or type(err).__name__}"
                 + (f" ({problem})" if problem else ""))
         return TransitionCallbackReturn.FAILURE
 
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def configure(self) -> TransitionCallbackReturn:
         """Open the bus side (start the simulated station, connect, configure the gateway);
-        the first configure also creates publishers, services and timers."""
-        s = self.settings
+        the first configure also creates publishers, services and timers. FAILURE: the
+        reason logged, everything closed again (unconfigured)."""
         try:
-            self._open_bus_side(s)  # type: ignore[attr-defined]
-            if not self._ros_side:
-                self._create_ros_side(s)  # type: ignore[attr-defined]
-                self._ros_side = True
+            self._steps.open_bus_side()
+            if self._ros is None:
+                self._ros = self._steps.create_ros_side()
             else:
-                self.cycle = self._new_cycle(s)  # type: ignore[attr-defined]
-                self.recorder.open_frame_tap()
+                self._steps.renew_cycle()
+                self._ros.recorder.open_frame_tap()
+                self._ros.diagnostics.reset()
         except Exception as err:  # noqa: BLE001 - reported as FAILURE, the node stays unconfigured
             self._close_bus_side()
             return self._failed("configure", err)
         self.configured = True
         if not self._autostarting:
-            self.get_logger().info(  # type: ignore[attr-defined]
+            s = self._steps.settings
+            self._log.info(
                 f"configured: bus {s.bus_interface}:{s.bus_channel} open, node {s.node_id}"
-                + (" (simulated station started)" if self.station is not None else ""))
+                + (" (simulated station started)" if self._bus.station is not None else ""))
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Start SYNC/the cycle, publishing and (record.enabled) recording."""
+    def activate(self) -> TransitionCallbackReturn:
+        """Start SYNC/the cycle, publishing and (record.enabled) recording. FAILURE: the
+        reason logged, the node stays inactive."""
         try:
-            if self.cycle is None:
-                self.cycle = self._new_cycle(self.settings)  # type: ignore[attr-defined]
-            self._start(self.settings)  # type: ignore[attr-defined]
+            self._steps.start_cycle()
         except Exception as err:  # noqa: BLE001 - reported as FAILURE, the node stays inactive
             return self._failed("activate", err)
         self.active = True
         return TransitionCallbackReturn.SUCCESS
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def deactivate(self) -> TransitionCallbackReturn:
         """Stop the cycle and the recording; the bus stays open and configured."""
         self._stop_cycle()
-        self.get_logger().info(  # type: ignore[attr-defined]
-            "deactivated: cycle stopped, bus still configured")
+        self._log.info("deactivated: cycle stopped, bus still configured")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def cleanup(self) -> TransitionCallbackReturn:
         """Close the bus (and stop the simulated station)."""
         self._close_bus_side()
-        self.get_logger().info("cleaned up: bus closed")  # type: ignore[attr-defined]
+        self._log.info("cleaned up: bus closed")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state: stop what runs and close what is open."""
+    def lifecycle_shutdown(self) -> TransitionCallbackReturn:
+        """From any state: stop what runs and close what is open; later recordings refused."""
         self._stop_cycle()
         self._close_bus_side()
-        if self._ros_side:
-            self.recorder.finalize()  # ~/start_recording is refused from now on (#24 item 7)
-        self.get_logger().info("shut down: bus closed")  # type: ignore[attr-defined]
+        if self._ros is not None:
+            self._ros.recorder.finalize()  # ~/start_recording is refused from now on
+        self._log.info("shut down: bus closed")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def error(self) -> TransitionCallbackReturn:
         """An error in a transition: close everything, back to unconfigured."""
         self._stop_cycle()
         self._close_bus_side()
         return TransitionCallbackReturn.SUCCESS
-
-    def _on_diag_timer(self) -> None:
-        """Diagnostics only while the bus side is open (the CAM objects are read over it)."""
-        if self.configured:
-            super()._on_diag_timer()  # type: ignore[misc]
 
     # -- steps -------------------------------------------------------------------------------
     def _stop_cycle(self) -> None:
@@ -176,40 +227,22 @@ class BridgeLifecycle:
         if not self.active:
             return
         self.active = False
-        steps: list[Step] = [("cycle", self.cycle.stop)]
-        if self.player is not None:
-            steps.append(("log replay", self.player.stop))
-        steps.append(("recording", self.recorder.stop))
-        self._run_steps(steps)
-        self.cycle = None  # a thread runs once: activate builds the next one
+        cycle = self._steps.release_cycle()
+        steps: list[Step] = [("cycle", cycle.stop)] if cycle is not None else []
+        if self._bus.player is not None:
+            steps.append(("log replay", self._bus.player.stop))
+        if self._ros is not None:
+            steps.append(("recording", self._ros.recorder.stop))
+        run_steps(steps, self._log.error)
 
     def _close_bus_side(self) -> None:
-        """Close every station's client, the bus, the master, the snapshots' CAN listener; stop
-        the simulated station."""
+        """Close every station's client, the bus, the master, the snapshots' CAN listener;
+        stop the simulated station (every step runs, whatever failed before)."""
         self.configured = False
-        steps: list[Step] = [(f"station {sid} client", c.close)
-                             for sid, c in getattr(self, "station_clients", {}).items()]
-        if getattr(self, "client", None) is not None:
-            steps.append(("bus", self.client.close))
-        if getattr(self, "master", None) is not None:
-            steps.append(("master", self.master.close))
-        if getattr(self, "station", None) is not None:
-            steps.append(("simulated station", self.station.stop))
-        if self._ros_side:  # the snapshots' CAN listener holds the bus too
-            steps.append(("snapshot CAN listener", self.recorder.close_frame_tap))
-        self._run_steps(steps)
-        self.station = None
-        self.station_clients = {}
-        self.master = None
-
-    def _run_steps(self, steps: list[Step]) -> None:
-        """Run every step even if an earlier one fails; a failure is one log line."""
-        for what, step in steps:
-            try:
-                step()
-            except Exception as err:  # noqa: BLE001 - the remaining steps must still run
-                self.get_logger().error(  # type: ignore[attr-defined]
-                    f"stopping the {what} failed: {err}")
+        steps = self._bus.close_steps()
+        if self._ros is not None:  # the snapshots' CAN listener holds the bus too
+            steps.append(("snapshot CAN listener", self._ros.recorder.close_frame_tap))
+        run_steps(steps, self._log.error)
 
     def shutdown(self) -> None:
         """The process ends: stop services, cycle, recording, live view, the bus side; safe to
@@ -219,14 +252,15 @@ class BridgeLifecycle:
         runs even if an earlier one fails (a recording on a full disk must not leave the bus
         open).
         """
-        if self._ros_side:
-            self._run_steps([("services", self.handlers.stop)])
+        ros = self._ros
+        if ros is not None:
+            run_steps([("services", ros.services.stop)], self._log.error)
         self._stop_cycle()
-        if self._ros_side:
-            self._run_steps([("recording", self.recorder.finalize),
-                             ("live view", self.liveview.stop)])
+        if ros is not None:
+            run_steps([("recording", ros.recorder.finalize), ("live view", ros.liveview.stop)],
+                      self._log.error)
         self._close_bus_side()
         logbridge.uninstall()
 
 
-__all__ = ["BridgeLifecycle"]
+__all__ = ["LifecycleSteps", "NodeLifecycle", "RosParts", "declare_autostart", "run_steps"]

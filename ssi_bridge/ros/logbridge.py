@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import logging
 
-from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.logging import LoggingSeverity
+
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 
 #: Python loggers bridged: this package and the CAN libraries it drives
 BRIDGED = ("ssi_bridge", "canopen", "can")

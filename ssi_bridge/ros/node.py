@@ -5,37 +5,30 @@ frame and answers with TPDOs; each joint's core (``core/joint.py``) turns its sa
 joint units and a velocity; the node publishes. ``header.stamp`` is the SYNC time, which is
 the SSI latch time of the sample (the module latches on SYNC, well inside one bit time after
 it; docs/node.md). Services call the ROS-free facade (``core/bridge.py``) from their own
-thread, so the cycle never waits on them. Diagnostics, run-time parameters and the lifecycle
-transitions are the parts in ``node_status.py``, ``node_params.py`` and ``lifecycle.py``: the
-node is an rclpy ``LifecycleNode`` whose ``autostart`` parameter configures and activates it
-at start-up (``ssi_bridge_node``) or leaves that to ``~/change_state``
-(``ssi_bridge_managed_node``).
+thread, so the cycle never waits on them. The node is an rclpy ``LifecycleNode`` whose
+``autostart`` parameter configures and activates it at start-up (``ssi_bridge_node``) or
+leaves that to ``~/change_state`` (``ssi_bridge_managed_node``).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import os
-import sys
-import threading
 import time
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.lifecycle import LifecycleNode
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
-from ssi_bridge.base.realtime import pin_process
 from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
 from ssi_bridge.client.cycle_feed import feed_frames, sync_number
 from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
 from ssi_bridge.client.master import BridgeClient, CanMaster
-from ssi_bridge.client.one_master import ensure_node_alone
 from ssi_bridge.core.bridge import Bridge
 from ssi_bridge.core.cycle import Cycle
 from ssi_bridge.core.cycle_log import StationLog
@@ -43,12 +36,14 @@ from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.ros import logbridge
+from ssi_bridge.ros.bus_side import BusSide, StationFactory
 from ssi_bridge.ros.cycle import CycleThread, cycle_waits, cycle_wire_time
-from ssi_bridge.ros.lifecycle import BridgeLifecycle
+from ssi_bridge.ros.lifecycle import NodeLifecycle, RosParts, declare_autostart
 from ssi_bridge.ros.liveview import LiveView
-from ssi_bridge.ros.messages import idle_read, joint_state_msg, status_msg, time_msg
+from ssi_bridge.ros.messages import joint_state_msg, status_msg, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
-from ssi_bridge.ros.node_status import NodeDiagnostics
+from ssi_bridge.ros.node_start import bridging_line, prepare_process, replay_settings
+from ssi_bridge.ros.node_status import CycleRate, NodeDiagnostics
 from ssi_bridge.ros.observe import SILENT_WARNING_S, ObservedCycleThread
 from ssi_bridge.ros.params import NodeSettings, declare_parameters
 from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
@@ -58,12 +53,17 @@ from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
 
-class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, LifecycleNode):
+class SsiBridgeNode(LifecycleNode):
     """Bridge of the XN-1SSI channels of XN-GW-CANOPEN stations to ROS 2 (a lifecycle node).
 
     ``autostart`` is the default of the ``autostart`` parameter: on, the constructor
     configures and activates the node and raises the reason if that fails (nothing left
     open); off, it returns unconfigured with nothing open.
+
+    It owns its parts: :attr:`bus` (ros/bus_side.py), :attr:`lifecycle` (ros/lifecycle.py;
+    rclpy's transition callbacks go to it), :attr:`parameters` (ros/node_params.py), and
+    from the first configure :attr:`handlers` (ros/services.py), :attr:`recorder`
+    (ros/recording.py), :attr:`liveview` and :attr:`diagnostics` (ros/node_status.py).
     """
 
     def __init__(self, stop: Callable[[], None] | None = None, autostart: bool = True,
@@ -72,18 +72,10 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         #: ends the process's spin cleanly (main's stop request; without main: the context)
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
-        autostart = self._declare_autostart(autostart)
-        self.settings: NodeSettings = declare_parameters(self)
-        if self.settings.replay_can_log:
-            # the log is played onto a channel of this process only; the sniffer of a
-            # re-recording and the diagnostics' hardware_id name that channel
-            self.settings = dataclasses.replace(
-                self.settings, bus_interface="virtual",
-                bus_channel=f"ssi_bridge_replay_{os.getpid()}_{id(self):x}")
-        #: the simulated station(s) the node owns while its bus side is open (simulation:
-        #: true), else None; the supervisor's class (None on real hardware)
-        self.station: Any = None
-        self._simulation: Any = None
+        autostart = declare_autostart(self, autostart)
+        self.settings: NodeSettings = replay_settings(declare_parameters(self), self)
+        #: makes the simulated station(s) (simulation: true; None on real hardware)
+        simulation: StationFactory | None = None
         if self.settings.simulation:
             # the node's one import of the simulator (docs/architecture.md): a node on
             # real hardware loads nothing of ssi_bridge.sim
@@ -92,14 +84,13 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
             # the node and its simulated station meet on this bus (sim/supervisor/station.py)
             self.settings = Simulation.bus_settings(self.settings,
                                                     self.get_fully_qualified_name())
-            self._simulation = Simulation
+            simulation = Simulation
         s = self.settings
         #: the simulated station's clock: wire time since the node started (fault durations)
         self.model_clock = ModelClock()
         self.stamper = Stamper(self.get_clock(), self.get_logger())
         #: the benchmark's span per cycle (ros/span_probe.py); None unless it asks
         self._span_probe = probe_from_env()
-        self._mirror = threading.local()  # .active: a parameter set mirroring the module
         #: the joints' cores by name, in the configured order (filled by the bus side)
         self.joints: dict[str, Joint] = {}
         #: each station's frame log by node id (filled by the bus side): which SYNC a TPDO
@@ -107,17 +98,39 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self.frame_logs: dict[int, StationLog] = {}
         #: the cycle decisions (core/cycle.py): ros/ only turns its results into messages
         self.cycle_core = Cycle(self.joints, self.frame_logs)
-        self.bridge = Bridge(self.joints, self.client_of, self.mirror_para1)
+        self.bridge = Bridge(self.joints, self.client_of,
+                             lambda joint, value: self.parameters.mirror_para1(joint, value))
+        self.parameters = RuntimeParameters(self, self.joints, self.bridge, self)
         self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                                     bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
-        self._begin(autostart)  # lifecycle.py: configure and activate, or wait unconfigured
+        #: the bus side (opened by configure, closed by cleanup; ros/bus_side.py)
+        self.bus = BusSide(self.bus_config, simulation, self.bridge, self.model_clock,
+                           self.get_logger().info)
+        #: the achieved cycle rate; the cycle appends each cycle's monotonic time
+        self.cycle_rate = CycleRate()
+        self._cycle_times = self.cycle_rate.times
+        self.lifecycle = NodeLifecycle(self, self.bus, self.get_logger())
+        # configure and activate, or wait unconfigured
+        self.lifecycle.begin(autostart, (self.trigger_configure, self.trigger_activate))
 
     @property
-    def incomplete_cycles(self) -> int:
-        """Cycles in which at least one joint was left out (no sample latched at its SYNC)."""
-        return self.cycle_core.incomplete_cycles
+    def client(self) -> BridgeClient | ListenOnlyClient:
+        """The first station's client or the listener (AttributeError before configure)."""
+        if (client := self.bus.client) is None:
+            raise AttributeError("client: the bus side was never opened")
+        return client
+
+    @property
+    def master(self) -> CanMaster | None:
+        """The CANopen master while configured (None: listen-only, closed)."""
+        return self.bus.master
+
+    @property
+    def player(self) -> CanLogPlayer | None:
+        """The log replay of a listen-only node (``replay.can_log``)."""
+        return self.bus.player
 
     @property
     def latch_bound_s(self) -> float:
@@ -125,18 +138,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         ``latch_bound`` parameter plus one cycle's worst-case wire time."""
         return self.settings.latch_bound + self.cycle_wire_s
 
-    @property
-    def clock_steps(self) -> int:
-        """Header stamps moved forward because the clock stepped back (NTP step)."""
-        return self.stamper.clock_steps
-
-    def _open_bus_side(self, s: NodeSettings) -> None:
-        """The joints' cores, the simulated station (if any), the master or listener.
-
-        The simulated station is a device of its own (a child process, or in-process on the
-        virtual bus as the fallback): the node starts it, waits for its boot-up, and from
-        then on reaches it only over CAN, fault injection included (SDO 0x4000-0x4002).
-        """
+    def open_bus_side(self) -> None:
+        """Configure: the joints' cores, the bus side (ros/bus_side.py), the frame logs."""
+        s = self.settings
         self.joints.clear()
         for j in s.joints:
             core = Joint(j, velocity_window=s.velocity_window, stale_cycles=s.stale_cycles,
@@ -144,31 +148,11 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
             if core.layout_problem:
                 self.get_logger().warning(f"{j.name}: no frame checks: {core.layout_problem}")
             self.joints[j.name] = core
-        self.bridge.faults = None
-        self.station = self._simulation(s) if self._simulation is not None else None
-        ensure_node_alone(self.bus_config, s, getattr(self.station, "open_bus", None))
-        if self.station is not None:
-            self.station.start()
-        self.player: CanLogPlayer | None = None
-        self.client: BridgeClient | ListenOnlyClient
-        #: one client per station (node id -> client), all on one master: one SYNC per cycle
-        self.station_clients: dict[int, BridgeClient] = {}
-        self.master: CanMaster | None = None
-        if s.listen_only:
-            self.client = ListenOnlyClient(self.bus_config, s.node_id,
-                                           max(j.slot for j in s.joints))
-            self.client.connect()
-            if s.replay_can_log:
-                self.player = CanLogPlayer(s.replay_can_log, s.bus_channel, rate=s.replay_rate)
-        else:
-            self._connect_stations(s)
+        self.bus.open(s, self.joints)
         self._attach_frame_logs()
         if not s.listen_only:
             self.refresh_cams()
-        self._cycle_times: deque[float] = deque()
-        self._cycle_started = time.monotonic()
-        self._last_levels: tuple = ()
-        self._last_bus_counts: dict = {}
+        self.cycle_rate.restart()
 
     def _attach_frame_logs(self) -> None:
         """A frame log per station, fed by its slot table (every SYNC and TPDO it sees)."""
@@ -183,29 +167,9 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
             for joint in joints:
                 self.frame_logs[joint.settings.station] = log
 
-    def _connect_stations(self, s: NodeSettings) -> None:
-        """The master, one client per station, and each joint's start-up configuration."""
-        self.master = CanMaster(self.bus_config, priority=s.cycle_priority,
-                                opener=self.station.open_bus if self.station else None)
-        for sid in s.station_ids:  # a failure: configure closes what is open (lifecycle.py)
-            slots = max(j.slot for j in s.station_joints(sid))
-            self.station_clients[sid] = BridgeClient(self.master, sid, slots,
-                                                     sdo_timeout=s.bus_sdo_timeout)
-            # our own station booted just now: on a busy machine its first answer may be late
-            self.station_clients[sid].connect(
-                patience=s.simulation_start_timeout if self.station is not None else 0.0)
-        self.client = self.station_clients[s.station_ids[0]]
-        if self.station is not None:
-            self.bridge.faults = self.station.fault_injector(
-                self.station_clients, {n: j.config for n, j in self.joints.items()},
-                self.sim_time)
-        for joint in self.joints.values():
-            change = self.bridge.configure(joint, idle_read)
-            if change:
-                self.get_logger().info(f"{logbridge.clip(joint.name, 80)}: {change}")
-
-    def _create_ros_side(self, s: NodeSettings) -> None:
-        """Publishers, the recorder, the cycle loop, diagnostics timer, services, parameters."""
+    def create_ros_side(self) -> RosParts:
+        """Publishers, the recorder, the cycle loop, services, diagnostics, parameters."""
+        s = self.settings
         self.joint_pub = publisher(self, JointState, "joint_states")
         self.status_pub = publisher(self, Status, "~/status")
         self.diag_pub = publisher(self, DiagnosticArray, "/diagnostics")
@@ -215,14 +179,21 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
         self._service_group = MutuallyExclusiveCallbackGroup()
         self._diag_group = MutuallyExclusiveCallbackGroup()
         self.cycle = self._new_cycle(s)
-        self.diag_timer = self.create_timer(s.diagnostics_period, self._on_diag_timer,
-                                            callback_group=self._diag_group)
         self.handlers = BridgeServices(self, self.bridge, self.recorder, self.publish_safe)
         self.handlers.register(self._service_group)
         self.liveview = LiveView(self, s, self.handlers)
         for pub in (self.joint_pub, self.status_pub, self.diag_pub, self.handlers.events):
             self.liveview.offer(pub)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.diagnostics = NodeDiagnostics(
+            self, self, self.bus, self.joints, self.cycle_rate, self.cycle_core, self.stamper,
+            recorder=self.recorder, liveview=self.liveview, services=self.handlers,
+            publish=lambda msg: self.publish_safe(self.diag_pub, msg),
+            refresh_cams=self.refresh_cams, bus_open=lambda: self.lifecycle.configured)
+        self.diag_timer = self.create_timer(s.diagnostics_period, self.diagnostics.on_timer,
+                                            callback_group=self._diag_group)
+        self.parameters.attach_events(self.handlers.log_event)
+        self.add_on_set_parameters_callback(self.parameters.on_set)
+        return RosParts(self.recorder, self.handlers, self.liveview, self.diagnostics)
 
     def _new_cycle(self, s: NodeSettings) -> CycleThread | ObservedCycleThread:
         """The cycle loop (not started): SYNC master, or observer of another master's SYNC."""
@@ -244,13 +215,8 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                 # the bridge still runs; the bus diagnostics show the error until fixed
                 self.recorder.error = f"record.enabled: {err}"
                 self.get_logger().error(self.recorder.error)
-        if s.cpu_affinity:
-            pin_process(s.cpu_affinity)
-            self.get_logger().info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
-        # Python hands the GIL to a waiting thread only every switch interval (5 ms by
-        # default): a service burst's CPU-bound handlers would hold the cycle that long
-        sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
-        self._cycle_started = time.monotonic()
+        prepare_process(s, self.get_logger().info)
+        self.cycle_rate.started = time.monotonic()
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:
@@ -258,30 +224,75 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                                        s.replay_wait_for_subscribers, self.context.ok)
             else:
                 self.player.start()
-        mode = ("simulated station" if s.simulation else
-                f"replay of {s.replay_can_log}" if s.replay_can_log else
-                "listen-only" if s.listen_only else "real station")
-        names = logbridge.clip(str(list(self.joints)), 200)  # echoed input: kept short
-        self.get_logger().info(
-            f"bridging {len(s.joints)} joint(s) {names} on "
-            f"{s.bus_interface}:{s.bus_channel} node {s.node_id} "
-            f"({mode}); publishing "
-            f"{self.joint_pub.topic_name} at {s.publish_rate:g} Hz, {self.status_pub.topic_name}, "
-            f"/diagnostics every {s.diagnostics_period:g} s; services under "
-            f"{self.get_fully_qualified_name()}/")
+        self.get_logger().info(bridging_line(s, self.joints, self.joint_pub.topic_name,
+                                             self.status_pub.topic_name,
+                                             self.get_fully_qualified_name()))
 
     def client_of(self, joint: str) -> BridgeClient | ListenOnlyClient:
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
-        return self.station_clients.get(self.joints[joint].settings.station, self.client)
+        return self.bus.station_clients.get(self.joints[joint].settings.station, self.client)
 
     def refresh_cams(self) -> None:
         """Read the CAM objects of every joint (SDO: never in the cycle)."""
         for name, err in self.bridge.refresh_cams():
             self.get_logger().debug(f"{name}: CAM objects not read: {err}")
 
-    def sim_time(self) -> float:
-        """Seconds since the node started: the clock of the simulated station."""
-        return self.model_clock()
+    # -- the lifecycle (ros/lifecycle.py: rclpy calls these on the node) --------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Open the bus side; the first configure also creates publishers, services, timers."""
+        return self.lifecycle.configure()
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Start SYNC/the cycle, publishing and (record.enabled) recording."""
+        return self.lifecycle.activate()
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Stop the cycle and the recording; the bus stays open and configured."""
+        return self.lifecycle.deactivate()
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Close the bus (and stop the simulated station)."""
+        return self.lifecycle.cleanup()
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """From any state: stop what runs and close what is open."""
+        return self.lifecycle.lifecycle_shutdown()
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """An error in a transition: close everything, back to unconfigured."""
+        return self.lifecycle.error()
+
+    def shutdown(self) -> None:
+        """The process ends: close everything (NodeLifecycle.shutdown; safe to call twice)."""
+        self.lifecycle.shutdown()
+
+    # -- the steps the lifecycle runs (ros/lifecycle.py LifecycleSteps) ----------------------
+    def renew_cycle(self) -> None:
+        """A later configure: a new cycle loop on the new bus side."""
+        self.cycle = self._new_cycle(self.settings)
+
+    def start_cycle(self) -> None:
+        """Activate: a cycle (unless configure just built one), then :meth:`_start`."""
+        if self.cycle is None:
+            self.cycle = self._new_cycle(self.settings)
+        self._start(self.settings)
+
+    def release_cycle(self) -> CycleThread | ObservedCycleThread | None:
+        """Deactivate: the cycle to stop (activate builds the next one)."""
+        cycle, self.cycle = self.cycle, None
+        return cycle
+
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
+        """rclpy's, plus an ~/events record of each change or refusal (node_params.py)."""
+        return self.parameters.set_each(parameter_list, super().set_parameters)
+
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
+        """rclpy's, plus an ~/events record of the change or the refusal."""
+        return self.parameters.set_atomically(parameter_list, super().set_parameters_atomically)
+
+    def _publish_on_change(self) -> None:
+        """The diagnostics at once when a level changed since the last cycle."""
+        self.diagnostics.publish_on_change()
 
     # -- the cycle -------------------------------------------------------------------------
     def _on_cycle(self) -> None:

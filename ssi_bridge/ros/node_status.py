@@ -1,23 +1,44 @@
 """The node's /diagnostics: a status per joint, the bus, and each station when there are several.
 
-:class:`NodeDiagnostics` is a part of :class:`~ssi_bridge.ros.node.SsiBridgeNode` (a mixin: it
-reads the node's joints, clients, cycle and recorder, and publishes on its ``diag_pub``). The
-levels and messages come from the per-joint core (``core/joint.py``, ``core/health.py``) and
-``ros/diagnostics.py`` puts them into ``diagnostic_msgs``. Published every
-``diagnostics_period`` and at once when a level changes (checked each cycle, cheaply).
+:class:`NodeDiagnostics` is the node's diagnostics part (``ros/node.py`` owns it): it reads the
+joints, the bus side (``ros/bus_side.py``), the cycle (:class:`~ssi_bridge.ros.node_ports.
+NodeView`), the figures of the recorder, the live view and the services, and publishes
+through the node's shutdown-safe publish. The levels and messages come from the per-joint core
+(``core/joint.py``, ``core/health.py``) and ``ros/diagnostics.py`` puts them into
+``diagnostic_msgs``. Published every ``diagnostics_period`` and at once when a level changes
+(checked each cycle, cheaply). :class:`BusFindings` says what the bus did between two
+messages; :class:`CycleRate` measures the achieved cycle rate.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any
+from collections import deque
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING
 
-from diagnostic_msgs.msg import DiagnosticArray, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from ssi_bridge.client.bus_master import CanMaster
 from ssi_bridge.client.error_frames import error_frame_keys
-from ssi_bridge.core.health import ERROR, WARN
+from ssi_bridge.client.listener import ListenOnlyClient
+from ssi_bridge.client.master import BridgeClient
+from ssi_bridge.core.cycle import Cycle
+from ssi_bridge.core.health import ERROR, WARN, Level
+from ssi_bridge.core.joint import Joint
+from ssi_bridge.ros.cycle import CycleThread
 from ssi_bridge.ros.diagnostics import bus_status, channel_status, station_status, status_name
+from ssi_bridge.ros.bus_side import BusSide
+from ssi_bridge.ros.node_ports import NodeView
+from ssi_bridge.ros.stamps import Stamper
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+    from ssi_bridge.ros.liveview import LiveView
+    from ssi_bridge.ros.recording import SessionRecorder
+    from ssi_bridge.ros.services import BridgeServices
 
 
 #: bus counters whose growth since the last diagnostics message is a WARN: what the bus did
@@ -27,58 +48,88 @@ BUS_WARN_COUNTS = ("undecodable_frames", "malformed_pdos", "malformed_frames", "
                    "foreign_nmt_commands", "foreign_station_frames")
 #: and an ERROR: a round of a station's supervisor thread failed (it goes on; the log says why)
 BUS_ERROR_COUNT = "supervisor_errors"
+#: the bus status's figures: counter name -> value (a count, a figure, a text)
+Figures = dict[str, object]
 
 
-class NodeDiagnostics:
-    """The diagnostics part of the node (see the module docstring)."""
+class CycleRate:
+    """Cycles per second over a window, from each cycle's monotonic time (an interval measure,
+    not the SYNC stamps).
 
-    # provided by the node
-    settings: Any
-    joints: dict
-    client: Any
-    master: Any
-    station_clients: dict
-    cycle: Any
-    handlers: Any
-    recorder: Any
-    liveview: Any
-    station: Any
-    diag_pub: Any
-    clock_steps: int
-    incomplete_cycles: int
-    latch_bound_s: float
-    _cycle_times: Any
-    _cycle_started: float
-    _last_levels: tuple
-    _last_bus_counts: dict
+    The cycle appends ``time.monotonic()`` to :attr:`times` once per cycle it ran.
+    """
 
-    def _bus_findings(self, counters: dict[str, Any]) -> tuple[bytes | None, str]:
-        """What the bus did since the last diagnostics message: (level, message), or (None, "").
+    def __init__(self) -> None:
+        #: the monotonic time of each cycle of the window (and some older ones, dropped lazily)
+        self.times: deque[float] = deque()
+        #: when the cycle (re)started: the window never reaches back before it
+        self.started = time.monotonic()
+
+    def restart(self) -> None:
+        """A new bus side: forget the cycles and count from now."""
+        self.times.clear()
+        self.started = time.monotonic()
+
+    def per_second(self, period_s: float) -> float:
+        """Cycles per second over the last ``period_s`` (at least 1 s, at most since
+        :attr:`started`); 0.0 right at the start."""
+        now = time.monotonic()
+        window = min(max(period_s, 1.0), now - self.started)
+        if window <= 0:
+            return 0.0
+        times = self.times
+        while times and now - times[0] > window:
+            times.popleft()
+        return len(times) / window
+
+
+class BusFindings:
+    """What the bus did between two diagnostics messages, as a level and a message.
+
+    :param master: the node's master now (None: listen-only or closed: no foreign-traffic or
+        error-frame findings)
+    :param period_s: the diagnostics period now (s): foreign frames of two periods count
+    """
+
+    def __init__(self, master: Callable[[], CanMaster | None],
+                 period_s: Callable[[], float]) -> None:
+        self._master = master
+        self._period_s = period_s
+        self._last: dict[str, int] = {}
+
+    def reset(self) -> None:
+        """A new bus side: every counter starts from zero again."""
+        self._last = {}
+
+    def findings(self, counters: Mapping[str, object]) -> tuple[Level | None, str]:
+        """What the bus did since the last call: (level, message), or (None, "").
 
         Counters of :data:`BUS_WARN_COUNTS` and error frames of a class (``error_frames_*``)
         that grew, a controller error passive or warning, and other nodes' SYNC / NMT / SDO
         request frames of the last two periods are a WARN; a failed supervisor round an ERROR.
         """
         names = (*BUS_WARN_COUNTS, *error_frame_keys(), BUS_ERROR_COUNT)
-        last = self._last_bus_counts
-        grown = {k: counters.get(k, 0) - last.get(k, 0) for k in names
-                 if counters.get(k, 0) > last.get(k, 0)}
-        self._last_bus_counts = {k: counters.get(k, 0) for k in names}
+        now = {k: _count(counters.get(k, 0)) for k in names}
+        last = self._last
+        grown = {k: now[k] - last.get(k, 0) for k in names if now[k] > last.get(k, 0)}
+        self._last = now
         if grown.get(BUS_ERROR_COUNT):
             return ERROR, (f"bridge-supervisor thread: {grown[BUS_ERROR_COUNT]} round(s) "
                            "failed (see the log)")
         parts = [f"{k} +{n}" for k, n in grown.items()]
-        if self.master is not None:
-            foreign = self.master.foreign_traffic(2 * self.settings.diagnostics_period)
-            passive = self.master.error_frames.warning()  # error passive / warning
+        master = self._master()
+        if master is not None:
+            foreign = master.foreign_traffic(2 * self._period_s())
+            passive = master.error_frames.warning()  # error passive / warning
             parts += [p for p in (passive, foreign) if p]
         return (WARN, "; ".join(parts)) if parts else (None, "")
 
-    def _with_bus_findings(self, status: Any, counters: dict[str, Any]) -> Any:
-        """``status`` raised to the level of :meth:`_bus_findings` where that is worse; a
-        status already as bad keeps its message and gets the findings after it (a low cycle
-        rate must not hide the undecodable frames that came with it)."""
-        level, message = self._bus_findings(counters)
+    def applied(self, status: DiagnosticStatus,
+                counters: Mapping[str, object]) -> DiagnosticStatus:
+        """``status`` raised to the level of :meth:`findings` where that is worse; a status
+        already as bad keeps its message and gets the findings after it (a low cycle rate must
+        not hide the undecodable frames that came with it)."""
+        level, message = self.findings(counters)
         if level is None:
             return status
         if status.level < level:
@@ -87,43 +138,95 @@ class NodeDiagnostics:
             status.message = f"{status.message}; {message}"
         return status
 
-    def achieved_rate(self) -> float:
-        """Cycles per second over the last diagnostics period (at least 1 s, at most uptime);
-        the cycles' times are monotonic (an interval measure, not the SYNC stamps)."""
-        now = time.monotonic()
-        window = min(max(self.settings.diagnostics_period, 1.0), now - self._cycle_started)
-        if window <= 0:
-            return 0.0
-        times = self._cycle_times
-        while times and now - times[0] > window:
-            times.popleft()
-        return len(times) / window
 
-    def _levels(self) -> tuple:
+def _count(value: object) -> int:
+    """A counter's value as a count (the bus status's counters are ints or bools)."""
+    return int(value) if isinstance(value, (int, float)) else 0
+
+
+class NodeDiagnostics:
+    """The node's /diagnostics (see the module docstring).
+
+    :param node: the node whose name the statuses carry, whose clock stamps the message and
+        whose context says whether publishing still makes sense
+    :param view: the node's settings and cycle as they are now
+    :param bus: the node's bus side (read while it is open)
+    :param joints: the joints' cores by name (the node's own mapping, refilled per configure)
+    :param rate: the achieved cycle rate (the cycle feeds it)
+    :param cycle_core: the cycle decisions (its incomplete cycles)
+    :param stamper: the header stamps (its clock steps)
+    :param recorder: gives its figures and error; records the message
+    :param liveview: gives its figures and error
+    :param services: gives the busy refusals and the request worker's rest
+    :param publish: publishes a DiagnosticArray on ``/diagnostics``; False when the node is
+        shutting down
+    :param refresh_cams: re-reads every joint's CAM objects (SDO)
+    :param bus_open: whether the bus side is open (the periodic message waits for it)
+    """
+
+    def __init__(self, node: Node, view: NodeView, bus: BusSide, joints: Mapping[str, Joint],
+                 rate: CycleRate, cycle_core: Cycle, stamper: Stamper, *, recorder: SessionRecorder, liveview: LiveView,
+                 services: BridgeServices, publish: Callable[[DiagnosticArray], bool],
+                 refresh_cams: Callable[[], None], bus_open: Callable[[], bool]) -> None:
+        self._node = node
+        self._view = view
+        self._bus = bus
+        self._bus_open = bus_open
+        self._joints = joints
+        self._rate = rate
+        self._cycle_core = cycle_core
+        self._stamper = stamper
+        self._recorder = recorder
+        self._liveview = liveview
+        self._services = services
+        self._publish = publish
+        self._refresh_cams = refresh_cams
+        self.bus = BusFindings(lambda: bus.master, lambda: view.settings.diagnostics_period)
+        self._last_levels: tuple[object, ...] = ()
+
+    def reset(self) -> None:
+        """A new bus side: no level to compare with, every bus counter from zero."""
+        self._last_levels = ()
+        self.bus.reset()
+
+    def achieved_rate(self) -> float:
+        """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
+        return self._rate.per_second(self._view.settings.diagnostics_period)
+
+    def _levels(self) -> tuple[object, ...]:
         """The diagnostic levels without building the statuses (checked every cycle)."""
-        levels: list[Any] = [j.level for j in self.joints.values()]
+        joints = self._joints.values()
+        levels: list[object] = [j.level for j in joints]
         # PowerFail / error bits change a joint's level too (a failed check under noise would
         # flip it every few cycles: that one waits for the periodic message). No check (a
         # register read holds REG_RD_ADR) raises nothing, as a clean one: not a change, or
         # every ~/read_register would publish the diagnostics twice
         levels += [(bool(f and f.power_failure), bool(f and f.encoder_error))
-                   for j in self.joints.values() for f in (j.counters.frame,)]
-        levels.extend(int(c.gateway_alive) for c in self.station_clients.values())
-        levels.append(int(self.client.gateway_alive) * 2 + int(bool(self._bus_problem())))
+                   for j in joints for f in (j.counters.frame,)]
+        levels.extend(int(c.gateway_alive) for c in self._bus.station_clients.values())
+        levels.append(int(self._client().gateway_alive) * 2 + int(bool(self.bus_problem())))
         return tuple(levels)
 
-    def _publish_on_change(self) -> None:
-        """Publish the diagnostics at once when a level changed since the last cycle."""
+    def publish_on_change(self) -> None:
+        """Publish the diagnostics at once when a level changed since the last call (each
+        cycle)."""
         levels = self._levels()
         if self._last_levels and levels != self._last_levels:
-            self.publish_diagnostics()
+            self.publish()
         self._last_levels = levels
 
-    def _statuses(self) -> list:
-        s = self.settings
-        fqn = self.get_fully_qualified_name()  # type: ignore[attr-defined]
+    def _client(self) -> BridgeClient | ListenOnlyClient:
+        """The bus side's (first) client; RuntimeError before the first configure."""
+        if (client := self._bus.client) is None:
+            raise RuntimeError("diagnostics of a bus side never opened")
+        return client
+
+    def _statuses(self) -> list[DiagnosticStatus]:
+        s = self._view.settings
+        client = self._client()
+        fqn = self._node.get_fully_qualified_name()
         out = []
-        for joint in self.joints.values():
+        for joint in self._joints.values():
             hw = (f"{s.bus_interface}:{s.bus_channel} node {joint.settings.station or s.node_id} "
                   f"slot {joint.slot} XN-1SSI")
             extra = {"para1": f"0x{joint.para1:08X}",
@@ -139,64 +242,69 @@ class NodeDiagnostics:
                               else f"{st.message}; {joint.para1_note}")
                 st.level = max(st.level, WARN)
             out.append(st)
-        if len(self.station_clients) > 1:
+        if len(self._bus.station_clients) > 1:
             return out + self._station_statuses()
-        counters = dataclasses.asdict(self.client.counters)
-        counters.update(self.recorder.counters())
-        counters["late_frames"] = self.client.table.late_frames
+        counters: Figures = dataclasses.asdict(client.counters)
+        counters.update(self._recorder.counters())
+        counters["late_frames"] = client.table.late_frames
         counters.update(self._cycle_counters())
-        meter = getattr(self.client, "load", None)
-        if meter is not None:
-            counters.update(meter.figures())
-        counters.update(self.liveview.counters())
-        out.append(self._with_bus_findings(bus_status(
+        if isinstance(client, BridgeClient):  # a listener has no load meter
+            counters.update(client.load.figures())
+        counters.update(self._liveview.counters())
+        out.append(self.bus.applied(bus_status(
             status_name(fqn, "bus"),
             f"{s.bus_interface}:{s.bus_channel} node {s.node_id} XN-GW-CANOPEN",
-            alive=self.client.gateway_alive, connected=self.client.network is not None,
+            alive=client.gateway_alive, connected=client.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self._bus_problem()), counters))
+            extra_error=self.bus_problem()), counters))
         return out
 
-    def _cycle_counters(self) -> dict[str, Any]:
+    def _cycle_counters(self) -> Figures:
         """The bus status's figures of the cycle, its threads and the services (one station
         or several)."""
-        counters: dict[str, Any] = {
-            "clock_steps": self.clock_steps, "incomplete_cycles": self.incomplete_cycles,
-            "samples_set_aside": sum(j.counters.set_aside for j in self.joints.values()),
-            "latch_bound_s": f"{self.latch_bound_s:.6f}",
-            "cycles_missed": getattr(self.cycle, "missed", 0),
-            "cycle_scheduling": getattr(self.cycle, "scheduling", "")}
-        if self.master is not None:
-            counters["receive_scheduling"] = self.master.receive_scheduling
-            counters.update(self.master.link_figures())
-            counters.update(self.master.error_frames.figures())
-        counters["diagnostics_period_s"] = f"{self.settings.diagnostics_period:g}"
-        counters["service_busy_refusals"] = self.handlers.busy_refusals
-        counters["service_rested_s"] = f"{self.handlers.queue.rested:.2f}"
+        view = self._view
+        cycle = view.cycle
+        counters: Figures = {
+            "clock_steps": self._stamper.clock_steps,
+            "incomplete_cycles": self._cycle_core.incomplete_cycles,
+            "samples_set_aside": sum(j.counters.set_aside for j in self._joints.values()),
+            "latch_bound_s": f"{view.latch_bound_s:.6f}",
+            "cycles_missed": cycle.missed if isinstance(cycle, CycleThread) else 0,
+            "cycle_scheduling": cycle.scheduling if cycle is not None else ""}
+        master = self._bus.master
+        if master is not None:
+            counters["receive_scheduling"] = master.receive_scheduling
+            counters.update(master.link_figures())
+            counters.update(master.error_frames.figures())
+        counters["diagnostics_period_s"] = f"{view.settings.diagnostics_period:g}"
+        counters["service_busy_refusals"] = self._services.busy_refusals
+        counters["service_rested_s"] = f"{self._services.queue.rested:.2f}"
         return counters
 
-    def _station_statuses(self) -> list:
+    def _station_statuses(self) -> list[DiagnosticStatus]:
         """Several stations: one bus status (master, SYNC, rate) and one per station."""
-        s = self.settings
-        fqn = self.get_fully_qualified_name()  # type: ignore[attr-defined]
-        assert self.master is not None
-        counters = dataclasses.asdict(self.master.counters)
-        counters.update(self.recorder.counters())
-        counters["late_frames"] = sum(c.table.late_frames for c in self.station_clients.values())
+        s = self._view.settings
+        clients = self._bus.station_clients
+        fqn = self._node.get_fully_qualified_name()
+        master = self._bus.master
+        assert master is not None
+        counters: Figures = dataclasses.asdict(master.counters)
+        counters.update(self._recorder.counters())
+        counters["late_frames"] = sum(c.table.late_frames for c in clients.values())
         counters.update(self._cycle_counters())
-        counters.update(self.master.load.figures())
-        silent = [sid for sid, c in self.station_clients.items() if not c.gateway_alive]
+        counters.update(master.load.figures())
+        silent = [sid for sid, c in clients.items() if not c.gateway_alive]
         totals = dict(counters)  # each station's supervisor counts into its own client
         for key in ("invalid_nmt_states", "nmt_restarts", BUS_ERROR_COUNT):
-            totals[key] = sum(getattr(c.counters, key, 0) for c in self.station_clients.values())
-        out = [self._with_bus_findings(bus_status(
+            totals[key] = sum(getattr(c.counters, key, 0) for c in clients.values())
+        out = [self.bus.applied(bus_status(
             status_name(fqn, "bus"), f"{s.bus_interface}:{s.bus_channel} master of stations "
-            f"{list(self.station_clients)}", alive=True, connected=self.master.network is not None,
+            f"{list(clients)}", alive=True, connected=master.network is not None,
             achieved_rate=self.achieved_rate(), publish_rate=s.publish_rate, counters=counters,
-            extra_error=self._bus_problem()), totals)]
+            extra_error=self.bus_problem()), totals)]
         if silent:
             out[0].values.append(KeyValue(key="silent_stations", value=str(silent)))
-        for sid, client in self.station_clients.items():
+        for sid, client in clients.items():
             node = client.node
             nmt = node.nmt.state if node is not None else "UNKNOWN"
             emcy = ([f"0x{e.code:04X} reg 0x{e.register:02X} {e.get_desc()}".strip()
@@ -210,36 +318,42 @@ class NodeDiagnostics:
                 counters=station_counters))
         return out
 
-    def _bus_problem(self) -> str:
+    def bus_problem(self) -> str:
         """An error beside the bus state: a lost interface, a bus-off controller, the
-        recorder's, a simulated station that ended."""
-        station = self.station.problem() if self.station is not None else None
-        link = self.master.interface_problem() if self.master is not None else ""
-        bus_off = self.master.error_frames.problem() if self.master is not None else ""
-        return "; ".join(p for p in (link, bus_off, self.recorder.error, self.liveview.error,
-                                     station) if p)
+        recorder's, the live view's, a simulated station that ended ("" when none)."""
+        station, master = self._bus.station, self._bus.master
+        ended = station.problem() if station is not None else None
+        link = master.interface_problem() if master is not None else ""
+        bus_off = master.error_frames.problem() if master is not None else ""
+        return "; ".join(p for p in (link, bus_off, self._recorder.error, self._liveview.error,
+                                     ended) if p)
 
-    def _on_diag_timer(self) -> None:
-        """Periodic diagnostics; the CAM objects are re-read here (SDO, never in the cycle)."""
-        lost = self.master is not None and self.master.interface_problem()
-        if not self.settings.listen_only and not lost and self.context.ok():  # type: ignore
-            self.refresh_cams()  # type: ignore[attr-defined]
-        self.publish_diagnostics()
-
-    def publish_diagnostics(self) -> None:
-        """Publish one DiagnosticArray with a status per joint and one for the bus."""
-        if not self.context.ok():  # type: ignore[attr-defined]
+    def on_timer(self) -> None:
+        """Periodic diagnostics while the bus side is open; the CAM objects are re-read here
+        (SDO, never in the cycle)."""
+        if not self._bus_open():
             return
-        clock = self.get_clock()  # type: ignore[attr-defined]
+        master = self._bus.master
+        lost = master is not None and master.interface_problem()
+        if not self._view.settings.listen_only and not lost and self._node.context.ok():
+            self._refresh_cams()
+        self.publish()
+
+    def publish(self) -> None:
+        """Publish one DiagnosticArray with a status per joint and one for the bus (nothing
+        once the context is shut down, or before use_sim_time's first /clock)."""
+        if not self._node.context.ok():
+            return
+        clock = self._node.get_clock()
         now = clock.now()
         if now.nanoseconds <= 0:
             return  # use_sim_time before the first /clock: no time to stamp with
         msg = DiagnosticArray()
         msg.header.stamp = now.to_msg()
         msg.status = self._statuses()
-        if not self.publish_safe(self.diag_pub, msg):  # type: ignore[attr-defined]
+        if not self._publish(msg):
             return
-        self.recorder.record("/diagnostics", msg, clock.now().nanoseconds)
+        self._recorder.record("/diagnostics", msg, clock.now().nanoseconds)
 
 
-__all__ = ["NodeDiagnostics"]
+__all__ = ["BUS_ERROR_COUNT", "BUS_WARN_COUNTS", "BusFindings", "CycleRate", "NodeDiagnostics"]

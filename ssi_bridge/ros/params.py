@@ -20,6 +20,7 @@ from ssi_bridge.ros.param_table import (
     JOINT_PARAMETERS, NODE_PARAMETERS, RENAMED, nesting_clashes,
 )
 from ssi_bridge.ros.qos_overrides import stray_overrides
+from ssi_bridge.ros.rclpy_compat import parameter_overrides
 
 # the station's part of the settings lives with the station (gateway/), rclpy-free
 from ssi_bridge.protocol.settings import (  # noqa: F401 - DEFAULT_PARA1, JointSettings re-exported
@@ -153,7 +154,7 @@ def unknown_overrides(node: Node) -> list[str]:
     import difflib
 
     declared = set(node.list_parameters([], 0).names)
-    given = getattr(node, "_parameter_overrides", {})
+    given = parameter_overrides(node)
     out = stray_overrides(node, list(given))  # qos_overrides.* (ros/qos_overrides.py)
     for name in sorted(given):
         if name in declared or name in RCLPY_PARAMETERS or name.startswith(RCLPY_PREFIXES):
@@ -172,7 +173,7 @@ def unknown_overrides(node: Node) -> list[str]:
 def renamed_overrides(node: Node) -> None:
     """ConfigError for a parameter given (params file, ``-p``) under its old name
     (:data:`~ssi_bridge.ros.param_table.RENAMED`), naming the new one."""
-    given = getattr(node, "_parameter_overrides", {})
+    given = parameter_overrides(node)
     for old, new in RENAMED.items():
         if old in given:
             raise ConfigError(f"parameter '{old}' is now '{new}' (a name that is also the prefix "

@@ -1,6 +1,6 @@
 """Every use of rclpy's private API in one place (Jazzy, rclpy 7.1), checked by a canary test.
 
-The node needs four things rclpy does not offer publicly:
+The node needs six things rclpy does not offer publicly:
 
 * :data:`RCLError`: the exception rcl raises when a publish or a take races the context's
   shutdown (``rclpy._rclpy_pybind11``); the node ends a cycle quietly on it during shutdown.
@@ -10,6 +10,11 @@ The node needs four things rclpy does not offer publicly:
   calls waits in the KEEP_ALL history and none is lost while a handshake runs.
 * :func:`executor_tasks`: the callbacks an executor still runs (``executor._futures``), so
   the node can let them finish before it closes the bus under them.
+* :func:`parameter_overrides`: the parameters given to a node (params file, ``-p``, the
+  ``parameter_overrides`` argument), declared or not (``Node._parameter_overrides``), so a
+  typo or an old name is reported instead of silently ignored.
+* :class:`RcutilsLogger`: the class of ``Node.get_logger()``, which rclpy defines in its
+  implementation package (``rclpy.impl``), for the log bridge's annotations.
 
 ``test/ros/test_rclpy_compat.py`` fails on an rclpy whose private names changed.
 """
@@ -20,6 +25,7 @@ from contextlib import ExitStack
 from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 
@@ -55,9 +61,18 @@ def service_pointer(service: Any) -> int:
     return service.handle.pointer
 
 
+def parameter_overrides(node: Any) -> dict[str, Any]:
+    """The parameters given to ``node`` by name (rclpy ``Parameter``), declared or not
+    (AttributeError on an rclpy that keeps them elsewhere)."""
+    given: dict[str, Any] = node._parameter_overrides
+    return given
+
+
 def executor_tasks(executor: Any) -> list[Any]:
-    """The tasks (callbacks) ``executor`` has started and not yet dropped."""
-    return list(getattr(executor, "_futures", ()))
+    """The tasks (callbacks) ``executor`` has started and not yet dropped (AttributeError on
+    an rclpy that keeps them elsewhere)."""
+    return list(executor._futures)
 
 
-__all__ = ["RCLError", "executor_tasks", "service_pointer", "take_request", "wait_for_requests"]
+__all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides",
+           "service_pointer", "take_request", "wait_for_requests"]

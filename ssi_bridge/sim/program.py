@@ -117,7 +117,14 @@ def _watch_parent(parent: int, stop: StopRequests) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the station until SIGINT/SIGTERM (0); 2 for bad parameters, 1 for bus errors."""
+    """Entry point of the ``station`` executable: the simulated station on its bus until
+    SIGINT/SIGTERM.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``):
+        ``--params-file``, ``-p NAME:=VALUE`` overrides, the bus (see ``--help``)
+    :returns: the exit code: 0 stopped by a signal; 2 bad parameters; 1 the bus could not be
+        opened or failed (the reason on stderr)
+    """
     # a handler that set an Event itself deadlocked the station for good when a second signal
     # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) landed inside the first one
     stop = StopRequests()

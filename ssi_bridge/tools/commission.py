@@ -102,7 +102,13 @@ class _Progress:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the tool; returns the exit code (see the module docstring)."""
+    """Entry point of the ``commission`` executable: find the station, write its params file.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``)
+    :returns: the exit code: 0 done; 1 the bus could not be opened or the file not
+        written; 2 bad options; 3 another master is active; 4 no XN-GW-CANOPEN found.
+        Errors never leave as exceptions (the reason on stderr).
+    """
     try:
         args = _parser().parse_args(argv)
     except SystemExit as stop:

@@ -60,10 +60,12 @@ class MonitorState:
     statuses: dict[str, Any] = field(default_factory=dict)
 
     def on_joint_states(self, msg: Any) -> None:
+        """Keep the newest ``joint_states`` message ``msg`` (a subscription callback)."""
         self.joint_states = msg
         self.received += 1
 
     def on_diagnostics(self, msg: Any) -> None:
+        """Keep the newest status of each name in the DiagnosticArray ``msg``."""
         for status in msg.status:
             self.statuses[status.name] = status
 
@@ -144,7 +146,13 @@ def node_seen(node: Any, name: str, namespace: str) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``monitor`` executable; 0 on Ctrl-C or after ``--count`` reports."""
+    """Entry point of the ``monitor`` executable: a running bridge's joints and diagnostics
+    in the terminal, once per ``--period``.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``);
+        ``--ros-args`` and what follows go to rclpy
+    :returns: the exit code: 0 on Ctrl-C or after ``--count`` reports; 2 bad options
+    """
     args_in = sys.argv[1:] if argv is None else argv
     ros_args = args_in[args_in.index("--ros-args"):] if "--ros-args" in args_in else []
     args = build_parser().parse_args(args_in[:len(args_in) - len(ros_args)])

@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _recorded_frame(bag: Path, joint: str, index: int) -> tuple[int, str]:
     """REG_SSI_FRAME of the index-th valid status sample of ``joint``."""
+    from ssi_bridge_msgs.msg import Status
+
     from ssi_bridge.record.reader import Bag
     with Bag(bag) as source:
         topics = [t.name for t in source.topics.values()
@@ -58,6 +60,8 @@ def _recorded_frame(bag: Path, joint: str, index: int) -> tuple[int, str]:
             raise RecordingError(f"{source.path}: no ssi_bridge_msgs/msg/Status topic")
         seen = 0
         for _topic, stamp, msg in source.decoded(topics):
+            if not isinstance(msg, Status):
+                continue
             for ch in msg.channels:
                 if (joint and ch.joint != joint) or not ch.ssi_frame_valid:
                     continue
@@ -70,7 +74,13 @@ def _recorded_frame(bag: Path, joint: str, index: int) -> tuple[int, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``plot`` executable."""
+    """Entry point of the ``plot`` executable: a session, or one SSI frame, as a PNG.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``)
+    :returns: the exit code: 0 written; 2 a bag that cannot be read, bad options or an
+        unwritable output (a RecordingError, ValueError or OSError, its reason on stderr);
+        130 interrupted. Errors never leave as exceptions.
+    """
     args = build_parser().parse_args(argv)
     try:
         if args.frame:

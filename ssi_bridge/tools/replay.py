@@ -115,8 +115,8 @@ def _until(args: argparse.Namespace) -> float | Decimal | None:
     if args.playback_until_nsec is not None:
         return Decimal(args.playback_until_nsec) / 10**9
     if args.playback_until_sec is not None:
-        return args.playback_until_sec
-    return args.playback_until
+        return float(args.playback_until_sec)
+    return None if args.playback_until is None else float(args.playback_until)
 
 
 def _options(args: argparse.Namespace) -> Any:
@@ -224,7 +224,14 @@ def _play(args: argparse.Namespace, bag: Any, options: Any, ros_args: list[str])
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``replay`` executable."""
+    """Entry point of the ``replay`` executable: publish a bag again, or ``--recover`` it.
+
+    :param argv: the command line without the program name (default: ``sys.argv[1:]``);
+        ``--ros-args`` and what follows go to rclpy
+    :returns: the exit code: 0 played, stopped or recovered; 2 a bag that cannot be read or
+        bad options (a RecordingError or ValueError, its reason on stderr); 130 (128 +
+        SIGINT) a ``--recover`` interrupted. Errors never leave as exceptions.
+    """
     args_in = sys.argv[1:] if argv is None else argv
     ros_args = args_in[args_in.index("--ros-args"):] if "--ros-args" in args_in else []
     args = build_parser().parse_args(args_in[:len(args_in) - len(ros_args)])

@@ -14,8 +14,12 @@ from ssi_bridge.tools.ssi_bridge_node import main as _main
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node with autostart off by default until interrupted (exit codes as
-    ssi_bridge_node)."""
+    """Entry point of ``ssi_bridge_managed_node``: the node with ``autostart`` off by default,
+    until interrupted.
+
+    :param args: the command line without the program name (default: ``sys.argv[1:]``)
+    :returns: the exit code, as :func:`ssi_bridge.tools.ssi_bridge_node.main`
+    """
     return _main(args, managed=True)
 
 

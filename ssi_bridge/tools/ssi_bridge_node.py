@@ -144,6 +144,13 @@ def main(args: list[str] | None = None, managed: bool = False) -> int:
     The node is a lifecycle node; its ``autostart`` parameter defaults to on (configure and
     activate at start-up; a failure is a start-up error) or, ``managed``
     (ssi_bridge_managed_node), off: it opens nothing until configured over ``~/change_state``.
+
+    :param args: the command line without the program name (default: ``sys.argv[1:]``),
+        ``--ros-args`` included
+    :param managed: ``autostart`` defaults to off
+    :returns: the exit code: 0 stopped by SIGINT/SIGTERM or a lifecycle shutdown; 1 the node
+        could not start (bad parameters, a bus or station that cannot be reached), the
+        reason on stderr
     """
     from ssi_bridge.ros.node import SsiBridgeNode
 

@@ -2,7 +2,8 @@
 master, garbage, a device of another kind, modules with no working encoder.
 
 ``commission`` runs in this process through its ``main`` (the installed executable is
-exercised by test_node_from_file.py); the stations are simulated ones it is not told about.
+exercised by test/ros/test_node_from_commissioned_file.py); the stations are simulated ones
+it is not told about.
 Exit codes are the documented ones (ssi_bridge/tools/commission.py): 0 done, 3 another master.
 """
 

@@ -21,7 +21,7 @@ from pathlib import Path
 TEST_ROOT = Path(__file__).resolve().parents[1]
 #: the fixtures that give a test a DDS domain of its own (test/conftest.py NODE_FIXTURES)
 DOMAIN_FIXTURES = frozenset({"ros_domain", "module_domain"})
-#: issue 32's budget of node-process test functions
+#: the budget of node-process test functions
 BUDGET = 100
 #: the ratchet while the tier moves: the count may not grow above this; lowered with every
 #: test moved in-process, until it reaches BUDGET

@@ -93,9 +93,18 @@ class Probe:
             self.executor.spin_once(0.01)
 
     def subscribe(self, topic: str) -> list[tuple[float, JointState]]:
+        """Messages on ``topic`` with the time the replay published each (seconds).
+
+        The time is the DDS source timestamp the writer puts on each sample, not this
+        process's receive time: a probe starved on a busy machine takes a burst of samples at
+        once, and the replay's pace is what the tests check.
+        """
         rx = self.got.setdefault(topic, [])
-        self.node.create_subscription(JointState, topic,
-                                      lambda m: rx.append((time.monotonic(), m)), RELIABLE)
+
+        def take(msg: JointState, info: dict[str, int]) -> None:
+            rx.append((info["source_timestamp"] / 1e9, msg))
+
+        self.node.create_subscription(JointState, topic, take, RELIABLE)
         return rx
 
     def call(self, srv_type: Any, name: str, request: Any, timeout: float = 20.0) -> Any:
@@ -258,7 +267,7 @@ def indices(rx: list[tuple[float, JointState]]) -> list[int]:
 
 
 def speed(part: list[tuple[float, JointState]]) -> float:
-    """Bag seconds played per wall second over ``part`` (received messages)."""
+    """Bag seconds played per wall second over ``part`` (by the replay's publish times)."""
     bag = (index(part[-1][1]) - index(part[0][1])) * PERIOD_NS / 1e9
     return bag / (part[-1][0] - part[0][0])
 

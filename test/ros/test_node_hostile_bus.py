@@ -26,8 +26,10 @@ from sensor_msgs.msg import JointState
 
 from ssi_bridge.base.udp_bus import open_udp_bus, parse_channel
 
+from support.stations import gone as _gone
+from support.stations import station_of as _station_of
+
 from .conftest import station_channel, latest_status, wait_for_level
-from .test_node_station_process import _gone, _station_of
 
 PERIOD = 0.5
 GARBAGE = b"\xc1 this is not a CAN frame"

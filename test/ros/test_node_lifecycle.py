@@ -10,46 +10,17 @@ from __future__ import annotations
 
 import os
 import re
-import subprocess
 import time
 from pathlib import Path
 
-import yaml
 from lifecycle_msgs.msg import State, Transition
-from lifecycle_msgs.srv import ChangeState, GetState
 from sensor_msgs.msg import JointState
 
-from .conftest import NodeProcess, dds_env, installed_executable
-
-RATE = 50.0
-
-
-def _start_managed(tmp_path: Path, domain_id: int, child_preexec, params: dict) -> NodeProcess:
-    values = {"bus.channel": f"test_{domain_id}_managed", "publish_rate": RATE,
-              "storage_path": str(tmp_path / "bank" / "retentive.json"),
-              # the station as a child process: its PID shows when cleanup closes the bus
-              "simulation.transport": "udp_multicast"}
-    values.update(params)
-    pfile = tmp_path / "params.yaml"
-    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
-    log_path = tmp_path / "node.log"
-    env = dds_env(domain_id)
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(
-            [str(installed_executable("ssi_bridge_managed_node")), "--ros-args",
-             "--params-file", str(pfile)],
-            stdout=log, stderr=subprocess.STDOUT, env=env, cwd=tmp_path,
-            start_new_session=True, preexec_fn=child_preexec)
-    return NodeProcess(proc, domain_id, "", log_path, env=env)
-
-
-def _state(probe, node: NodeProcess) -> int:
-    return probe.call(GetState, node.topic("~/get_state"), GetState.Request()).current_state.id
-
-
-def _change(probe, node: NodeProcess, transition: int) -> bool:
-    request = ChangeState.Request(transition=Transition(id=transition))
-    return probe.call(ChangeState, node.topic("~/change_state"), request, timeout=30.0).success
+from support.lifecycle import RATE
+from support.lifecycle import change_state as _change
+from support.lifecycle import lifecycle_state as _state
+from support.lifecycle import start_managed as _start_managed
+from support.ros_process import NodeProcess
 
 
 def _station_pid(node: NodeProcess, probe) -> int:

@@ -24,17 +24,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import ReadRegister
 
+from support.liveview import free_port
+
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 #: binary server message "Message Data": opcode, subscription id, log time (ns)
 MESSAGE_DATA = struct.Struct("<BIQ")
 OP_MESSAGE_DATA = 0x01
-
-
-def free_port() -> int:
-    """A TCP port nothing listens on right now (the kernel's choice)."""
-    with socket.socket() as s:
-        s.bind(("0.0.0.0", 0))
-        return int(s.getsockname()[1])
 
 
 def non_loopback_address() -> str | None:

@@ -20,7 +20,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
@@ -49,8 +48,6 @@ def _stop(procs: list[subprocess.Popen]) -> None:
         p.wait(5)
 
 
-@pytest.mark.load
-@pytest.mark.integration
 def test_one_khz_beside_two_cpu_burners_reports_no_false_fault(running, probe, tmp_path):
     # every published joint_states is read back from the node's own recording: a subscriber
     # on a loaded machine may lose messages (KEEP_LAST 10), and the velocity window is the

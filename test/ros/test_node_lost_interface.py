@@ -24,7 +24,9 @@ from sensor_msgs.msg import JointState
 
 from ssi_bridge.base.udp_bus import derive_channel
 
-from .test_node_station_process import _ready, _start_station
+from support.stations import ready as _ready
+from support.stations import start_station as _start_station
+
 from .unpluggable_can import FLAG_ENV, INTERFACE
 
 HERE = Path(__file__).resolve().parent

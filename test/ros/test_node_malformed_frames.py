@@ -19,8 +19,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from ssi_bridge.base.udp_bus import open_udp_bus
 
+from support.stations import gone as _gone
+from support.stations import station_of as _station_of
+
 from .conftest import station_channel, latest_status, wait_for_level
-from .test_node_station_process import _gone, _station_of
 
 PERIOD = 0.5
 HEARTBEATS, SEGMENTS = 20, 20

@@ -26,29 +26,14 @@ from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.registers import Reg
 
+from support.stations import ready as _ready
+from support.stations import started_station as _start_station
+from support.stations import stop_station as _stop_station
+
 from .conftest import REPO, NodeProcess, dds_env, installed_executable, joint_of
-from .test_node_station_process import _ready
-from .test_node_station_process import _start_station as start_station_process
 
 #: REG_PARA1 of the default joint (25-bit binary frame, 250 kbit/s) with INVALID_BITS_LSB = 2
 PARA1_TWO_INVALID_LSB = 0x19020200
-
-
-def _start_station(tmp_path: Path, params: dict, *args: str) -> subprocess.Popen:
-    """The ``station`` program on ``params``, once it said it is ready."""
-    proc = start_station_process(tmp_path, params, *args)
-    _ready(proc)
-    return proc
-
-
-def _stop_station(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(5)
 
 
 def _start_probed_node(tmp_path: Path, domain_id: int, params: dict,

@@ -17,7 +17,9 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from ssi_bridge_msgs.srv import StartRecording, StopRecording
 
-from .test_node_lifecycle import _change, _start_managed, _state
+from support.lifecycle import change_state as _change
+from support.lifecycle import lifecycle_state as _state
+from support.lifecycle import start_managed as _start_managed
 
 RATE = 100.0
 BUS = "/ssi_bridge: bus"
@@ -119,8 +121,7 @@ def test_a_finalized_managed_node_refuses_to_record(tmp_path, domain_id, child_p
 def test_recorder_control_and_snapshot_reach_the_live_view(running, probe, tmp_path):
     """The four Trigger services are offered by the live view (Foxglove's Service Call panel)
     and answer as over DDS."""
-    from .test_node_liveview import free_port
-    from .test_node_liveview_rw import LiveViewClient, session
+    from support.liveview import LiveViewClient, free_port, session
 
     port = free_port()
     node = running({"foxglove.port": port, "record.root": str(tmp_path / "rec"),

@@ -16,7 +16,6 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
@@ -25,38 +24,18 @@ from ssi_bridge_msgs.srv import InjectFault, ReadRegister, WriteRegister
 from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.base.realtime import fifo_permitted, thread_policies
 
+from support.stations import children as _children
+from support.stations import gone as _gone
+from support.stations import ready as _ready
+from support.stations import start_station as _start_station
+from support.stations import station_of as _station_of
+
 from .conftest import dds_env, installed_executable
 
 REG_LOWER_LIMIT = 48
 PERIOD = 0.5
 #: the station as a child process of the node
 CHILD = {"simulation.transport": "udp_multicast"}
-
-
-def _children(pid: int) -> list[int]:
-    """Child processes of ``pid`` (forked by any of its threads)."""
-    out: list[int] = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            out += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return out
-
-
-def _station_of(node) -> int:
-    kids = [k for k in _children(node.proc.pid)
-            if b"ssi_bridge.sim.program" in Path(f"/proc/{k}/cmdline").read_bytes()]
-    assert len(kids) == 1, f"expected one station child of the node, got {kids}"
-    return kids[0]
-
-
-def _gone(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return True
-    return state in ("Z", "X")  # ended (a zombie waits only for its reaper)
 
 
 def _wait(predicate, timeout: float, what: str) -> None:
@@ -201,20 +180,6 @@ def test_without_multicast_on_loopback_the_default_names_the_fallback(tmp_path, 
     lines = [ln for ln in text.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot start" in lines[0], text
     assert "simulation.transport:=virtual" in lines[0], text
-
-
-def _start_station(tmp_path: Path, params: dict, *extra: str) -> subprocess.Popen:
-    pfile = tmp_path / "station.yaml"
-    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    return subprocess.Popen([str(installed_executable("station")), "--params-file", str(pfile), *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
-
-
-def _ready(proc: subprocess.Popen) -> str:
-    line = proc.stdout.readline().decode()
-    assert line.startswith("station ready"), (line, proc.stderr.read().decode()[-2000:])
-    return line
 
 
 def test_node_with_simulation_false_drives_a_separately_started_station(

@@ -10,7 +10,6 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 
-@pytest.mark.integration
 def test_stamps_are_wire_times_and_strictly_increasing(running, probe):
     node = running({"publish_rate": 200.0})
     msgs = probe.subscribe(JointState, node.topic("joint_states"), qos=500)
@@ -24,7 +23,6 @@ def test_stamps_are_wire_times_and_strictly_increasing(running, probe):
     assert all(0 < now_ns - s < 60 * 10**9 for s in stamps)
 
 
-@pytest.mark.integration
 def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_node, probe):
     node = start_node({"use_sim_time": True, "publish_rate": 100.0})
     msgs = probe.subscribe(JointState, node.topic("joint_states"), qos=100)
@@ -52,7 +50,6 @@ def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_n
     assert node.log().count("waiting for /clock") == 1
 
 
-@pytest.mark.integration
 def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running, probe):
     from ssi_bridge.protocol import wire
 
@@ -65,7 +62,6 @@ def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running,
     assert "does not fit the CAN wire" not in quiet.log()
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize("transport", ["virtual", "udp_multicast"])
 def test_a_rate_the_wire_cannot_carry_runs_complete_cycles_at_the_rate_that_does(
         running, probe, transport, tmp_path):

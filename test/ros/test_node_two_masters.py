@@ -20,7 +20,9 @@ from sensor_msgs.msg import JointState
 
 from ssi_bridge.base.udp_bus import derive_channel
 
-from .test_node_station_process import _children, _ready, _start_station
+from support.stations import children as _children
+from support.stations import ready as _ready
+from support.stations import start_station as _start_station
 
 
 def _one_line_exit_1(node) -> str:

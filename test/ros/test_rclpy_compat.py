@@ -70,3 +70,33 @@ def test_a_running_callback_is_listed(domain_id):
     finally:
         release.set()
         rclpy.try_shutdown(context=context)
+
+
+def test_the_given_parameters_are_read_declared_or_not(domain_id):
+    """``parameter_overrides``: what a params file or ``-p`` gave a node, before and without a
+    declaration (``Node._parameter_overrides``), so ros/params.py can name a typo."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        node = rclpy.create_node(
+            "canary_overrides", context=context,
+            cli_args=["--ros-args", "-p", "publish_rte:=100.0"],
+            parameter_overrides=[rclpy.parameter.Parameter("joints", value=["a"])])
+        given = rclpy_compat.parameter_overrides(node)
+        assert given["publish_rte"].value == 100.0
+        assert given["joints"].value == ["a"]
+        assert not node.has_parameter("publish_rte")
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_a_nodes_logger_is_the_class_the_log_bridge_names(domain_id):
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        node = rclpy.create_node("canary_logger", context=context)
+        assert isinstance(node.get_logger(), rclpy_compat.RcutilsLogger)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -17,7 +17,8 @@ from ssi_bridge.base.udp_bus import derive_channel, parse_channel
 from ssi_bridge.client.master import BridgeClient
 from ssi_bridge.protocol.settings import BusConfig
 
-from .test_node_station_process import _ready, _start_station
+from support.stations import ready as _ready
+from support.stations import start_station as _start_station
 
 
 def test_a_standalone_station_hears_a_master_after_undecodable_datagrams(tmp_path, domain_id):

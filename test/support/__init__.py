@@ -1,2 +1,4 @@
-"""ROS-free helpers of the tests and benchmarks (never imported by the driver): ``truth``, the
-truth oracle of the simulated station."""
+"""Helpers shared by several test folders and the benchmarks (never imported by the driver,
+never a test module): ``truth``, the truth oracle of the simulated station; ``ros_process``,
+``stations``, ``lifecycle`` and ``liveview``, the node and station processes of the node
+tests and the clients that talk to them."""

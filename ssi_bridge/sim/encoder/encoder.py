@@ -44,7 +44,8 @@ class EncoderFrame(NamedTuple):
     """The frame an encoder latched, with the ground truth it was made from.
 
     A :class:`typing.NamedTuple` (immutable, built once per latch in the scalar hot path,
-    where a frozen dataclass's per-field ``object.__setattr__`` cost about 1.2 µs); use
+    where a frozen dataclass pays an ``object.__setattr__`` per field, docs/encoder_line.md
+    "Performance"); use
     ``frame._replace(...)`` for a modified copy.
     """
 
@@ -53,7 +54,7 @@ class EncoderFrame(NamedTuple):
     #: number of frame bits
     length: int
     #: output value encoded in the position bits (steps, may be negative, 001 §5.2.5)
-    count: int
+    count: int  # type: ignore[assignment]  # the field shadows tuple.count on purpose
     #: ground truth position at the formation time (rev or m)
     position: float
     #: ground truth velocity at the formation time (rev/s or m/s)
@@ -145,10 +146,12 @@ class SsiEncoder:
 
     @property
     def linear(self) -> bool:
+        """Whether the encoder measures a length (m) rather than an angle (rev)."""
         return self.config.linear
 
     @property
     def measuring_step_m(self) -> float:
+        """The length of one step of a linear encoder (m)."""
         return self.config.measuring_step_m
 
     # -- inputs and faults --------------------------------------------------------------

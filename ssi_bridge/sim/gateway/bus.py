@@ -17,9 +17,9 @@ from copy import deepcopy
 from typing import Any
 
 import can
-import canopen
 
 from ssi_bridge.base.can_compat import recv_step, recv_step_unfiltered, steps_itself
+from ssi_bridge.base.canopen_compat import OwnListenerNetwork
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.sim.gateway.wire_bus import (
     OWED_MAX_S, SIMULATED_INTERFACES, DuePeriodicTask, Wire, WireBus, open_bus, take_bus, wire_for,
@@ -126,7 +126,7 @@ class LossyBus(can.BusABC):
         is taken directly: this is the path of every frame the receive thread reads. (The
         step skips python-can's level-9 "Received" trace of the ``can.bus`` logger.)
         """
-        if (self._inner_steps and not self.drop_received and self._filters is None
+        if (self._inner_steps and not self.drop_received and self.filters is None
                 and self._inner.filters is None):
             msg = recv_step_unfiltered(self._inner, timeout)
         else:
@@ -213,44 +213,27 @@ class WireMessage(can.Message):
         return clone
 
 
-class BridgeNetwork(canopen.Network):
-    """canopen's ``Network`` sending :class:`WireMessage` frames.
+class BridgeNetwork(OwnListenerNetwork):
+    """The gateway's canopen ``Network`` (``base/canopen_compat.OwnListenerNetwork``), sending
+    :class:`WireMessage` frames; its listener is ``base/rx_guard.GuardedListener``'s
+    controller model (``controller.py``)."""
 
-    ``Network.send_message`` is canopen's documented hook for a custom back end; everything
-    canopen sends through it (NMT, SYNC, SDO, EMCY, PDOs) goes out unchanged on the wire, with
-    the same lock and the same check of the receive thread.
-    """
-
-    #: called with every frame :meth:`send_message` sent (the master's bus load)
-    on_sent: Callable[[can.Message], None] | None = None
     #: TPDO bursts not sent because a newer SYNC was already on the wire
     window_missed = 0
 
-    def check(self) -> None:
-        """Nothing to check: the station's listener (``base/rx_guard.GuardedListener``)
-        handles every receive error and keeps receiving, so canopen has none to raise."""
-
-    def send_message(self, can_id: int, data: bytes, remote: bool = False) -> WireMessage:
-        """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
-        connected). On a simulated wire its ``timestamp`` is then its end on the wire."""
-        if not self.bus:
-            raise RuntimeError("Not connected to CAN bus")
-        frame = WireMessage.frame(can_id, data, remote)
-        with self.send_lock:
-            self.bus.send(frame)
-        self.check()
-        if self.on_sent is not None:
-            self.on_sent(frame)
-        return frame
+    def make_frame(self, can_id: int, data: bytes, remote: bool) -> WireMessage:
+        """The frame sent: a :class:`WireMessage` (on a simulated wire its ``timestamp`` is
+        then its end on the wire)."""
+        return WireMessage.frame(can_id, data, remote)
 
     def send_messages(self, frames: Sequence[tuple[int, bytes]], answering: float | None = None
                       ) -> list[tuple[int, can.CanError]]:
         """Send data frames back to back under one lock; return those that failed.
 
         The same frames as :meth:`send_message` for each, in order, with nothing of another
-        thread between them (a station's TPDOs after one SYNC); the lock and the receive
-        thread check are paid once. A frame the bus refuses (``can.CanError``) does not stop
-        the others: it is returned with its error. RuntimeError when not connected.
+        thread between them (a station's TPDOs after one SYNC); the lock is taken once. A
+        frame the bus refuses (``can.CanError``) does not stop the others: it is returned with
+        its error. RuntimeError when not connected.
         """
         bus = self.bus
         if not bus:
@@ -271,7 +254,6 @@ class BridgeNetwork(canopen.Network):
                         bus.send(frame(can_id, data))
                     except can.CanError as err:
                         failed.append((can_id, err))
-        self.check()
         return failed
 
 

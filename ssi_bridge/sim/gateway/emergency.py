@@ -21,7 +21,7 @@ import logging
 import struct
 from collections.abc import Callable, Sequence
 
-from canopen.sdo import SdoAbortedError
+from canopen import SdoAbortedError
 
 from ssi_bridge.protocol.aborts import SdoAbort
 from ssi_bridge.protocol.dictionary import ERROR_HISTORY

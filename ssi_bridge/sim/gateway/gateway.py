@@ -35,6 +35,7 @@ from canopen.sdo import SdoAbortedError
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
+from ssi_bridge.base.canopen_compat import forget_values
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.protocol.frame_rules import station_rules
 from ssi_bridge.protocol.settings import BusConfig
@@ -142,7 +143,7 @@ class XnGateway:
             self._source = None  # a handed-over bus is taken once
         self.rx_fifo.grace = grace_for(inner) if self.stall_grace is None else self.stall_grace
         self.bus = LossyBus(inner)
-        self.network = BridgeNetwork(self.bus)
+        self.network = BridgeNetwork(self.bus, notifier_cycle=NOTIFIER_CYCLE)
         # subscribers get each frame's handling time through the controller's receive FIFO
         # (a SYNC latches then) and no undecodable datagram, receive error or raising
         # callback stops the station
@@ -155,9 +156,7 @@ class XnGateway:
         self.node.sdo.report = listener.malformed
         #: the station's receive path: its faults by kind (``listener.faults``)
         self.listener = listener
-        self.network.listeners[:] = [listener]
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.network.connect()
+        self.network.start(listener)
         self.network.add_node(self.node)
         self.network.subscribe(0, self._on_nmt)
         with self._lock:
@@ -225,12 +224,11 @@ class XnGateway:
     def _boot(self, *, reset_application: bool) -> None:
         self.node.nmt.stop_heartbeat()
         if reset_application:
-            self.node.data_store.clear()
+            forget_values(self.node)
             self.objects.reset()
             self.emergencies.reset()
         else:
-            for index in [i for i in self.node.data_store if 0x1000 <= i < 0x2000]:
-                del self.node.data_store[index]
+            forget_values(self.node, lambda index: 0x1000 <= index < 0x2000)
         self.pdo.reload()
         self._subscribe_sync()
         self.node.nmt.send_command(NMT_CMD_RESET_NODE)  # INITIALISING: boot-up message

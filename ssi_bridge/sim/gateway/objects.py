@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from canopen.objectdictionary import ODVariable
-from canopen.sdo import SdoAbortedError
+from canopen import SdoAbortedError
 
 from ssi_bridge.exceptions import ParameterError, RegisterWriteError
 from ssi_bridge.protocol.aborts import SdoAbort
@@ -161,8 +161,9 @@ class EncoderObjects:
         """
         if len(entries) < 2 or any(index != POSITION for index, _ in entries):
             return None
-        modules = [self._module(subindex) for _, subindex in entries]
-        if any(m is None for m in modules):
+        found = [self._module(subindex) for _, subindex in entries]
+        modules = [m for m in found if m is not None]
+        if len(modules) != len(found):
             return None
         pack = struct.Struct("<" + "I" * len(modules)).pack
         if len(modules) == 2:
@@ -189,7 +190,10 @@ class EncoderObjects:
                 raise SdoAbortedError(SdoAbort.VALUE_TOO_HIGH)
             self._cam[index][slot] = value
         elif index in REGISTER_OBJECTS:
-            self._write_register(module, index, od.decode_raw(data))
+            raw = od.decode_raw(data)
+            if not isinstance(raw, int):  # the register objects are integers (000 Table 16)
+                raise SdoAbortedError(SdoAbort.LENGTH_MISMATCH)
+            self._write_register(module, index, raw)
 
     @staticmethod
     def _write_register(module: Xn1Ssi, index: int, value: int) -> None:

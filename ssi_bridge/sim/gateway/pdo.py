@@ -35,7 +35,7 @@ from functools import partial
 from typing import Callable
 
 import canopen
-from canopen.sdo import SdoAbortedError
+from canopen import SdoAbortedError
 
 from ssi_bridge.protocol.aborts import SdoAbort
 from ssi_bridge.protocol.dictionary import (
@@ -117,13 +117,15 @@ class PdoEngine:
         self.tpdos: list[_Pdo] = []
         self.rpdos: list[_Pdo] = []
         self._active: list[_Pdo] = []  # the valid, mapped TPDOs
-        self._subscribed: dict[int, Callable] = {}
+        self._subscribed: dict[int, Callable[[int, bytearray, float], None]] = {}
         self._sync_count = 0
 
     # -- configuration -----------------------------------------------------------------------
     def _u(self, index: int, subindex: int) -> int:
-        obj = self._node.object_dictionary[index][subindex]
-        return obj.decode_raw(self._node.get_data(index, subindex))
+        obj = self._node.object_dictionary.get_variable(index, subindex)
+        if obj is None:
+            raise KeyError(f"0x{index:04X}:{subindex:02X} is not in the station's dictionary")
+        return int(obj.decode_raw(self._node.get_data(index, subindex)))
 
     def _load(self, com: int, mapping: int, number: int) -> _Pdo:
         cob = self._u(com, 1)
@@ -342,7 +344,7 @@ class PdoEngine:
                 logger.warning("RPDO%d: 0x%04X:%02X refused (0x%08X)", pdo.number, index,
                                subindex, err.code)
 
-    def _make_receiver(self, pdo: _Pdo) -> Callable:
+    def _make_receiver(self, pdo: _Pdo) -> Callable[[int, bytearray, float], None]:
         def receive(can_id: int, data: bytearray, timestamp: float) -> None:
             if self._node.nmt.state != "OPERATIONAL":
                 return

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any, Protocol
 
-from canopen.sdo import SdoAbortedError
+from canopen import SdoAbortedError
 
 from ssi_bridge.protocol.aborts import SdoAbort
 from ssi_bridge.sim.gateway.error_frames import report_error_frames

@@ -95,7 +95,7 @@ class SimStation:
 
         Saved without fsync: the atomic replace keeps the bank whole if the station is killed
         at any point, and a simulated module need not survive a power loss of the host. An
-        fsync waits on the host's disk (over 1 s beside a busy test suite, measured), and a
+        fsync waits on the host's disk (seconds beside a busy test suite, docs/module.md), and a
         retentive write is answered over SDO only once saved: the station would fall silent
         for the master's SDO timeout (docs/module.md)."""
         if not storage_path:

@@ -76,6 +76,7 @@ class LineConfig:
 
     @property
     def tv(self) -> float:
+        """The data line's delay (s): ``delay_s`` when given, else the cable's (``data_delay``)."""
         return self.delay_s if self.delay_s is not None else data_delay(self.cable_length_m)
 
 
@@ -94,12 +95,14 @@ class LineFaults:
     bit_error_rate: float = 0.0
 
     def clear(self) -> None:
+        """Remove every fault of the line."""
         self.data_break = self.clock_break = False
         self.stuck.clear()
         self.bit_error_rate = 0.0
 
     @property
     def active(self) -> bool:
+        """Whether any fault is in force."""
         return self.data_break or self.clock_break or bool(self.stuck) or self.bit_error_rate > 0
 
 

@@ -35,6 +35,7 @@ class MultiReadout:
 
     @property
     def mismatch(self) -> bool:
+        """Whether the repeated transmissions differed (DATA_MISMATCH)."""
         return bool(self.status & MasterStatus.DATA_MISMATCH)
 
 

@@ -95,9 +95,11 @@ class MemoryStore:
         self.saves = 0
 
     def load(self) -> BankSnapshot | None:
+        """The bank saved last, or None."""
         return self.snapshot
 
     def save(self, snapshot: BankSnapshot) -> None:
+        """Keep ``snapshot`` as the bank (counted in ``saves``)."""
         self.snapshot = snapshot
         self.saves += 1
 

@@ -42,7 +42,10 @@ class Simulation:
 
     @staticmethod
     def open_bus(config: BusConfig) -> can.BusABC:
-        """The master's end of the simulated wire (a python-can bus like any other)."""
+        """The master's end of the simulated wire (a python-can bus like any other).
+
+        :param config: the bus the master was configured with (the simulated wire's channel)
+        """
         return open_bus(config)
 
     def start(self) -> None:
@@ -66,7 +69,12 @@ class Simulation:
     def fault_injector(self, clients: Mapping[int, ObjectWriter],
                        configs: Mapping[str, EncoderConfig | None],
                        clock: Callable[[], float]) -> FaultInjector | StationFaults:
-        """Fault injection over the master's SDO clients (one per station node id)."""
+        """Fault injection over the master's SDO clients (one per station node id).
+
+        :param clients: the master's SDO access per station node id
+        :param configs: each joint's encoder layout (None: the joint has no frame layout)
+        :param clock: the monotonic clock fault durations are measured on
+        """
         s = self.settings
         injectors = {sid: FaultInjector(client, {j.name: j for j in s.station_joints(sid)},
                                         dict(configs), clock)

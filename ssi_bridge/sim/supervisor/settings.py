@@ -7,13 +7,16 @@ simulator needs nothing of the driver to be started by it.
 
 from __future__ import annotations
 
-from typing import Protocol
+from dataclasses import Field
+from typing import Any, ClassVar, Protocol
 
 from ssi_bridge.protocol.settings import JointSettings
 
 
 class NodeSettings(Protocol):
-    """The node's settings the simulated stations are started from."""
+    """The node's settings the simulated stations are started from (a dataclass)."""
+
+    __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
 
     simulation_transport: str
     simulation_start_timeout: float

@@ -143,7 +143,13 @@ class ChildStation:
         return self.proc.pid if self.proc is not None else None
 
     def start(self, timeout: float) -> None:
-        """Spawn the station and wait for its boot-up (GatewayUnavailable with the reason)."""
+        """Spawn the station and wait for its boot-up.
+
+        :param timeout: longest wait for the boot-up message (s)
+        :raises BusError: the node's end of the bus cannot be opened
+        :raises GatewayUnavailable: no boot-up within ``timeout``, with the station's last
+            log line
+        """
         cmd = [sys.executable, "-m", "ssi_bridge.sim.program", "--params-file", "-",
                "--parent-pid", str(os.getpid()),
                "--priority", str(self.settings.simulation_station_priority)]

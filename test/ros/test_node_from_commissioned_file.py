@@ -25,9 +25,9 @@ from ssi_bridge.commission.discover import ENCODER_CONFIG
 from ssi_bridge.protocol.para1 import Para1
 from ssi_bridge.protocol.settings import BusConfig
 
-from ..ros.conftest import domain_id, installed_executable, probe, start_node  # noqa: F401
-from ..ros.test_node_real_station import _start_station as start_station
-from ..ros.test_node_real_station import _stop_station as stop_station
+from support.ros_process import installed_executable
+from support.stations import started_station as start_station
+from support.stations import stop_station
 
 NODE_ID = 7
 #: rev/s of the simulated shaft (not the 0.25 of a node's own simulated default station)

@@ -31,7 +31,7 @@ from ssi_bridge.protocol.images import ModuleStatus as M
 from ssi_bridge.protocol.registers import Para1, Reg
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-CONFIG = Path(__file__).resolve().parents[2] / "config" / "noise_guard.yaml"
+CONFIG = Path(__file__).resolve().parents[3] / "config" / "noise_guard.yaml"
 N = 4000
 RATE = 0.01
 PERIOD = 0.001

@@ -33,7 +33,7 @@ class ScriptedReader:
         return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
                            end_time=t + (n_bits + 1) / bit_rate_hz)
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 _ch = itertools.count()
 
 

@@ -22,7 +22,7 @@ from ssi_bridge.protocol.settings import station_settings
 from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.protocol.registers import Reg
 
-from .conftest import wait_for
+from support.waiting import wait_for
 
 
 @pytest.fixture

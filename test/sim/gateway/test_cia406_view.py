@@ -26,7 +26,7 @@ from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.sim.supervisor.boot import BootWatch
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 EDS = REPO / "config" / "xn_gw_canopen.eds"
 DOC = REPO / "docs" / "canopen.md"
 NODE_ID = 5

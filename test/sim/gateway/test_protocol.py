@@ -16,7 +16,7 @@ from ssi_bridge.protocol.registers import Reg
 
 NODE_ID = 7  # conftest's station node id
 
-EDS = Path(__file__).resolve().parents[2] / "config" / "xn_gw_canopen.eds"
+EDS = Path(__file__).resolve().parents[3] / "config" / "xn_gw_canopen.eds"
 
 
 def _attributes(var: canopen.objectdictionary.ODVariable) -> tuple:

@@ -20,6 +20,7 @@ from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
+from support.waiting import wait_for
 
 _channels = itertools.count()
 NODE_ID = 7
@@ -52,16 +53,6 @@ class Station:
         before = self.gateway.cycles
         self.network.sync.transmit()
         wait_for(lambda: self.gateway.cycles > before, "gateway ran no cycle after SYNC")
-
-
-def wait_for(condition, message: str, timeout: float = 2.0) -> None:
-    """Poll ``condition`` until true; fail with ``message`` after ``timeout`` s."""
-    import time
-    end = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > end:
-            pytest.fail(message)
-        time.sleep(0.001)
 
 
 @pytest.fixture

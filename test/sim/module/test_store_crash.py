@@ -20,7 +20,7 @@ from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 from ssi_bridge.sim.module.store import RetentiveStore
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 WRITER = """
 import sys
 from ssi_bridge.protocol.registers import RETENTIVE, REGISTERS, Reg

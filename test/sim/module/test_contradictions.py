@@ -22,7 +22,7 @@ def test_bit_rate_codes_3_and_4_follow_profibus_and_canopen(reader, module) -> N
 def test_offset_is_subtracted_not_added(reader, module) -> None:
     # 000 ch. 1 "Offset function": REG_SSI_POS = SSI encoder - REG_OFFSET.
     # 000 ch. 4 object 0x6810 (= REG_OFFSET) says "added"; the module follows chapter 1 and
-    # the gateway negates 0x6810 into REG_OFFSET (test/gateway/test_preset_6810.py).
+    # the gateway negates 0x6810 into REG_OFFSET (test/sim/gateway/test_preset_6810.py).
     module.write_register(Reg.REG_OFFSET, 300)
     reader.push(1000)
     module.cycle(0.0)
