@@ -94,6 +94,7 @@ class InProcessBridge:
     errors: list[str] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
+        self._findings: Any = None
         values = {**STATION_DEFAULTS, **self.values, "bus.interface": "virtual",
                   "bus.channel": f"inprocess-{os.getpid()}-{next(_channels)}"}
         self.bus = BusConfig(interface="virtual", channel=str(values["bus.channel"]),
@@ -307,14 +308,14 @@ class InProcessBridge:
                 for ok, text in part.output.events]
 
     def bus_status(self) -> Any:
-        """The bus DiagnosticStatus of ``ros/diagnostics.py`` ``bus_status`` from the
-        client's liveness and counters (without the node's findings of counter growth)."""
-        from ssi_bridge.ros.diagnostics import bus_status
+        """A bus DiagnosticStatus as the node builds it (support/inprocess_bus.py); each call
+        is one diagnostics message: what grew since the call before is a WARN naming it."""
+        from ssi_bridge.ros.node_status import BusFindings
+        from support.inprocess_bus import node_bus_status
 
-        client = self.client
-        return bus_status("bus", "inprocess", alive=client.gateway_alive,
-                          connected=client.network is not None, achieved_rate=self.rate,
-                          publish_rate=self.rate, counters=dataclasses.asdict(client.counters))
+        if self._findings is None:
+            self._findings = BusFindings(lambda: self.master, lambda: 1.0)
+        return node_bus_status(self, self._findings)
 
     def level(self, joint: str) -> bytes:
         """The level byte of :meth:`status` (``DiagnosticStatus.OK`` ...)."""
