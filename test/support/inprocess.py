@@ -69,6 +69,8 @@ class InProcessBridge:
     """
 
     values: Mapping[str, Any] = field(default_factory=dict)
+    #: opens the master's bus (default: the master's end of the simulated wire)
+    opener: Callable[[BusConfig], Any] | None = None
     #: the simulated stations by node id, first station first
     stations: dict[int, Station] = field(init=False, default_factory=dict)
     master: CanMaster = field(init=False)
@@ -138,7 +140,7 @@ class InProcessBridge:
         return out
 
     def _open_master(self, values: Mapping[str, Any]) -> None:
-        self.master = CanMaster(self.bus, priority=CYCLE_PRIORITY, opener=open_bus)
+        self.master = CanMaster(self.bus, priority=CYCLE_PRIORITY, opener=self.opener or open_bus)
         names = [str(n) for n in values["joints"]]
         by_name = {j.name: j for joints in self.settings.values() for j in joints}
         for name in names:  # the configured order
