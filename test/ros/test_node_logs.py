@@ -1,20 +1,19 @@
 """What the installed node prints: a warning-free default, typos
 named with the closest parameter, echoed input kept short, library
-messages (canopen, python-can) under the node's logger, a silent listen-only bus reported.
-EMCY floods summarised: test/client/test_inprocess_emcy_flood.py (docs/testing.md)."""
+messages (canopen, python-can) under the node's logger. EMCY floods summarised and a silent
+listen-only bus reported run in process: test/client/test_inprocess_emcy_flood.py,
+test/ros/test_observe_silence.py (docs/testing.md)."""
 
 from __future__ import annotations
 
 import re
 import signal
-import time
 from pathlib import Path
 
 import pytest
 
 from ssi_bridge.sim.line.timing import recommended_bit_rate
 from ssi_bridge.protocol.para1 import Para1
-from ssi_bridge.ros.observe import SILENT_WARNING_S
 from ssi_bridge.ros.params import DEFAULT_PARA1, JointSettings
 
 REPO = Path(__file__).resolve().parents[2]
@@ -87,13 +86,3 @@ def test_canopen_and_python_can_messages_go_through_the_node_logger(start_node):
     names = {name for _, name, _ in lines(log)}
     assert {"ssi_bridge.canopen.network", "ssi_bridge.canopen.nmt"} <= names, sorted(names)
     assert not [n for n in names if n.startswith(("canopen", "can."))], sorted(names)
-
-
-def test_listen_only_on_a_silent_bus_says_so(start_node):
-    node = start_node({"simulation.enabled": False, "bus.listen_only": True})
-    node.wait_for_log("bridging")
-    started = time.monotonic()
-    node.wait_for_log("no SYNC on the bus", timeout=SILENT_WARNING_S + 30.0)
-    assert time.monotonic() - started >= SILENT_WARNING_S - 1.0, "not before the documented time"
-    log = stop(node)
-    assert log.count("no SYNC on the bus") == 1, "one warning, not one per period"
