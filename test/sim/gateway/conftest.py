@@ -49,8 +49,8 @@ def channel(request: pytest.FixtureRequest) -> Iterator[str]:
 
 
 @contextmanager
-def canopen_master(channel: str, slots: int,
-                   sdo_timeout: float = 0.5) -> Iterator[tuple[canopen.Network, canopen.RemoteNode]]:
+def canopen_master(channel: str, slots: int, sdo_timeout: float = 0.5,
+                   ) -> Iterator[tuple[canopen.Network, canopen.RemoteNode]]:
     """canopen's own master on ``channel`` with a RemoteNode for a station of ``slots``
     modules at NODE_ID (SDO answers awaited ``sdo_timeout`` s); disconnected on exit."""
     network = canopen.Network()
