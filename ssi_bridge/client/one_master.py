@@ -89,7 +89,9 @@ def ensure_alone(config: BusConfig, station_ids: Sequence[int],
 class MasterSettings(Protocol):
     """What :func:`ensure_node_alone` reads of the node's settings (``NodeSettings``)."""
 
-    listen_only: bool
+    @property
+    def listen_only(self) -> bool:
+        """True: the node only listens (another master serves the stations)."""
 
     @property
     def station_ids(self) -> tuple[int, ...]:

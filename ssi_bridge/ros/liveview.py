@@ -26,11 +26,12 @@ watches).
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from ssi_bridge.exceptions import RecordingError
 
 if TYPE_CHECKING:
+    from foxglove.websocket import ServerListener
     from rclpy.node import Node
 
     from ssi_bridge.ros.params import NodeSettings
@@ -129,11 +130,12 @@ class LiveView:
         if self._with_parameters:
             self._listener.params = ParameterBridge(self._node)
             capabilities.append(Capability.Parameters)
+        # the listener is a ServerListener by its methods (no SDK import before the start)
         try:
             self._context = foxglove.Context()
             self._server = foxglove.start_server(
                 name=self._node.get_fully_qualified_name(), host=address, port=port,
-                context=self._context, server_listener=self._listener,
+                context=self._context, server_listener=cast("ServerListener", self._listener),
                 capabilities=capabilities, supported_encodings=["cdr"], services=services)
         except (RuntimeError, ValueError, OSError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")

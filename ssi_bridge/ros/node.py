@@ -98,6 +98,7 @@ class SsiBridgeNode(LifecycleNode):
         self.frame_logs: dict[int, StationLog] = {}
         #: the cycle decisions (core/cycle.py): ros/ only turns its results into messages
         self.cycle_core = Cycle(self.joints, self.frame_logs)
+        self.parameters: RuntimeParameters  # the REG_PARA1 mirror below reaches it
         self.bridge = Bridge(self.joints, self.client_of,
                              lambda joint, value: self.parameters.mirror_para1(joint, value))
         self.parameters = RuntimeParameters(self, self.joints, self.bridge, self)
@@ -112,7 +113,6 @@ class SsiBridgeNode(LifecycleNode):
         self.cycle_rate = CycleRate()
         self._cycle_times = self.cycle_rate.times
         self.lifecycle = NodeLifecycle(self, self.bus, self.get_logger())
-        # configure and activate, or wait unconfigured
         self.lifecycle.begin(autostart, (self.trigger_configure, self.trigger_activate))
 
     @property
@@ -217,6 +217,7 @@ class SsiBridgeNode(LifecycleNode):
                 self.get_logger().error(self.recorder.error)
         prepare_process(s, self.get_logger().info)
         self.cycle_rate.started = time.monotonic()
+        assert self.cycle is not None, "start_cycle builds the cycle first"
         self.cycle.start()
         if self.player is not None:
             if s.replay_wait_for_subscribers > 0:

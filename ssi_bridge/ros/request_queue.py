@@ -7,6 +7,7 @@ thread cannot have) is held to ``cpu_share`` of the wall time each.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -196,7 +197,7 @@ class RequestQueue:
             with self._lock:
                 waiting = len(self._jobs)
                 if waiting < self.limit and not self._stopped:
-                    self._jobs.append(_Job(lambda r=request, a=response, h=handler: h(r, a),
+                    self._jobs.append(_Job(functools.partial(handler, request, response),
                                            service, response, header))
                     self._lock.notify()
                     continue

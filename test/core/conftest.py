@@ -16,8 +16,8 @@ def inprocess() -> Iterator[Callable[..., InProcessBridge]]:
     node parameter values (dotted names); every one started is closed after the test."""
     started: list[InProcessBridge] = []
 
-    def _start(values: dict[str, Any] | None = None) -> InProcessBridge:
-        bridge = InProcessBridge(values or {})
+    def _start(values: dict[str, Any] | None = None, **kwargs: Any) -> InProcessBridge:
+        bridge = InProcessBridge(values or {}, **kwargs)
         started.append(bridge)
         return bridge
 

@@ -126,30 +126,6 @@ def test_every_reg_para1_path_keeps_position_and_velocity_true(running, probe, p
     assert len(off) <= 0.1 * len(moving), f"{path}: {len(off)} of {len(moving)} estimates off: {off[:5]}"
 
 
-def test_ld20_on_a_gray_encoder_says_the_default_does_not_fit_and_warns(running, probe):
-    # shoulder as in config/ssi_bridge.yaml: AFM60 multiturn in Gray; LD20 restores the
-    # binary default REG_PARA1, which misreads the Gray frame: say so, and WARN
-    node = running({"joints": ["shoulder"], "shoulder.family": "AFM60_MULTI",
-                    "shoulder.code": "gray", "shoulder.steps_per_rev": 32768,
-                    "shoulder.para1": 0x9E010300, "diagnostics_period": 0.5})
-    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    res = probe.call(ResetRegisters, node.topic("~/reset_registers"),
-                     ResetRegisters.Request(joint="shoulder", include_parameters=True))
-    assert res.success, res.message
-    assert "does not fit" in res.message and "gray" in res.message, res.message
-    assert _get(probe, node, "shoulder.para1") == PARA1_DEFAULT
-
-    def warned():
-        for _, arr in reversed(diags):
-            for st in arr.status:
-                if st.name == "/ssi_bridge: shoulder":
-                    return st.level >= b"\x01" and "does not fit" in st.message
-        return False
-    probe.wait_for(warned, 5.0, "shoulder WARN: REG_PARA1 does not fit the encoder", node)
-    good = _set(probe, node, "shoulder.para1", 0x9E010300)
-    assert good.successful, good.reason
-
-
 def test_every_runtime_parameter_takes_effect_and_every_change_is_an_event(running, probe):
     node = running({"publish_rate": 100.0, "diagnostics_period": 0.5})
     msgs = probe.subscribe(JointState, node.topic("joint_states"))

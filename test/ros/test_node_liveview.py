@@ -227,24 +227,3 @@ def test_a_port_in_use_is_reported_and_the_bridge_keeps_publishing(running, prob
     assert "Address already in use" in node.log()
     seen = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(seen) > 20, 10.0, "joint_states still flowing", node)
-
-
-def test_off_by_default_and_described_with_a_port_range(running, probe):
-    from rcl_interfaces.srv import DescribeParameters, GetParameters
-
-    node = running()
-    names = ["foxglove.port", "foxglove.address"]
-    desc = probe.call(DescribeParameters, node.topic("~/describe_parameters"),
-                      DescribeParameters.Request(names=names)).descriptors
-    port = desc[0].integer_range[0]
-    assert (port.from_value, port.to_value) == (0, 65535)
-    assert all(d.read_only and d.description for d in desc)
-    values = probe.call(GetParameters, node.topic("~/get_parameters"),
-                        GetParameters.Request(names=names)).values
-    assert (values[0].integer_value, values[1].string_value) == (0, "127.0.0.1")
-    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-    probe.wait_for(lambda: any(s.name == "/ssi_bridge: bus" for _, d in diags for s in d.status),
-                   10.0, "bus diagnostics", node)
-    bus = next(s for _, d in diags for s in d.status if s.name == "/ssi_bridge: bus")
-    assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == "0"
-    assert "live view" not in node.log()

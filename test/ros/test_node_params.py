@@ -7,9 +7,10 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
+import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, SetParameters
-from ssi_bridge_msgs.srv import ReadRegister, StopRecording
+from ssi_bridge_msgs.srv import ReadRegister
 
 
 def _set(probe, node, name, value):
@@ -19,19 +20,58 @@ def _set(probe, node, name, value):
     return res.results[0]
 
 
-def test_parameters_are_described_with_ranges(shared_node, shared_probe):
-    node = shared_node()
-    names = ["publish_rate", "bus.node_id", "joint1.para1", "joint1.slot", "record.root"]
-    res = shared_probe.call(DescribeParameters, node.topic("~/describe_parameters"),
-                     DescribeParameters.Request(names=names))
-    by_name = {d.name: d for d in res.descriptors}
-    assert set(by_name) == set(names)
-    assert all(d.description for d in res.descriptors), "every parameter says what it means"
+def _core(by_name, node, probe) -> None:
+    assert all(d.description for d in by_name.values()), "every parameter says what it means"
     rate = by_name["publish_rate"].floating_point_range[0]
     assert (rate.from_value, rate.to_value) == (1.0, 2000.0)
     node_id = by_name["bus.node_id"].integer_range[0]
     assert (node_id.from_value, node_id.to_value) == (1, 127) and by_name["bus.node_id"].read_only
     assert "REG_PARA1" in by_name["joint1.para1"].description
+
+
+def _split(by_name, node, probe) -> None:
+    # (from test_node_split.py: the descriptors are the node's whatever its configuration)
+    size, duration = by_name["record.max_size"], by_name["record.max_duration"]
+    assert "bytes" in size.description and "seconds" in duration.description
+    assert size.integer_range[0].from_value == 0 and duration.integer_range[0].from_value == 0
+    assert size.read_only and duration.read_only
+
+
+def _foxglove(by_name, node, probe) -> None:
+    # (from test_node_liveview.py: off by default, described with a port range)
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.srv import GetParameters
+
+    port = by_name["foxglove.port"].integer_range[0]
+    assert (port.from_value, port.to_value) == (0, 65535)
+    assert all(d.read_only and d.description for d in by_name.values())
+    values = probe.call(GetParameters, node.topic("~/get_parameters"),
+                        GetParameters.Request(names=["foxglove.port", "foxglove.address"])).values
+    assert (values[0].integer_value, values[1].string_value) == (0, "127.0.0.1")
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
+    probe.wait_for(lambda: any(s.name == "/ssi_bridge: bus" for _, d in diags for s in d.status),
+                   10.0, "bus diagnostics", node)
+    bus = next(s for _, d in diags for s in d.status if s.name == "/ssi_bridge: bus")
+    assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == "0"
+    assert "live view" not in node.log()
+
+
+DESCRIBED = {
+    "core": (["publish_rate", "bus.node_id", "joint1.para1", "joint1.slot", "record.root"], _core),
+    "split": (["record.max_size", "record.max_duration"], _split),
+    "foxglove": (["foxglove.port", "foxglove.address"], _foxglove),
+}
+
+
+@pytest.mark.parametrize("group", DESCRIBED)
+def test_parameters_are_described_with_ranges(shared_node, shared_probe, group):
+    node = shared_node()  # descriptions only: one default node serves every group
+    names, check = DESCRIBED[group]
+    res = shared_probe.call(DescribeParameters, node.topic("~/describe_parameters"),
+                            DescribeParameters.Request(names=names))
+    by_name = {d.name: d for d in res.descriptors}
+    assert set(by_name) == set(names)
+    check(by_name, node, shared_probe)
 
 
 def test_runtime_para1_change_is_validated_by_the_module_rules(running, probe):
@@ -48,12 +88,20 @@ def test_runtime_para1_change_is_validated_by_the_module_rules(running, probe):
     assert back.success and back.value == 0x19030000
 
 
-def test_out_of_range_value_is_refused_by_the_descriptor(shared_node, shared_probe):
+@pytest.mark.parametrize("name, value, words", [
+    # out of the descriptor's range (1..2000 Hz)
+    ("publish_rate", ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5000.0),
+     ""),
+    # read-only at run time
+    ("bus.node_id", ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=5),
+     "read-only"),
+], ids=["out_of_range", "read_only"])
+def test_a_refused_parameter_set_changes_nothing(shared_node, shared_probe, name, value, words):
     node = shared_node()  # refused: the node is unchanged
-    v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=5000.0)
     res = shared_probe.call(SetParameters, node.topic("~/set_parameters"),
-                     SetParameters.Request(parameters=[Parameter(name="publish_rate", value=v)]))
+                            SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
     assert not res.results[0].successful
+    assert words in res.results[0].reason.lower(), res.results[0].reason
 
 
 def test_sigterm_closes_the_recording_and_exits_zero(running, probe, tmp_path: Path):
@@ -67,12 +115,6 @@ def test_sigterm_closes_the_recording_and_exits_zero(running, probe, tmp_path: P
     with open(root / "s" / "s_0.mcap", "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None and summary.statistics.message_count > 0
-
-
-def test_stop_recording_without_a_session_is_refused(shared_node, shared_probe):
-    node = shared_node()  # refused: the node is unchanged
-    res = shared_probe.call(StopRecording, node.topic("~/stop_recording"), StopRecording.Request())
-    assert not res.success and "no recording is running" in res.message
 
 
 def test_publish_rate_change_takes_effect_at_once(running, probe):
@@ -91,14 +133,6 @@ def test_publish_rate_change_takes_effect_at_once(running, probe):
     time.sleep(2.0)
     rate = (len(msgs) - start) / (time.monotonic() - t0)
     assert abs(rate - 20.0) <= 2.0, f"{rate:.1f} Hz after setting publish_rate to 20"
-
-
-def test_read_only_parameters_cannot_change_at_run_time(shared_node, shared_probe):
-    node = shared_node()  # refused: the node is unchanged
-    v = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=5)
-    res = shared_probe.call(SetParameters, node.topic("~/set_parameters"),
-                     SetParameters.Request(parameters=[Parameter(name="bus.node_id", value=v)]))
-    assert not res.results[0].successful and "read-only" in res.results[0].reason.lower()
 
 
 def test_cpu_affinity_pins_every_thread_of_the_node(running):

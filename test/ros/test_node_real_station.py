@@ -135,11 +135,6 @@ def test_invalid_lsb_bits_keep_the_position_on_a_real_station(tmp_path, domain_i
         _stop_station(station)
 
 
-def test_invalid_lsb_bits_keep_the_position_on_the_simulated_default(probe, start_node):
-    node = start_node({"joint1.motion.kind": "still", "joint1.motion.start": 0.3})
-    _invalid_lsb_keeps_the_position(node, probe)
-
-
 @pytest.mark.parametrize("simulation", [False, True])
 def test_the_readme_station_commands_publish_the_linear_joint_in_metres(
         tmp_path, domain_id, probe, start_node, simulation):

@@ -14,7 +14,8 @@ import pytest
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.srv import (
-    ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording, WriteRegister,
+    ReadRegister, ResetRegisters, SetControl, SetPreset, StartRecording, StopRecording,
+    WriteRegister,
 )
 
 REG_CMP1 = 34
@@ -29,13 +30,15 @@ REG_CMP1 = 34
     (ResetRegisters, ResetRegisters.Request(joint="x"), "unknown joint"),
     (SetControl, SetControl.Request(joint="x"), "unknown joint"),
     (SetPreset, SetPreset.Request(position=float("nan")), "not a finite number"),
+    # (from test_node_params.py)
+    (StopRecording, StopRecording.Request(), "no recording is running"),
 ])
 def test_each_failure_has_a_distinct_clear_message(shared_node, shared_probe, srv, request_,
                                                    words):
     node = shared_node()  # a refusal changes nothing: one node serves every case
     name = {ReadRegister: "~/read_register", WriteRegister: "~/write_register",
             ResetRegisters: "~/reset_registers", SetControl: "~/set_control",
-            SetPreset: "~/set_preset"}[srv]
+            SetPreset: "~/set_preset", StopRecording: "~/stop_recording"}[srv]
     res = shared_probe.call(srv, node.topic(name), request_)
     assert not res.success
     assert words in res.message, res.message

@@ -185,17 +185,3 @@ def test_kill_9_in_the_third_file_then_replay_recover(start_node, probe, tmp_pat
     with Bag(bag) as reopened:
         stamps = [m.publish_time for _, m in reopened.messages([node.topic("joint_states")])]
     assert stamps and all(a < b for a, b in zip(stamps, stamps[1:])), "no repeat at a split"
-
-
-def test_split_parameters_are_described_with_ranges(session) -> None:  # type: ignore[no-untyped-def]
-    from rcl_interfaces.srv import DescribeParameters
-
-    node: NodeProcess = session["node"]
-    names = ["record.max_size", "record.max_duration"]
-    res = session["probe"].call(DescribeParameters, node.topic("~/describe_parameters"),
-                                DescribeParameters.Request(names=names))
-    by_name = {d.name: d for d in res.descriptors}
-    size, duration = by_name["record.max_size"], by_name["record.max_duration"]
-    assert "bytes" in size.description and "seconds" in duration.description
-    assert size.integer_range[0].from_value == 0 and duration.integer_range[0].from_value == 0
-    assert size.read_only and duration.read_only

@@ -54,21 +54,21 @@ def _bus_status(diags):
     return None
 
 
-def test_kill_9_of_the_node_leaves_no_station_behind(running):
+@pytest.mark.parametrize("how", ["kill_9", "clean_stop"])
+def test_the_station_child_ends_with_its_node(running, how):
+    """kill -9 of the node leaves no station behind (the child dies with its parent); a clean
+    stop of the node (exit 0) stops the station. (Two tests of the same node before.)"""
     node = running(CHILD)
     station = _station_of(node)
     assert not _gone(station)
-    os.kill(node.proc.pid, signal.SIGKILL)
-    node.proc.wait(10)
-    _wait(lambda: _gone(station), 10.0, f"station process {station} to end after kill -9 "
-          "of the node")
-
-
-def test_a_clean_stop_of_the_node_stops_the_station(running):
-    node = running(CHILD)
-    station = _station_of(node)
-    assert node.stop() == 0
-    _wait(lambda: _gone(station), 10.0, "station process to end with the node")
+    if how == "kill_9":
+        os.kill(node.proc.pid, signal.SIGKILL)
+        node.proc.wait(10)
+        _wait(lambda: _gone(station), 10.0, f"station process {station} to end after kill -9 "
+              "of the node")
+    else:
+        assert node.stop() == 0
+        _wait(lambda: _gone(station), 10.0, "station process to end with the node")
 
 
 def test_a_crashed_station_is_a_bus_error_and_the_node_keeps_publishing(running, probe):

@@ -69,6 +69,8 @@ class InProcessBridge:
     """
 
     values: Mapping[str, Any] = field(default_factory=dict)
+    #: opens the master's bus (default: the master's end of the simulated wire)
+    opener: Callable[[BusConfig], Any] | None = None
     #: the simulated stations by node id, first station first
     stations: dict[int, Station] = field(init=False, default_factory=dict)
     master: CanMaster = field(init=False)
@@ -88,14 +90,18 @@ class InProcessBridge:
     #: the service events (kind, joint, request, success, message), as ~/events has them
     service_events: list[tuple[str, str, str, bool, str]] = field(init=False,
                                                                   default_factory=list)
+    #: each joint's ``<joint>.para1`` parameter as the node mirrors it from the module
+    para1: dict[str, int] = field(init=False, default_factory=dict)
     #: unexpected errors the service handlers logged
     errors: list[str] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
+        self._findings: Any = None
         values = {**STATION_DEFAULTS, **self.values, "bus.interface": "virtual",
                   "bus.channel": f"inprocess-{os.getpid()}-{next(_channels)}"}
         self.bus = BusConfig(interface="virtual", channel=str(values["bus.channel"]),
-                             node_id=int(values["bus.node_id"]))
+                             bitrate=int(values["bus.bitrate"]), node_id=int(values["bus.node_id"]))
+        self.frame_id = str(values.get("frame_id", ""))
         self.rate = float(values.get("publish_rate", PUBLISH_RATE))
         self.settings = self._joints_by_station(values)
         counts = [max(j.slot for j in joints) for joints in self.settings.values()]
@@ -134,7 +140,7 @@ class InProcessBridge:
         return out
 
     def _open_master(self, values: Mapping[str, Any]) -> None:
-        self.master = CanMaster(self.bus, priority=CYCLE_PRIORITY, opener=open_bus)
+        self.master = CanMaster(self.bus, priority=CYCLE_PRIORITY, opener=self.opener or open_bus)
         names = [str(n) for n in values["joints"]]
         by_name = {j.name: j for joints in self.settings.values() for j in joints}
         for name in names:  # the configured order
@@ -156,7 +162,7 @@ class InProcessBridge:
                                            {n: j.config for n, j in self.joints.items()},
                                            self.clock)
         self.cycle = Cycle(self.joints, self.logs)
-        self.bridge = Bridge(self.joints, self.client_of, lambda _j, _v: None)
+        self.bridge = Bridge(self.joints, self.client_of, self._mirror_para1)
         self.faults = (next(iter(injectors.values())) if len(injectors) == 1
                        else StationFaults(injectors, by_name))
         self.bridge.faults = self.faults
@@ -174,6 +180,10 @@ class InProcessBridge:
                                  priority=CYCLE_PRIORITY)
         self._loop.start()
 
+    def _mirror_para1(self, joint: str, value: int) -> None:
+        """What the node mirrors into ``<joint>.para1`` (ros/node_params.py)."""
+        self.para1[joint] = value
+
     def _log_event(self, kind: str, joint: str, request: str, success: bool,
                    message: str) -> None:
         self.service_events.append((kind, joint, request, success, message))
@@ -190,6 +200,34 @@ class InProcessBridge:
                             [p.output.position for p in parts],
                             [p.output.velocity for p in parts]))
         return out
+
+    def joint_state_msgs(self) -> list[Any]:
+        """Each cycle's joint_states message as the node builds it (``ros/messages.py``
+        ``joint_state_msg``, stamped with the SYNC's wire time, ``frame_id``); a cycle
+        without a published joint sends none."""
+        from ssi_bridge.base.timebase import to_ros_ns
+        from ssi_bridge.ros.messages import joint_state_msg, time_msg
+
+        out = []
+        for result in list(self.results):
+            msg = joint_state_msg(result, time_msg(to_ros_ns(result.t_sync)), self.frame_id)
+            if msg.name:
+                out.append(msg)
+        return out
+
+    def station_status(self, node_id: int) -> Any:
+        """Station ``node_id``'s DiagnosticStatus as ``ros/node_status.py`` builds it for
+        several stations (``ros/diagnostics.py`` ``station_status``: heartbeat, NMT state,
+        EMCY history)."""
+        from ssi_bridge.ros.diagnostics import station_status
+
+        client = self.clients[node_id]
+        node = client.node
+        emcy = ([f"0x{e.code:04X} reg 0x{e.register:02X} {e.get_desc()}".strip()
+                 for e in node.emcy.log] if node is not None else [])
+        return station_status(f"station {node_id}", "inprocess", alive=client.gateway_alive,
+                              nmt_state=str(node.nmt.state if node is not None else "UNKNOWN"),
+                              emcy=emcy, counters={})
 
     def client_of(self, joint: str) -> BridgeClient:
         """The client of the station holding ``joint``'s module (KeyError: unknown joint)."""
@@ -272,14 +310,14 @@ class InProcessBridge:
                 for ok, text in part.output.events]
 
     def bus_status(self) -> Any:
-        """The bus DiagnosticStatus of ``ros/diagnostics.py`` ``bus_status`` from the
-        client's liveness and counters (without the node's findings of counter growth)."""
-        from ssi_bridge.ros.diagnostics import bus_status
+        """A bus DiagnosticStatus as the node builds it (support/inprocess_bus.py); each call
+        is one diagnostics message: what grew since the call before is a WARN naming it."""
+        from ssi_bridge.ros.node_status import BusFindings
+        from support.inprocess_bus import node_bus_status
 
-        client = self.client
-        return bus_status("bus", "inprocess", alive=client.gateway_alive,
-                          connected=client.network is not None, achieved_rate=self.rate,
-                          publish_rate=self.rate, counters=dataclasses.asdict(client.counters))
+        if self._findings is None:
+            self._findings = BusFindings(lambda: self.master, lambda: 1.0)
+        return node_bus_status(self, self._findings)
 
     def level(self, joint: str) -> bytes:
         """The level byte of :meth:`status` (``DiagnosticStatus.OK`` ...)."""

@@ -8,7 +8,7 @@ simulator needs nothing of the driver to be started by it.
 from __future__ import annotations
 
 from dataclasses import Field
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from ssi_bridge.protocol.settings import JointSettings
 
@@ -18,15 +18,25 @@ class NodeSettings(Protocol):
 
     __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
 
-    simulation_transport: str
-    simulation_start_timeout: float
-    simulation_station_priority: int
-    bus_interface: str
-    bus_channel: str
-    bus_bitrate: int
-    node_id: int
-    joints: tuple[JointSettings, ...]
-    storage_path: str
+    # read-only: the node's settings are a frozen dataclass
+    @property
+    def simulation_transport(self) -> str: ...
+    @property
+    def simulation_start_timeout(self) -> float: ...
+    @property
+    def simulation_station_priority(self) -> int: ...
+    @property
+    def bus_interface(self) -> str: ...
+    @property
+    def bus_channel(self) -> str: ...
+    @property
+    def bus_bitrate(self) -> int: ...
+    @property
+    def node_id(self) -> int: ...
+    @property
+    def joints(self) -> tuple[JointSettings, ...]: ...
+    @property
+    def storage_path(self) -> str: ...
 
     @property
     def station_ids(self) -> tuple[int, ...]:
@@ -36,4 +46,8 @@ class NodeSettings(Protocol):
         """The joints of ``station``."""
 
 
-__all__ = ["NodeSettings"]
+#: the node's own settings class, whatever it is: a changed copy is of the same class
+AnySettings = TypeVar("AnySettings", bound=NodeSettings)
+
+
+__all__ = ["AnySettings", "NodeSettings"]

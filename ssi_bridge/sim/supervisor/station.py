@@ -35,7 +35,7 @@ from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.protocol.settings import BusConfig, JOINT_DEFAULTS, JointSettings, StationSettings
 from ssi_bridge.sim.gateway.station import Station
-from ssi_bridge.sim.supervisor.settings import NodeSettings
+from ssi_bridge.sim.supervisor.settings import AnySettings, NodeSettings
 
 logger = logging.getLogger(__name__)
 
@@ -61,8 +61,8 @@ def ros_domain_id() -> int:
         return DEFAULT_DOMAIN
 
 
-def with_station_bus(s: NodeSettings, node: str = DEFAULT_NODE,
-                     domain: int | None = None) -> NodeSettings:
+def with_station_bus(s: AnySettings, node: str = DEFAULT_NODE,
+                     domain: int | None = None) -> AnySettings:
     """``s`` with the bus the node ``node`` (fully qualified name) shares with its station.
 
     udp_multicast: the user's udp_multicast channel, else a group and port of their own on
