@@ -21,7 +21,6 @@ from typing import Any
 
 import can
 from diagnostic_msgs.msg import DiagnosticStatus
-from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
@@ -33,6 +32,7 @@ from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.record.can_frames import pack_frame
 from ssi_bridge.record.snapshot import SnapshotConfig, SnapshotKeeper
 from ssi_bridge.ros.params import NodeSettings
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 from ssi_bridge.ros.recording_meta import bus_config, session_metadata, type_of
 
 logger = logging.getLogger(__name__)

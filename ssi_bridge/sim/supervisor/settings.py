@@ -20,23 +20,32 @@ class NodeSettings(Protocol):
 
     # read-only: the node's settings are a frozen dataclass
     @property
-    def simulation_transport(self) -> str: ...
+    def simulation_transport(self) -> str:
+        """How the station child is reached: "virtual" or "udp_multicast"."""
     @property
-    def simulation_start_timeout(self) -> float: ...
+    def simulation_start_timeout(self) -> float:
+        """Seconds a station child may take to send its boot-up message."""
     @property
-    def simulation_station_priority(self) -> int: ...
+    def simulation_station_priority(self) -> int:
+        """The SCHED_FIFO priority of a station child (0: none)."""
     @property
-    def bus_interface(self) -> str: ...
+    def bus_interface(self) -> str:
+        """The python-can interface of the node's bus."""
     @property
-    def bus_channel(self) -> str: ...
+    def bus_channel(self) -> str:
+        """The python-can channel of the node's bus."""
     @property
-    def bus_bitrate(self) -> int: ...
+    def bus_bitrate(self) -> int:
+        """The bus bit rate in bit/s."""
     @property
-    def node_id(self) -> int: ...
+    def node_id(self) -> int:
+        """The first station's CANopen node id."""
     @property
-    def joints(self) -> tuple[JointSettings, ...]: ...
+    def joints(self) -> tuple[JointSettings, ...]:
+        """Every configured joint, in the order of the parameters."""
     @property
-    def storage_path(self) -> str: ...
+    def storage_path(self) -> str:
+        """Where recordings and station files go."""
 
     @property
     def station_ids(self) -> tuple[int, ...]:
