@@ -28,11 +28,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / "ssi_bridge"
 
-#: ros/ is being recomposed (its parts typed one by one); until then these names it offers
-#: to tools/ still carry ``Any``. The list only shrinks: a name that no longer carries ``Any``
-#: must leave it (test_the_exemptions_are_still_needed).
+#: what tools/ calls of ros/ that still carries ``Any`` (ros/ was recomposed by other work;
+#: these are its last). The list only shrinks: a name that no longer carries ``Any`` must
+#: leave it (test_the_exemptions_are_still_needed).
 ROS_EXEMPT: frozenset[str] = frozenset({
-    "ssi_bridge.ros.node.SsiBridgeNode",  # **kwargs, station, publish_safe(publisher, msg)
+    "ssi_bridge.ros.node.SsiBridgeNode",  # **kwargs, publish_safe(publisher, msg)
     "ssi_bridge.ros.rclpy_compat.executor_tasks",  # rclpy's executor and its tasks
 })
 #: base/canopen_compat.py is being reworked into base/'s one canopen integration point (not

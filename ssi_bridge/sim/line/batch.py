@@ -103,7 +103,7 @@ def read_batch(line: SsiLine, times: np.ndarray, n_bits: int, bit_rate_hz: float
     :param times: the bursts' start times (s)
     :param n_bits: data bits per burst
     :param bit_rate_hz: the clock rate
-    :param rng: the noise source (default: a new one)
+    :param rng: the bit-noise source (default: one seeded with the line's ``seed``)
     """
     enc, faults = line.encoder, line.faults
     times = np.asarray(times, dtype=np.float64)
