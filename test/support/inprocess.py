@@ -272,7 +272,7 @@ class InProcessBridge:
         while not condition():
             if time.monotonic() > end:
                 raise AssertionError(f"no {what} within {timeout} s")
-            time.sleep(0.005)
+            time.sleep(0.02)  # the condition reads the joints: little GIL for it
 
     def status(self, joint: str) -> Any:
         """The joint's DiagnosticStatus as the node builds it (``ros/diagnostics.py``
