@@ -62,33 +62,46 @@ class Cycle:
         #: cycles in which at least one joint was set aside
         self.incomplete_cycles = 0
 
-    def run(self, seq: int, t_sync: float) -> CycleResult:
+    def run(self, seq: int, t_sync: float, *, settle: bool = True) -> CycleResult:
         """Decide SYNC ``seq`` (wire time ``t_sync``) for every joint.
 
         Each joint's counters and health take the cycle whether it is published or not.
+        ``settle`` False leaves the health of the SYNC before (which nothing published
+        depends on) to :meth:`settle`, for a caller that publishes first.
         """
         result = CycleResult(seq, t_sync)
+        append = result.joints.append
+        logs = self.logs
         for joint in self.joints.values():
-            log = self.logs.get(joint.settings.station)
-            result.joints.append(self._joint(joint, log, seq, t_sync))
+            append(self._joint(joint, logs.get(joint.settings.station), seq, t_sync))
         if any(j.output is None for j in result.joints):
             self.incomplete_cycles += 1
+        if settle:
+            self.settle(result)
         return result
+
+    def settle(self, result: CycleResult) -> None:
+        """The health of the SYNC before ``result``'s, judged now that its window is over
+        (``StationLog.settled``): every joint of a cycle :meth:`run` with ``settle`` False."""
+        seq = result.seq
+        logs = self.logs
+        for part in result.joints:
+            joint = part.joint
+            log = logs.get(joint.settings.station)
+            joint.settle(seq, log.settled(joint.slot, seq - 1) if log is not None else None)
 
     @staticmethod
     def _joint(joint: Joint, log: StationLog | None, seq: int, t_sync: float) -> JointCycle:
         if log is None:
-            joint.set_aside(seq, None, "no frame log for the joint's station")
+            joint.leave_out("no frame log for the joint's station")
             return JointCycle(joint, None, None, "no frame log", b"")
-        settled = log.settled(joint.slot, seq - 1)
         verdict: Verdict = log.verdict(joint.slot, seq)
         sample = verdict.sample
         if sample is None:
-            joint.set_aside(seq, settled, verdict.reason, verdict.image, verdict.position)
+            joint.leave_out(verdict.reason, verdict.image, verdict.position)
             return JointCycle(joint, None, None, verdict.reason, verdict.image)
         joint.count(t_sync, sample.process_input, sample.position, t_sync)
-        out = joint.update(t_sync, sample.process_input, sample.position, t_sync, seq=seq,
-                           settled=settled)
+        out = joint.output(t_sync, sample.process_input, sample.position, t_sync)
         return JointCycle(joint, out, sample, "", sample.process_input)
 
 

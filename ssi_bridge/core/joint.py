@@ -129,6 +129,8 @@ class Joint:
         self.health = ChannelHealth()
         #: the last published position (joint units)
         self.position = 0.0
+        #: whether this cycle's sample was an implausible step, for :meth:`settle`
+        self._implausible = False
 
     # -- settings that change at run time ---------------------------------------------------
     def _limit(self, max_speed: float) -> float:
@@ -208,6 +210,12 @@ class Joint:
             self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
                          lost=lost)
 
+    def settle(self, seq: int, settled: tuple[float, float] | None) -> None:
+        """The health of the SYNC before ``seq`` (:meth:`_settle`), after :meth:`output` or
+        :meth:`leave_out` of SYNC ``seq``: what :meth:`update` and :meth:`set_aside` do last,
+        for a caller that publishes the cycle first."""
+        self._settle(settled, seq, self._implausible)
+
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
         """No sample of this SYNC can be vouched for (``reason``, ``core/cycle_log.py``): the
@@ -217,6 +225,12 @@ class Joint:
         published). After ``stale_cycles`` of them the velocity estimate restarts, so a gap
         never becomes a speed. ``settled`` as for :meth:`update`.
         """
+        self.leave_out(reason, image, position)
+        self.settle(seq, settled)
+
+    def leave_out(self, reason: str, image: bytes = b"", position: int | None = None) -> None:
+        """:meth:`set_aside` but the health of the SYNC before (:meth:`settle`, due next)."""
+        self._implausible = False
         counters = self.counters
         counters.stale_cycles += 1
         counters.consecutive_stale += 1
@@ -232,7 +246,6 @@ class Joint:
             counters.last_position = position
         if counters.consecutive_stale >= self.stale_cycles:
             self.velocity.reset()
-        self._settle(settled, seq, False)
 
     def count(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float) -> bool:
         """Count the newest sample (latched at ``sample_time``) for the SYNC at ``t_sync``;
@@ -258,6 +271,13 @@ class Joint:
         """What the joint publishes for the sample it has at the SYNC ``t_sync`` (number
         ``seq``). Call :meth:`count` first; ``settled``: (wire time, share not vouched) of the
         SYNC before, judged once its window is over (None for the first SYNC)."""
+        out = self.output(sample_time, image, reg_ssi_pos, t_sync)
+        self.settle(seq, settled)
+        return out
+
+    def output(self, sample_time: float, image: bytes, reg_ssi_pos: int,
+               t_sync: float) -> JointOutput:
+        """:meth:`update` but the health of the SYNC before (:meth:`settle`, due next)."""
         counters = self.counters
         fresh = sample_time >= t_sync
         estimator = self.velocity
@@ -294,7 +314,7 @@ class Joint:
             velocity = math.nan
         else:
             velocity = estimator.velocity
-        self._settle(settled, seq, implausible)
+        self._implausible = implausible
         self.position = position
         out.position, out.velocity = position, velocity
         return out

@@ -153,22 +153,32 @@ class CyclePublisher:
         stamp_ns = node.stamper.stamp_ns(t_sync)
         if stamp_ns is None:
             return None
-        result = node.cycle_core.run(seq, t_sync)
-        js = joint_state_msg(result, time_msg(stamp_ns), node.settings.frame_id)
-        if js.name:
-            if not node.publish_safe(node.joint_pub, js):
-                return None
-            probe = node._span_probe
-            if probe is not None:  # bench/bench_node.py: the driver's own span
-                rx = getattr(node.client, "bus", None)  # listen-only: none
-                probe.published(getattr(rx, "rx_latest", 0.0), len(js.name))
-        return PublishedCycle(result, js, stamp_ns)
+        # the health of the SYNC before, which nothing published depends on: in _finish
+        core = node.cycle_core
+        result = core.run(seq, t_sync, settle=False)
+        handed = False
+        try:
+            js = joint_state_msg(result, time_msg(stamp_ns), node.settings.frame_id)
+            if js.name:
+                if not node.publish_safe(node.joint_pub, js):
+                    return None
+                probe = node._span_probe
+                if probe is not None:  # bench/bench_node.py: the driver's own span
+                    rx = getattr(node.client, "bus", None)  # listen-only: none
+                    probe.published(getattr(rx, "rx_latest", 0.0), len(js.name))
+            handed = True
+            return PublishedCycle(result, js, stamp_ns)
+        finally:
+            if not handed:  # no _finish for this cycle: its health is judged all the same
+                core.settle(result)
 
     def _finish(self, cycle: PublishedCycle) -> None:
-        """The rest of a published cycle: recording, ``~/events`` of the frame checks,
+        """The rest of a published cycle: the health of the SYNC before (``Cycle.settle``),
+        recording, ``~/events`` of the frame checks,
         ``~/status`` (built only for a listener), diagnostics on a level change."""
         node = self.node
         result, js, stamp_ns = cycle.result, cycle.joint_state, cycle.stamp_ns
+        node.cycle_core.settle(result)
         recorder = node.recorder
         if js.name:
             recorder.record(node.joint_pub.topic_name, js, stamp_ns)
