@@ -3,7 +3,8 @@ joint_states, without a node, a bus or another thread.
 
 ``python bench/cycle_decide.py [joints] [cycles]``: one station's frame log fed like the
 simulated station answers (every slot's image and position once per SYNC, 60 us apart,
-positions moving), and a ``core/cycle.Cycle`` of N joints (slots 1..N, GENERIC encoders with
+positions moving; ``Cycle.prepare`` between the SYNC and its answers, as the cycle thread),
+and a ``core/cycle.Cycle`` of N joints (slots 1..N, GENERIC encoders with
 their frame checks) deciding each SYNC as the node does: the part before ``publish()``
 (``run(settle=False)`` and the JointState), then the health of the SYNC before
 (``settle``). Prints median / p99 (us) per cycle of each part after a warm-up of 500 cycles.
@@ -49,6 +50,7 @@ def main(argv: list[str]) -> int:
     for k in range(1, cycles + WARM_UP + 1):
         t = k * PERIOD
         log.sync(k, t)
+        core.prepare(k)  # the cycle thread, while the answers are on the wire
         for slot in range(1, n + 1):
             pos = 37 * k * slot
             log.image(slot, t + 0.0001 + 0.00006 * slot,

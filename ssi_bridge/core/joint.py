@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
 from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
-from ssi_bridge.core.joint_scale import JointScale
+from ssi_bridge.core.joint_scale import JointScale, to_int32
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
@@ -120,6 +120,8 @@ class Joint:
         #: why the REG_PARA1 in force does not fit the encoder (a WARN), or ""
         self.para1_note = self._note(self.para1)
         self.scale = joint_scale(settings, self.config, self.para1)
+        #: the scale's joint units per count, read every cycle (follows ``scale``)
+        self._unit_per_count = self.scale.unit_per_count
         self.velocity = VelocityEstimator(self.scale, velocity_window, self.max_speed)
         #: samples latched at or before this wire time may carry another REG_PARA1 (inf: a
         #: change is in flight): their position and velocity are unknown (NaN)
@@ -171,6 +173,7 @@ class Joint:
         unknown (NaN).
         """
         self.scale = joint_scale(self.settings, self.config, value)
+        self._unit_per_count = self.scale.unit_per_count
         estimator = VelocityEstimator(self.scale, self._window, self.max_speed)
         estimator.reset(after=since)
         self.velocity = estimator
@@ -281,7 +284,7 @@ class Joint:
         counters = self.counters
         fresh = sample_time >= t_sync
         estimator = self.velocity
-        position = estimator.scale.position(reg_ssi_pos)
+        position = to_int32(reg_ssi_pos) * self._unit_per_count  # JointScale.position
         implausible = False
         out = JointOutput(position, math.nan)
         watch = self.frames

@@ -6,12 +6,16 @@ node's publishers, cycle core, stamper and settings). The cycle thread
 last expected TPDO arrives; the receive thread that handled that frame decides the cycle and
 publishes ``joint_states`` at once, at its own (real-time) priority
 (``client/cycle_gate.CycleGate``): no thread wakes up between the data and ``publish()``. The
-cycle thread, woken once that publish returned, does the rest of the cycle (the health of the
-SYNC before, ``~/events``, ``~/status``, recording, diagnostics on a level change) before its
-next SYNC. A cycle that does not complete within its wait (``ros/cycle.cycle_waits``) is
-decided and published by the cycle thread at the timeout, as before. Either way the cycle core
-decides with the same rules (``core/cycle.py``), and the next SYNC goes out only after the
-cycle was published. Listen-only, the observer thread publishes each observed cycle whole.
+cycle thread is woken once that publish returned. A cycle that does not complete within its
+wait (``ros/cycle.cycle_waits``) is decided and published by the cycle thread at the timeout,
+as before. Either way the cycle core decides with the same rules (``core/cycle.py``), and the
+next SYNC goes out only after the cycle was published. The rest of a cycle (the health of the
+SYNC before, ``~/events``, ``~/status``, recording, diagnostics on a level change) is done by
+the cycle thread right after its next SYNC, while that SYNC's TPDOs are on the wire, and
+before it hands that cycle to the receive thread: each cycle's messages still go out in
+order, and the time from one SYNC to the next holds only the wire and joint_states. The last
+cycle is finished when the cycle thread ends. Listen-only, the observer thread publishes each
+observed cycle whole.
 """
 
 from __future__ import annotations
@@ -56,6 +60,8 @@ class CyclePublisher:
         self._armed = (0.0, 0)
         #: the cycle the receive thread published, for the cycle thread to finish
         self._handed: PublishedCycle | None = None
+        #: the cycle published last, finished after the next SYNC went out
+        self._pending: PublishedCycle | None = None
 
     # -- the master's cycle (cycle thread, receive thread) ---------------------------------
     def on_cycle(self) -> None:
@@ -70,8 +76,9 @@ class CyclePublisher:
                 raise
 
     def _cycle(self) -> None:
-        """SYNC; the cycle is published by the receive thread as its last TPDO arrives, or
-        here once the wait for it is over; then the rest of the cycle, here."""
+        """SYNC; the rest of the cycle before (:meth:`_finish`) while this one's TPDOs are on
+        the wire; this cycle is published by the receive thread as its last TPDO arrives, or
+        here once the wait for it is over."""
         node = self.node
         faults = node.bridge.faults
         if faults is not None and faults.active:
@@ -80,13 +87,16 @@ class CyclePublisher:
                                         True, "fault duration over, cleared")
         client, master = node.client, node.master
         t_sync = client.sync()  # the master's one SYNC: every station's cycle
+        self._finish_pending()  # nothing is armed yet: the receive thread decides nothing
         # the TPDOs need their wire time (cycle.cycle_waits); a late cycle skips SYNC slots,
         # counted in cycles_missed, instead of sending SYNCs nobody can answer. The master
         # wakes once every station's cycle is complete and its publish (if handed) ended.
         assert master is not None
         gate = master.gate
-        self._armed = (t_sync, sync_number(client, t_sync))
+        seq = sync_number(client, t_sync)
+        self._armed = (t_sync, seq)
         self._handed = None
+        node.cycle_core.prepare(seq)  # off the path from the last TPDO to publish()
         armed = gate.arm(self._on_complete)  # False: complete already, published here
         mine = not armed
         try:
@@ -97,11 +107,27 @@ class CyclePublisher:
                 mine = gate.claim()  # False: the receive thread took it (and has finished)
         if mine:
             node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
-            published = self._publish(*self._armed)
+            self._pending = self._publish(*self._armed)
         else:
-            published, self._handed = self._handed, None
-        if published is not None:
-            self._finish(published)
+            self._pending, self._handed = self._handed, None
+
+    def _finish_pending(self) -> None:
+        """Finish the cycle published last (:meth:`_finish`); an error is logged, and the
+        cycle goes on."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        try:
+            self._finish(pending)
+        except RCLError:
+            if self.node.context.ok():
+                logger.exception("finishing the cycle failed; continuing with the next one")
+        except Exception:  # noqa: BLE001 - the next cycle's SYNC is out: it must be armed
+            logger.exception("finishing the cycle failed; continuing with the next one")
+
+    def on_end(self) -> None:
+        """The cycle thread's last act (``CycleThread`` ``end``): finish the last cycle."""
+        self._finish_pending()
 
     def _on_complete(self) -> None:
         """The receive thread: the armed cycle's last TPDO arrived; publish it now.

@@ -238,7 +238,7 @@ class SsiBridgeNode(BridgeLifecycle, NodeDiagnostics, RuntimeParameters, Lifecyc
                 silent_warning=None if self.player is not None else SILENT_WARNING_S,
                 priority=s.cycle_priority)
         return CycleThread(1.0 / s.publish_rate, self.cycle_publisher.on_cycle,
-                           priority=s.cycle_priority)
+                           priority=s.cycle_priority, end=self.cycle_publisher.on_end)
 
     def _start(self, s: NodeSettings) -> None:
         """Start-up recording, CPU pinning, then the cycle (and a log replay) begins."""
