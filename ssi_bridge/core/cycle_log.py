@@ -367,7 +367,13 @@ class StationLog:
         return self.settled_all((slot,), seq)[0]
 
     def settled_all(self, slots: Sequence[int], seq: int) -> list[tuple[float, float] | None]:
-        """:meth:`settled` of each of ``slots``, in that order (one look-up of the SYNC)."""
+        """:meth:`settled` of each of ``slots``, in that order (one look-up of the SYNC).
+
+        :param slots: the slots asked about
+        :param seq: the number of the SYNC whose cycle they belong to
+        :returns: per slot, (the SYNC's wire time, the share of the slot's answer not
+            vouched: 0.0 when its sample is), or None for each when the SYNC is not in the log
+        """
         t = self.sync_time(seq)
         if t is None:
             return [None] * len(slots)

@@ -11,9 +11,9 @@ clock stepped back, an NTP step) becomes last + 1 ns and is counted (bus diagnos
 from __future__ import annotations
 
 from rclpy.clock import Clock, ROSClock
-from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from ssi_bridge.base.timebase import to_ros_ns, wire_now
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 
 
 class Stamper:
