@@ -83,6 +83,8 @@ from benchlib import emit_record as emit
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+sys.path.insert(0, str(REPO / "test"))
+from support.ros_process import dds_env  # noqa: E402  (the node tests' isolated DDS domain)
 NODE_EXE = REPO / "install" / "ssi_bridge" / "lib" / "ssi_bridge" / "ssi_bridge_node"
 SUBSCRIBER = HERE / "node_subscriber.py"
 LIVEVIEW_CLIENT = HERE / "liveview_client.py"
@@ -270,15 +272,6 @@ PIN_CPU = max(os.sched_getaffinity(0))
 
 def _domain_id() -> int:
     return random.Random(os.getpid() * 104729 + time.time_ns()).randint(1, 100)
-
-
-def _env(domain_id: int) -> dict[str, str]:
-    env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(domain_id)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env.pop("ROS_LOCALHOST_ONLY", None)
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
 
 
 _prctl = ctypes.CDLL(None, use_errno=True).prctl  # resolved before any fork
@@ -847,13 +840,13 @@ def run(records: list[dict]) -> None:
     if os.environ.get("BENCH_NODE_ONLY") == "stations":
         domain_id = _domain_id()
         with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
-            run_stations(records, domain_id, _env(domain_id), Path(tmp))
+            run_stations(records, domain_id, dds_env(domain_id), Path(tmp))
         return
     if not NODE_EXE.exists():
         raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
     only = os.environ.get("BENCH_NODE_ONLY", "")
     domain_id = _domain_id()
-    env = _env(domain_id)
+    env = dds_env(domain_id)
     plain: dict[int, dict] = {}
     with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
         work = Path(tmp)

@@ -121,7 +121,7 @@ def bench_node_recording(tmp: Path) -> None:
     import bench_node as bn
 
     domain_id = bn._domain_id()
-    env = bn._env(domain_id)
+    env = bn.dds_env(domain_id)
     topic = f"{bn.NODE_NS}/joint_states"
     off = bn.measure("rec_off", bn.node_cmd(1, domain_id, tmp), topic, env, tmp)
     on = bn.measure("rec_on", bn.node_cmd(1, domain_id, tmp, {

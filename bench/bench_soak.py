@@ -101,7 +101,7 @@ def missed_cycles(stamps_ns: list[int]) -> int:
 
 def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path) -> dict:
     """One soak: node + subscriber for ``minutes``; RSS, CPU, received stamps, the bag."""
-    env = bn._env(domain_id)
+    env = bn.dds_env(domain_id)
     out, ready = work / f"{tag}.samples", work / f"{tag}.ready"
     pub_log, sub_log = work / f"{tag}.node.log", work / f"{tag}.sub.log"
     procs: list[subprocess.Popen] = []

@@ -112,7 +112,7 @@ def run(records: list[dict], extra: dict | None = None) -> None:
     import numpy as np
 
     domain_id = bn._domain_id()
-    env = bn._env(domain_id)
+    env = bn.dds_env(domain_id)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with tempfile.TemporaryDirectory(prefix="bench_burst_") as tmp:
         work = Path(tmp)

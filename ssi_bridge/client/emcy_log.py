@@ -32,7 +32,11 @@ class _Key:
 
 
 def describe(code: int, data: bytes) -> tuple[tuple[int, int, int], str]:
-    """The summary key (slot, code, bit) and a readable text of one EMCY."""
+    """The summary key (slot, code, bit) and a readable text of one EMCY.
+
+    :param code: the emergency error code
+    :param data: its 5 manufacturer-specific bytes (byte 0: the slot, 1: the diagnostics bits)
+    """
     if code == EMCY_ADDITIONAL_MODULES and len(data) >= 3:
         slot, bit = data[0], data[2]
         what = DIAG_BITS.get(bit, f"diagnostics bit 0x{bit:02X}")
@@ -43,7 +47,13 @@ def describe(code: int, data: bytes) -> tuple[tuple[int, int, int], str]:
 
 
 class EmcySummary:
-    """Log EMCYs at INFO, each (slot, code, bit) at most once per ``period`` seconds."""
+    """Log EMCYs at INFO, each (slot, code, bit) at most once per ``period`` seconds.
+
+    :param logger: where the lines go
+    :param prefix: put before each line (e.g. the gateway's node id)
+    :param period: at most one line per (slot, code, bit) per this many seconds
+    :param clock: the monotonic clock the period is measured on
+    """
 
     def __init__(self, logger: logging.Logger, prefix: str = "", period: float = PERIOD_S,
                  clock: Callable[[], float] = time.monotonic) -> None:
@@ -54,7 +64,11 @@ class EmcySummary:
         self._keys: dict[tuple[int, int, int], _Key] = {}
 
     def on_emcy(self, code: int, data: bytes) -> bool:
-        """Count one EMCY; True if it was logged, False if it waits for the next line."""
+        """Count one EMCY; True if it was logged, False if it waits for the next line.
+
+        :param code: the emergency error code
+        :param data: its manufacturer-specific bytes
+        """
         key, text = describe(code, data)
         now = self._clock()
         seen = self._keys.get(key)

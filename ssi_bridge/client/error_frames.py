@@ -73,7 +73,10 @@ class ErrorFrameWatch:
                           "far)", name, mask, frame.text(), n)
 
     def heard(self, can_id: int) -> None:
-        """A frame was received while bus-off is reported (receive thread)."""
+        """A frame was received while bus-off is reported (receive thread).
+
+        :param can_id: the received frame's identifier
+        """
         self._heard += 1
         if self._heard >= RECOVERY_FRAMES:
             self.recovered(f"{self._heard} frames received since, the last 0x{can_id:03X}")

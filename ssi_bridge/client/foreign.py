@@ -54,7 +54,10 @@ NMT_COMMAND_NAMES = {NMT_START: "start", NMT_STOP: "stop",
 
 
 def describe_nmt(data: bytes) -> str:
-    """An NMT frame's payload in words: "NMT stop (0x02) to node 1", "... to all nodes"."""
+    """An NMT frame's payload in words: "NMT stop (0x02) to node 1", "... to all nodes".
+
+    :param data: the NMT frame's 2 data bytes (command, node id)
+    """
     if len(data) < 2:
         return f"NMT frame [{data.hex(' ')}] (not 2 bytes)"
     command, node = data[0], data[1]
@@ -121,7 +124,12 @@ class ForeignTraffic:
         self.ids = frozenset(self.frames)
 
     def observe(self, can_id: int, data: bytes | bytearray, wire_t: float) -> None:
-        """A received frame on one of :attr:`ids` (receive thread); others are ignored."""
+        """A received frame on one of :attr:`ids` (receive thread); others are ignored.
+
+        :param can_id: the frame's identifier
+        :param data: its data bytes
+        :param wire_t: its wire time (s)
+        """
         if can_id == SYNC_COB_ID:
             self._count(FOREIGN_SYNCS)
             if self.on_sync is not None:

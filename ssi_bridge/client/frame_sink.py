@@ -25,10 +25,16 @@ class FrameSink(Protocol):
         """Another producer's SYNC at wire time ``t``."""
 
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
-        """A process input image of ``slot`` (the ``count``-th) at wire time ``t``."""
+        """A process input image of ``slot`` (the ``count``-th) at wire time ``t``.
+
+        :param data: the 8 bytes of the image
+        """
 
     def position(self, slot: int, t: float, value: int) -> None:
-        """A position of ``slot`` at wire time ``t``."""
+        """A position of ``slot`` at wire time ``t``.
+
+        :param value: REG_SSI_POS as received
+        """
 
 
 __all__ = ["FrameSink"]

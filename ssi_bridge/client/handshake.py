@@ -48,14 +48,24 @@ class ImagePort(Protocol):
         """Apply ``edit`` to bytes 0-5 of the slot's output image and send it."""
 
     def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
-        """Return an input image produced after the last ``edit_output`` (None on timeout)."""
+        """Return an input image produced after the last ``edit_output`` (None on timeout).
+
+        :param slot: the module's slot (1-8)
+        :param timeout: longest wait (s)
+        """
 
     def alive(self) -> bool:
         """Whether the gateway's heartbeat is current."""
 
 
 def check_address(addr: int, write: bool) -> None:
-    """Refuse an address the 6-bit REG_xx_ADR field cannot carry, before any bus traffic."""
+    """Refuse an address the 6-bit REG_xx_ADR field cannot carry, before any bus traffic.
+
+    :param addr: the register address
+    :param write: for a write (RegisterWriteError) or a read (RegisterReadError)
+    :raises RegisterReadError: a read of an address outside 0-63
+    :raises RegisterWriteError: a write to an address outside 0-63
+    """
     if not 0 <= addr < REGISTER_COUNT:
         error = RegisterWriteError if write else RegisterReadError
         raise error(addr, f"out of range 0..{REGISTER_COUNT - 1}")

@@ -69,6 +69,8 @@ class ProcessImages:
         :meth:`BridgeClient.set_control` for the parameters.
 
         :raises KeyError: an unknown slot
+
+        (``stop``, ``enable_cmp1``, ``enable_cmp2``, ``clear_cmp1``, ``clear_cmp2``: output bits)
         """
         bits = CmpControl(0)
         for on, flag in ((enable_cmp1, CmpControl.EN_CMP1), (enable_cmp2, CmpControl.EN_CMP2),
@@ -151,7 +153,12 @@ class ProcessImages:
 
     def on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
         """A TPDO with ``slot``'s input image arrived (network thread): keep it, and send
-        the next output of a running clear pulse."""
+        the next output of a running clear pulse.
+
+        :param can_id: the TPDO's COB-ID
+        :param data: the 8 bytes of the image
+        :param timestamp: its wire time (s)
+        """
         table = self._table
         st = table.on_image(slot, data, timestamp)
         if st.pulse_seq is None and st.release_seq is None:  # re-checked under the lock

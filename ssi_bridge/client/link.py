@@ -133,7 +133,10 @@ class ReopeningBus(can.BusABC):
         return can.CanOperationError(f"CAN interface {self.name} lost: {self.reason}")
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Send ``msg``; raises ``can.CanOperationError`` while (or as) the interface is lost."""
+        """Send ``msg``; raises ``can.CanOperationError`` while (or as) the interface is lost.
+
+        :param timeout: as python-can's ``BusABC.send``
+        """
         inner = self._inner
         if inner is None:
             raise self._lost_error()

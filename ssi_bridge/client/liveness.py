@@ -95,7 +95,11 @@ class Supervised(Protocol):
         """True while the station's heartbeat is current."""
 
     def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
-        """One SDO upload (raises SsiBridgeError)."""
+        """One SDO upload (raises SsiBridgeError).
+
+        :param index: the object's index
+        :param subindex: its subindex
+        """
 
     def configure(self) -> None:
         """Configure the station again (raises SsiBridgeError)."""
@@ -168,7 +172,12 @@ class Liveness:
         return age - max(lag, 0.0) <= timeout
 
     def on_heartbeat_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        """The heartbeat frame (network thread): its receive time, then the NMT state."""
+        """The heartbeat frame (network thread): its receive time, then the NMT state.
+
+        :param can_id: 0x700 + the gateway's node id
+        :param data: the heartbeat's byte (the NMT state)
+        :param timestamp: its wire time (s)
+        """
         if not data:
             return
         state = data[0] & 0x7F

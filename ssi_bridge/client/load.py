@@ -20,7 +20,11 @@ SYNC_COB_ID = 0x080
 
 
 class BusLoad:
-    """Frames (timestamp, wire seconds, is SYNC) of the last ``window`` seconds."""
+    """Frames (timestamp, wire seconds, is SYNC) of the last ``window`` seconds.
+
+    :param bitrate: the bus's bit rate (bit/s)
+    :param window: seconds of frames the load is computed over
+    """
 
     def __init__(self, bitrate: int, window: float = 1.0) -> None:
         self.bitrate = bitrate
@@ -29,7 +33,10 @@ class BusLoad:
         self._lock = threading.Lock()
 
     def add(self, msg: can.Message) -> None:
-        """Account one frame (its timestamp, or now when it has none)."""
+        """Account one frame (its timestamp, or now when it has none).
+
+        :param msg: the frame as python-can received or sent it
+        """
         if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
             return
         bits = frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)

@@ -312,7 +312,7 @@ class BridgeClient:
             raise BusError("client not connected")
         return self.sdo.read(index, subindex)
 
-    def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
+    def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None:
         """SDO download with typed errors.
 
         :param index: the object's index

@@ -34,6 +34,10 @@ def heard_masters(bus: can.BusABC, station_ids: Sequence[int], window: float) ->
 
     A receive error (an undecodable datagram, an interface that fails) ends nothing: the
     window runs out. Error, remote and extended frames are not a master's.
+
+    :param bus: the open bus to receive on
+    :param station_ids: the node ids of this master's stations (SDO requests to them)
+    :param window: how long to listen (s)
     """
     frames = master_frames(list(station_ids))
     heard: Counter[str] = Counter()
@@ -61,6 +65,8 @@ def ensure_alone(config: BusConfig, station_ids: Sequence[int],
     nor on the in-process ``virtual`` bus (nobody else can be on it). A bus that cannot be
     opened is not checked either: whoever opens it next (the simulated station's start, the
     master) reports that with its own words.
+
+    :param station_ids: the node ids of this master's stations
     """
     if listen_only or config.interface == "virtual":
         return
@@ -83,7 +89,9 @@ def ensure_alone(config: BusConfig, station_ids: Sequence[int],
 class MasterSettings(Protocol):
     """What :func:`ensure_node_alone` reads of the node's settings (``NodeSettings``)."""
 
-    listen_only: bool
+    @property
+    def listen_only(self) -> bool:
+        """True: the node only listens (another master serves the stations)."""
 
     @property
     def station_ids(self) -> tuple[int, ...]:

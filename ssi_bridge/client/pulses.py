@@ -27,7 +27,11 @@ _PULSE_CHECKS = tuple((int(c), int(f), int(s_)) for c, f, s_ in (
 
 def pulse_lost(control: int, cmp: int) -> bool:
     """A requested CLR_CMPx whose FLAG_CMPx is still 1 while STS_CMPx = 0: the module would
-    have carried the clear out, so the pulse RPDO never arrived."""
+    have carried the clear out, so the pulse RPDO never arrived.
+
+    :param control: output byte 6 as requested (the CLR_CMPx bits)
+    :param cmp: input byte 6 as received (FLAG_CMPx, STS_CMPx)
+    """
     return any(control & clr and cmp & flag and not cmp & sts
                for clr, flag, sts in _PULSE_CHECKS)
 
@@ -39,6 +43,9 @@ def next_pulse_output(slot: int, st: SlotState, seq: int, image: bytearray,
 
     Call with the slot table's lock held; updates the slot's pulse state (and
     ``counters.pulse_resends``).
+
+    :param st: the slot's state in the table (its pulse bookkeeping)
+    :param counters: where a resent pulse is counted
     """
     if st.release_seq is not None and seq > st.release_seq:
         st.release_seq = None  # the release is sent once more

@@ -160,7 +160,7 @@ class SdoAccess:
             raise BusError(f"0x{index:04X}:{subindex:02X} read as {raw!r}, not a process image")
         return int(raw).to_bytes(8, "little") if isinstance(raw, int) else bytes(raw)
 
-    def write(self, index: int, subindex: int, value: int | bytes) -> None:
+    def write(self, index: int, subindex: int, value: int | float | bytes) -> None:
         """Download one object (raises SdoAbortError / GatewayUnavailable)."""
         with self.lock:
             try:

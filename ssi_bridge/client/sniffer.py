@@ -45,7 +45,10 @@ _TAIL_BLOCK = 64 * 1024
 
 
 def cut_partial_line(path: Path) -> int:
-    """Truncate a text file after its last newline (a write cut short); returns bytes removed."""
+    """Truncate a text file after its last newline (a write cut short); returns bytes removed.
+
+    :param path: the text file
+    """
     with open(path, "r+b") as f:
         size = f.seek(0, os.SEEK_END)
         end = size

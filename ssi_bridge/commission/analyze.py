@@ -65,7 +65,12 @@ class SlotResult:
 
 
 def analyze(found: SlotSamples, para1: int | None, para1_object: int | None) -> SlotResult:
-    """The :class:`SlotResult` of one sampled slot."""
+    """The :class:`SlotResult` of one sampled slot.
+
+    :param found: the slot's samples
+    :param para1: REG_PARA1 read through the handshake (None: not read)
+    :param para1_object: REG_PARA1 read over SDO (object 0x5802; None: not read)
+    """
     res = SlotResult(found.node_id, found.slot, para1, para1_object,
                      samples=len(found.samples))
     res.err_para = found.share(ModuleStatus.ERR_PARA)

@@ -70,7 +70,11 @@ def _garbage_kind(msg: can.Message) -> str | None:
 
 
 def listen(bus: can.BusABC, window: float) -> Heard:
-    """Receive for ``window`` s; sort what came into devices, masters and garbage."""
+    """Receive for ``window`` s; sort what came into devices, masters and garbage.
+
+    :param bus: the open bus to receive on
+    :param window: how long to listen (s)
+    """
     heard = Heard(window=window)
     frames = master_frames(list(range(1, 128)))
     end = time.monotonic() + window
@@ -87,7 +91,12 @@ def listen(bus: can.BusABC, window: float) -> Heard:
 
 
 def note(heard: Heard, msg: can.Message, frames: dict[int, str] | None = None) -> None:
-    """Sort one received frame into ``heard``."""
+    """Sort one received frame into ``heard``.
+
+    :param heard: what was heard so far (updated)
+    :param msg: the received frame
+    :param frames: the COB-IDs only a master sends, named (default: those of node ids 1-127)
+    """
     frames = frames if frames is not None else master_frames(list(range(1, 128)))
     heard.frames += 1
     kind = _garbage_kind(msg)
@@ -110,6 +119,10 @@ def scan(bus: can.BusABC, node_ids: list[int], window: float) -> set[int]:
 
     Reads only (an upload request changes nothing on a CiA 301 device). Raises BusError
     when the interface refuses to send.
+
+    :param bus: the open bus
+    :param node_ids: the node ids to ask
+    :param window: how long to wait for answers (s)
     """
     for node_id in node_ids:
         try:
@@ -189,7 +202,11 @@ class SlotProbe:
 
 
 def find_slots(sdo: SdoAccess) -> list[SlotProbe]:
-    """Probe slots 1-8 by 0x5801:slot; raises GatewayUnavailable when the node falls silent."""
+    """Probe slots 1-8 by 0x5801:slot; raises GatewayUnavailable when the node falls silent.
+
+    :param sdo: SDO access to the gateway
+    :raises GatewayUnavailable: the node stopped answering
+    """
     probes = []
     for slot in range(1, MAX_SLOTS + 1):
         try:

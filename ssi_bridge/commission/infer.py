@@ -86,6 +86,10 @@ def parity_bits(frames: list[int], stats: BitStats) -> int:
 
     A parity bit is the last special bit (001 §5.5.7), so only the lowest moving bit can be
     one: in a frame of even parity *every* bit is the parity of the others.
+
+    :param frames: the sampled frames
+    :param stats: which bits moved
+    :returns: that bit as a mask (``1 << b``), or 0
     """
     if not stats.moving or len(set(frames)) < MIN_PARITY_FRAMES:
         return 0
@@ -125,7 +129,11 @@ class Continuity:
 
 
 def continuity(values: list[int], width: int) -> Continuity:
-    """Score a position sequence: 1.0 = every step the same sign and similar size."""
+    """Score a position sequence: 1.0 = every step the same sign and similar size.
+
+    :param values: the positions in latch order
+    :param width: their bits (a wrap-around is a small step)
+    """
     steps = [_signed(b - a, width) for a, b in zip(values, values[1:])]
     moved = [d for d in steps if d]
     if len(moved) < 2:
@@ -139,7 +147,13 @@ def continuity(values: list[int], width: int) -> Continuity:
 
 def decode_window(frames: list[int], lsb: int, width: int, gray: bool) -> list[int]:
     """The value of frame bits ``lsb`` .. ``lsb + width - 1`` of each frame, Gray-decoded if
-    ``gray`` (the whole field above the LSB, so Gray's XOR chain is complete)."""
+    ``gray`` (the whole field above the LSB, so Gray's XOR chain is complete).
+
+    :param frames: the sampled frames
+    :param lsb: the window's lowest bit
+    :param width: its bits
+    :param gray: the window is Gray-coded
+    """
     mask = (1 << width) - 1
     out = []
     for f in frames:
@@ -184,7 +198,11 @@ def _direction(steps: list[int]) -> tuple[int, str]:
 
 
 def read_motion(frames: list[int], frame_len: int) -> Motion:
-    """What ``frames`` (in latch order) say about the position bits, code and direction."""
+    """What ``frames`` (in latch order) say about the position bits, code and direction.
+
+    :param frames: the sampled frames, in latch order
+    :param frame_len: their length in bits
+    """
     stats = BitStats.of(frames, frame_len)
     parity = parity_bits(frames, stats) if stats.moving else 0
     moving = stats.moving & ~parity

@@ -40,7 +40,13 @@ class Observation:
 
 def observe(bus: can.BusABC, heard: Heard, seconds: float,
             say: Callable[[str], None]) -> Observation:
-    """Receive for ``seconds``; collect heartbeats into ``heard`` and images per slot."""
+    """Receive for ``seconds``; collect heartbeats into ``heard`` and images per slot.
+
+    :param bus: the open bus (nothing is sent on it)
+    :param heard: what was heard so far (updated)
+    :param seconds: how long to watch
+    :param say: a progress line for a person
+    """
     images = {tpdo_cob_base(s) + n: (n, s) for n in range(1, 128)
               for s in range(1, MAX_SLOTS + 1)}
     obs = Observation(seconds)

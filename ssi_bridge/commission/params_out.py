@@ -31,12 +31,18 @@ class BusSpec:
 
 
 def joint_name(res: SlotResult) -> str:
-    """The joint's name: station and slot (never 'bus' or 'station N', the node's statuses)."""
+    """The joint's name: station and slot (never 'bus' or 'station N', the node's statuses).
+
+    :param res: the slot's result
+    """
     return f"node{res.node_id}_slot{res.slot}"
 
 
 def describe_para1(p: Para1) -> str:
-    """REG_PARA1's fields in words (000 Table 19)."""
+    """REG_PARA1's fields in words (000 Table 19).
+
+    :param p: the decoded REG_PARA1
+    """
     words = [f"{p.ssi_frame_len}-bit frame", "Gray" if p.ssi_code_gray else "binary",
              f"{BIT_RATES_HZ.get(p.ssi_bit_rate, 0) / 1000:g} kbit/s"]
     if p.invalid_bits_lsb:

@@ -182,7 +182,13 @@ def _score(cfg: EncoderConfig, frame_len: int, stats: BitStats,
 
 def rank_families(frames: list[int], frame_len: int, motion: Motion,
                   stats: BitStats | None = None) -> list[list[Fit]]:
-    """The families fitting ``frames``: groups of equal score, best group first."""
+    """The families fitting ``frames``: groups of equal score, best group first.
+
+    :param frames: the sampled frames
+    :param frame_len: their length in bits
+    :param motion: what the frames say about the position bits, code and direction
+    :param stats: which bits moved (computed from ``frames`` when None)
+    """
     stats = stats or BitStats.of(frames, frame_len)
     fits: list[Fit] = []
     for family, fam in FAMILIES.items():
@@ -208,7 +214,11 @@ def rank_families(frames: list[int], frame_len: int, motion: Motion,
 
 
 def describe_bits(stats: BitStats, motion: Motion) -> str:
-    """One line on the frame's bits: moving, constant 1, constant 0."""
+    """One line on the frame's bits: moving, constant 1, constant 0.
+
+    :param stats: which bits moved
+    :param motion: the inferred position bits
+    """
     moving = stats.moving & ~motion.parity & ~motion.check
     parts = [f"{stats.frame_len} clocks"]
     if moving:

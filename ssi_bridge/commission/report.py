@@ -47,7 +47,10 @@ def _slot(res: SlotResult) -> dict[str, Any]:
 
 
 def decisions(result: Result) -> list[str]:
-    """What the user must still decide, one line each."""
+    """What the user must still decide, one line each.
+
+    :param result: the run's result
+    """
     out = []
     for res in result.slot_results:
         if not res.joint:
@@ -104,7 +107,10 @@ def as_dict(result: Result) -> dict[str, object]:
 
 
 def as_json(result: Result) -> str:
-    """The report as JSON text."""
+    """The report as JSON text.
+
+    :param result: the run's result
+    """
     return json.dumps(as_dict(result), indent=2, sort_keys=False)
 
 

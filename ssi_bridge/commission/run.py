@@ -207,7 +207,11 @@ def _run(network: MasterNetwork, heard: Heard, answered: set[int], options: Opti
 
 def diagnostics_now(sdo: SdoAccess, slot: int) -> list[str] | None:
     """The slot's diagnostics byte (object 0x5804 = REG_DIAG1, 000 Table 27) in the manual's
-    words ([] when none is set, None when it cannot be read)."""
+    words ([] when none is set, None when it cannot be read).
+
+    :param sdo: SDO access to the gateway
+    :param slot: the module's slot
+    """
     try:
         value = int.from_bytes(sdo.upload(ENCODER_DIAG, slot)[:1] or b"\0", "little")
     except SsiBridgeError:

@@ -37,6 +37,9 @@ class SdoImagePort:
     The output image is written whole to 0x2100:slot (bytes 6/7 as they were read, so the
     comparator and STOP bits are never touched); an input image is read from 0x2000:slot
     after a SYNC, so it was produced after the last write.
+
+    :param sdo: SDO access to the gateway
+    :param send_sync: sends one SYNC
     """
 
     def __init__(self, sdo: SdoAccess, send_sync: Callable[[], None]) -> None:
@@ -69,7 +72,11 @@ class SdoImagePort:
         return ProcessInput.decode(raw)
 
     def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
-        """A SYNC, then the input image (None when the gateway did not answer)."""
+        """A SYNC, then the input image (None when the gateway did not answer).
+
+        :param slot: the module's slot
+        :param timeout: unused: one SDO transfer is bounded by its own timeout
+        """
         try:
             self.send_sync()
             return self.read_input(slot)
@@ -81,20 +88,33 @@ class SdoImagePort:
         return True
 
     def set_read_address(self, slot: int, addr: int) -> None:
-        """Put ``addr`` into REG_RD_ADR (output byte 4) and leave it there."""
+        """Put ``addr`` into REG_RD_ADR (output byte 4) and leave it there.
+
+        :param slot: the module's slot
+        """
         def put(out: bytearray) -> None:
             out[OUT_RD_ADR] = addr & ADDRESS_MASK
         self.edit_output(slot, put)
 
     def restore(self, slot: int) -> None:
-        """Write REG_RD_ADR back to what it was before (raises BusError)."""
+        """Write REG_RD_ADR back to what it was before (raises BusError).
+
+        :param slot: the module's slot
+        """
         if slot in self.original:
             before = self.original[slot][OUT_RD_ADR]
             self.set_read_address(slot, before)
 
 
 def read_register(port: SdoImagePort, slot: int, addr: int) -> int:
-    """Read one register through the 000 read handshake; REG_RD_ADR is set back after."""
+    """Read one register through the 000 read handshake; REG_RD_ADR is set back after.
+
+    :param port: the slot's image port over SDO
+    :param slot: the module's slot
+    :param addr: the register
+    :raises RegisterReadError: the module aborted the read
+    :raises HandshakeTimeout: a step got no answer
+    """
     port.load(slot)
     return Handshake(port, STEP_TIMEOUT, 3 * STEP_TIMEOUT).read(slot, addr)
 
@@ -144,6 +164,10 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
 
     REG_RD_ADR of each slot is set to REG_SSI_FRAME first and set back at the end (also
     when sampling fails). A slot whose gateway stops answering is noted, not fatal.
+
+    :param targets: (port, node id, slot) of every slot to sample
+    :param send_sync: sends one SYNC
+    :param progress: a progress line for a person
     """
     results = [SlotSamples(node, slot) for _, node, slot in targets]
     live: list[bool] = [True] * len(targets)

@@ -120,7 +120,11 @@ class FrameWatch:
 
 
 def edges(before: FrameVerdict, after: FrameVerdict) -> list[str]:
-    """Sentences for the status bits that changed (for ~/events): power failure, error bits."""
+    """Sentences for the status bits that changed (for ~/events): power failure, error bits.
+
+    :param before: the frame's verdict of the previous sample
+    :param after: the verdict now
+    """
     out = []
     if after.power_failure != before.power_failure:
         out.append("POWER_FAILURE: the encoder's PowerFail bit is "
@@ -139,7 +143,11 @@ class ParityEvents:
         self._count = 0
 
     def failed(self, now: float, verdict: FrameVerdict) -> str | None:
-        """Count a failed frame; the sentence to log when one is due, else None."""
+        """Count a failed frame; the sentence to log when one is due, else None.
+
+        :param now: the frame's wire time (s)
+        :param verdict: the frame's verdict
+        """
         self._count += 1
         if self._last is not None and now - self._last < self.period:
             return None

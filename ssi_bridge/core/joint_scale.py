@@ -59,7 +59,11 @@ class JointScale:
         return int(round(self.counts_per_rev * self.revolutions))
 
     def position(self, counts: int) -> float:
-        """Joint position of a REG_SSI_POS value (32-bit, read as Integer32)."""
+        """Joint position of a REG_SSI_POS value (32-bit, read as Integer32).
+
+        :param counts: REG_SSI_POS as received
+        :returns: rad (rotary) or m (linear)
+        """
         return to_int32(counts) * self.unit_per_count
 
     def counts(self, position: float) -> int:

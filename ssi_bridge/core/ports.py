@@ -35,28 +35,46 @@ class StationClient(Protocol):
         """Register ``addr`` of the module in ``slot`` through the handshake (000 Table 4)."""
 
     def write_register(self, slot: int, addr: int, value: int) -> None:
-        """Write register ``addr`` of the module in ``slot`` through the handshake."""
+        """Write register ``addr`` of the module in ``slot`` through the handshake.
+
+        :param value: the register's new value
+        """
 
     def set_control(self, slot: int, *, stop: bool = False, enable_cmp1: bool = False,
                     enable_cmp2: bool = False, clear_cmp1: bool = False,
                     clear_cmp2: bool = False) -> None:
-        """STOP and the CMP bits of the module's process output (000 Table 6)."""
+        """STOP and the CMP bits of the module's process output (000 Table 6).
+
+        Parameters ``slot``, ``stop``, ``enable_cmp1``, ``enable_cmp2``, ``clear_cmp1`` and
+        ``clear_cmp2`` as ``client/master.py`` ``BridgeClient.set_control``.
+        """
 
     def edit_output(self, slot: int, edit: Callable[[bytearray], None]) -> None:
-        """Change bytes 0-5 of the module's process output image and send it."""
+        """Change bytes 0-5 of the module's process output image and send it.
+
+        :param slot: the module's slot (1-8)
+        :param edit: changes the 8 bytes in place; bytes 6-7 are kept
+        """
 
     def read_object(self, index: int, subindex: int = 0) -> int | float | bytes | str:
         """SDO upload of ``index:subindex``, decoded by the station's dictionary."""
 
     def write_object(self, index: int, subindex: int, value: int | bytes) -> None:
-        """SDO download to ``index:subindex``."""
+        """SDO download to ``index:subindex``.
+
+        :param value: the value, encoded by the object's data type (bytes: as they are)
+        """
 
 
 class RawSdo(Protocol):
     """A client's raw SDO access (``client.sdo.SdoAccess``): bytes in, bytes out."""
 
     def upload(self, index: int, subindex: int) -> bytes:
-        """The object's bytes as the station sent them."""
+        """The object's bytes as the station sent them.
+
+        :param index: the object's index
+        :param subindex: its subindex
+        """
 
     def download(self, index: int, subindex: int, data: bytes) -> None:
         """Download ``data`` to ``index:subindex`` unchanged."""

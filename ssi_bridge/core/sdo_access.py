@@ -130,7 +130,11 @@ def encode(data_type: DataType, value: int | float | str) -> bytes:
 
 
 def show(data_type: DataType, value: int | float | str) -> str:
-    """A value for a message: hex and decimal for integers."""
+    """A value for a message: hex and decimal for integers.
+
+    :param data_type: the value's CANopen data type
+    :param value: the value
+    """
     if isinstance(value, str):
         return repr(value)
     if isinstance(value, float):

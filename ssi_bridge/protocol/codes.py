@@ -57,6 +57,8 @@ def gray_excess_offset(resolution: int) -> int:
     """Excess ``e`` of the Gray-excess code for ``resolution`` steps (004 §2.4).
 
     ``e = (2**N - R) // 2`` with ``N = bit_length(R - 1)``; 0 for powers of two.
+
+    :raises ConfigError: ``resolution`` below 2
     """
     if resolution < 2:
         raise ConfigError(f"Gray-excess resolution {resolution} must be >= 2")
@@ -65,14 +67,21 @@ def gray_excess_offset(resolution: int) -> int:
 
 
 def gray_excess_encode(value: int, resolution: int) -> int:
-    """Gray-excess code of ``value`` in ``0 .. resolution - 1`` (004 §2.4)."""
+    """Gray-excess code of ``value`` in ``0 .. resolution - 1`` (004 §2.4).
+
+    :raises ValueError: ``value`` outside 0..``resolution`` - 1
+    """
     if not 0 <= value < resolution:
         raise ValueError(f"value {value} outside 0..{resolution - 1}")
     return bin_to_gray(value + gray_excess_offset(resolution))
 
 
 def gray_excess_decode(code: int, resolution: int) -> int:
-    """Inverse of :func:`gray_excess_encode`; raises ``ValueError`` outside the capped range."""
+    """Inverse of :func:`gray_excess_encode`; raises ``ValueError`` outside the capped range.
+
+    :param code: the Gray-excess code word
+    :param resolution: the encoder's steps
+    """
     value = gray_to_bin(code) - gray_excess_offset(resolution)
     if not 0 <= value < resolution:
         raise ValueError(f"Gray-excess code 0x{code:X} outside the capped range of {resolution}")
@@ -80,7 +89,11 @@ def gray_excess_decode(code: int, resolution: int) -> int:
 
 
 def bcd_encode(value: int) -> int:
-    """Packed BCD of a non-negative integer, one decimal digit per nibble (004 Table 1)."""
+    """Packed BCD of a non-negative integer, one decimal digit per nibble (004 Table 1).
+
+    :param value: the value (>= 0)
+    :raises ValueError: ``value`` is negative
+    """
     if value < 0:
         raise ValueError(f"BCD of negative value {value}: use a negative-value format (001 §5.2.5)")
     out = 0
@@ -94,7 +107,10 @@ def bcd_encode(value: int) -> int:
 
 
 def bcd_decode(code: int) -> int:
-    """Integer of a packed BCD word; raises ``ValueError`` on a nibble above 9."""
+    """Integer of a packed BCD word; raises ``ValueError`` on a nibble above 9.
+
+    :param code: the packed BCD word
+    """
     value = 0
     scale = 1
     while code:
@@ -119,7 +135,12 @@ def encode(value: int, code: Code, resolution: int = 0) -> int:
 
 
 def decode(word: int, code: Code, resolution: int = 0) -> int:
-    """Inverse of :func:`encode`."""
+    """Inverse of :func:`encode`.
+
+    :param word: the code word
+    :param code: the code it is in
+    :param resolution: the encoder's steps (Gray-excess only)
+    """
     if code is Code.BINARY:
         return word
     if code is Code.GRAY:

@@ -135,7 +135,10 @@ CAM_BITS = (SpecialBit.CAM1, SpecialBit.CAM2, SpecialBit.CAM3, SpecialBit.CAM4)
 
 
 def round_half_up(x: float) -> int:
-    """Round to the nearest integer, halves up: 001 §5.1.2.2 "rounded up or down"."""
+    """Round to the nearest integer, halves up: 001 §5.1.2.2 "rounded up or down".
+
+    :param x: the value
+    """
     return int(x + 0.5) if x >= 0 else -int(-x + 0.5)
 
 

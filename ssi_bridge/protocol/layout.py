@@ -19,8 +19,8 @@ Encoding order (and the reasons):
 
 from __future__ import annotations
 
-from ssi_bridge.protocol.codes import (Code, bcd_decode, bcd_encode, bin_to_gray,
-                                      gray_excess_decode, gray_excess_encode, gray_to_bin)
+from ssi_bridge.protocol.codes import (Code, bcd_decode, bcd_encode, bin_to_gray, decode, encode,
+                                      gray_to_bin)
 from ssi_bridge.protocol.encoder_config import Alignment, EncoderConfig, Negative, SpecialBit
 
 
@@ -67,6 +67,12 @@ def _decode_negative_capable(cfg: EncoderConfig, word: int) -> int:
     return w - (1 << db) if (w >> (db - 1)) & 1 else w
 
 
+def _excess_origin(cfg: EncoderConfig) -> int:
+    """What the code word counts from: Gray-excess codes the step in the range (value -
+    origin, 004 §2.4); the other codes carry the value itself."""
+    return cfg.origin if cfg.code is Code.GRAY_EXCESS else 0
+
+
 def _tannenbaum_bits(cfg: EncoderConfig) -> tuple[int, int]:
     """(singleturn field width, singleturn resolution bits n) of a Tannenbaum layout."""
     return cfg.field_bits - cfg.turn_bits, int(cfg.steps_per_rev).bit_length() - 1
@@ -81,14 +87,7 @@ def encode_area(cfg: EncoderConfig, value: int) -> int:
     if cfg.origin < 0:
         word = _encode_negative_capable(cfg, value)
     else:
-        if cfg.code is Code.GRAY_EXCESS:
-            coded = gray_excess_encode(value - cfg.origin, cfg.range_steps)
-        elif cfg.code is Code.BCD:
-            coded = bcd_encode(value)
-        elif cfg.code is Code.GRAY:
-            coded = bin_to_gray(value)
-        else:
-            coded = value
+        coded = encode(value - _excess_origin(cfg), cfg.code, cfg.range_steps)
         if cfg.alignment is Alignment.TANNENBAUM:
             field, n = _tannenbaum_bits(cfg)
             word = ((coded >> n) << field) | ((coded & ((1 << n) - 1)) << (field - n))
@@ -105,6 +104,9 @@ def decode_area(cfg: EncoderConfig, area: int) -> int:
 
     With ``shift_right`` the LSB is lost on the wire (004 §3.4), so the value comes back
     with its LSB cleared (binary; in the other codes the last code bit is lost).
+
+    :param cfg: the encoder's layout
+    :param area: the position area's bits
     """
     if cfg.shift_right:
         area <<= 1
@@ -118,17 +120,16 @@ def decode_area(cfg: EncoderConfig, area: int) -> int:
         coded = word >> (cfg.field_bits - cfg.value_bits)
     else:
         coded = word
-    if cfg.code is Code.GRAY_EXCESS:
-        return gray_excess_decode(coded, cfg.range_steps) + cfg.origin
-    if cfg.code is Code.BCD:
-        return bcd_decode(coded)
-    if cfg.code is Code.GRAY:
-        return gray_to_bin(coded)
-    return coded
+    return decode(coded, cfg.code, cfg.range_steps) + _excess_origin(cfg)
 
 
 def assemble(cfg: EncoderConfig, area: int, levels: list[int]) -> int:
-    """Frame bits: the position area followed by the special-bit levels and zero fill."""
+    """Frame bits: the position area followed by the special-bit levels and zero fill.
+
+    :param cfg: the encoder's layout
+    :param area: the position area's bits
+    :param levels: the wire level of each special bit, in the layout's order
+    """
     frame = area
     for level in levels:
         frame = (frame << 1) | level
@@ -136,7 +137,11 @@ def assemble(cfg: EncoderConfig, area: int, levels: list[int]) -> int:
 
 
 def split(cfg: EncoderConfig, frame: int) -> tuple[int, dict[SpecialBit, int]]:
-    """Position area and the wire level of each special bit (ZERO fillers dropped)."""
+    """Position area and the wire level of each special bit (ZERO fillers dropped).
+
+    :param cfg: the encoder's layout
+    :param frame: the frame's bits, first transmitted = MSB
+    """
     n_spec = len(cfg.special_bits)
     fill = cfg.frame_bits - cfg.position_bits - n_spec
     body = frame >> fill

@@ -184,7 +184,13 @@ def check_joint_names(names: list[str], shown: str = "") -> None:
 
 
 def make_joints(names: list[str], values: Mapping[str, Any]) -> tuple[JointSettings, ...]:
-    """Joints from ``names`` and per-joint values ``{"<joint>.<key>": value}`` (checked)."""
+    """Joints from ``names`` and per-joint values ``{"<joint>.<key>": value}`` (checked).
+
+    :param names: the joints, in the ``joints`` parameter's order
+    :param values: parameter values by dotted name
+    :raises ConfigError: more than 8 joints, a slot outside 1-8, two joints on one slot, or a
+        value :func:`joint_from_values` refuses
+    """
     check_joint_names(names)
     if len(names) > 8:
         raise ConfigError(f"{len(names)} joints: a station holds at most 8 XN-1SSI modules")

@@ -64,30 +64,25 @@ def stuff_count(bits: Sequence[int]) -> int:
     return count
 
 
-def _crc_table() -> list[int]:
-    table = []
-    for byte in range(256):
-        crc = 0
-        for i in range(7, -1, -1):
-            nxt = ((byte >> i) & 1) ^ ((crc >> 14) & 1)
-            crc = (crc << 1) & 0x7FFF
-            if nxt:
-                crc ^= _CRC15_POLY
-        table.append(crc)
-    return table
+def _crc15_of_int(value: int, width: int) -> int:
+    """:func:`crc15` of the ``width`` bits of ``value``, most significant first, without
+    making a list of them."""
+    crc = 0
+    for i in range(width - 1, -1, -1):
+        nxt = ((value >> i) & 1) ^ ((crc >> 14) & 1)
+        crc = (crc << 1) & 0x7FFF
+        if nxt:
+            crc ^= _CRC15_POLY
+    return crc
 
 
-_CRC_TABLE = _crc_table()
+#: the CRC-15 of each byte value, for the byte-wise step of :func:`_fast_crc`
+_CRC_TABLE = [_crc15_of_int(byte, 8) for byte in range(256)]
 
 
 def _fast_crc(head: int, payload: bytes) -> int:
     """CRC-15 of the 19 header bits then the payload bytes (byte-wise table, same result)."""
-    crc = 0
-    for i in range(18, -1, -1):
-        nxt = ((head >> i) & 1) ^ ((crc >> 14) & 1)
-        crc = (crc << 1) & 0x7FFF
-        if nxt:
-            crc ^= _CRC15_POLY
+    crc = _crc15_of_int(head, 19)
     for byte in payload:
         crc = ((crc << 8) & 0x7FFF) ^ _CRC_TABLE[((crc >> 7) & 0xFF) ^ byte]
     return crc

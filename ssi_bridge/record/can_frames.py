@@ -32,7 +32,10 @@ def pack_frame(msg: can.Message, wire_time: float) -> bytes:
 
 
 def unpack_frame(raw: bytes) -> can.Message:
-    """The ``can.Message`` of :func:`pack_frame`'s bytes (timestamp = the wire time)."""
+    """The ``can.Message`` of :func:`pack_frame`'s bytes (timestamp = the wire time).
+
+    :param raw: the bytes :func:`pack_frame` made
+    """
     t, arbitration_id, flags, dlc = _HEAD.unpack_from(raw)
     return can.Message(timestamp=t, arbitration_id=arbitration_id,
                        is_extended_id=bool(flags & EXTENDED),
@@ -46,6 +49,8 @@ class FrameLog:
     """A CAN log file written from ring bytes (the writer chosen by the suffix).
 
     :raises OSError: the file cannot be created
+
+    :param path: the log file (``.log``: candump; other suffixes: python-can's writer for it)
     """
 
     def __init__(self, path: Path) -> None:

@@ -32,7 +32,12 @@ class FrameLevels:
 
 
 def frame_levels(value: int, n_bits: int, bit_rate_hz: float, monoflop_s: float) -> FrameLevels:
-    """Clock and data levels of a burst that reads ``value`` (``n_bits`` bits, MSB first)."""
+    """Clock and data levels of a burst that reads ``value`` (``n_bits`` bits, MSB first).
+
+    :param bit_rate_hz: the SSI clock rate
+    :param monoflop_s: the monoflop time tm (s)
+    :raises ValueError: ``n_bits`` below 1, or a rate or monoflop time not positive
+    """
     if n_bits < 1 or bit_rate_hz <= 0 or monoflop_s <= 0:
         raise ValueError("need n_bits >= 1, bit rate > 0 and monoflop > 0")
     period = 1.0 / bit_rate_hz

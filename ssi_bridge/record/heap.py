@@ -70,9 +70,8 @@ def fix_mmap_threshold(threshold: int = MMAP_THRESHOLD) -> None:
     glibc starts at 128 kB but raises the threshold to the size of every mmapped block that is
     freed (up to 32 MB), so after start-up the few-hundred-kB blocks of a recording (a
     chunk's compressed bytes, a buffer that grows) come from the heap, where they leave free
-    memory between longer-lived blocks. Measured without ROS (bench/heap_split.py,
-    docs/recording.md): with the threshold fixed and the bag's reused chunk buffers, glibc's
-    heap stayed flat over 13 splits. Setting it turns glibc's adjustment off; a
+    memory between longer-lived blocks (the measurements: docs/recording.md "Memory over
+    hours"). Setting it turns glibc's adjustment off; a
     ``MALLOC_MMAP_THRESHOLD_`` in the environment wins; not glibc: nothing to do.
     """
     _mallopt_unless_set("MALLOC_MMAP_THRESHOLD_", M_MMAP_THRESHOLD, threshold)

@@ -19,7 +19,12 @@ from ssi_bridge.record.metadata import FileInfo
 
 
 class McapFile:
-    """An MCAP file open for writing, profile ``ros2``; ``info`` counts what it holds."""
+    """An MCAP file open for writing, profile ``ros2``; ``info`` counts what it holds.
+
+    :param path: the file
+    :param stream: its open binary stream
+    :param writer: the MCAP writer on ``stream``
+    """
 
     def __init__(self, path: Path, stream: BinaryIO, writer: McapWriter, info: FileInfo) -> None:
         self.path = path
@@ -33,7 +38,12 @@ class McapFile:
     def create(cls, path: Path, info: FileInfo, chunks: ChunkBuffers, chunk_size: int,
                library: str) -> McapFile:
         """Create ``path`` (it must not exist) and write the MCAP magic and header; its
-        chunks go through ``chunks`` (compressed as those say)."""
+        chunks go through ``chunks`` (compressed as those say).
+
+        :param info: what the file holds, counted as it is written
+        :param chunk_size: bytes of a chunk before it is written
+        :param library: the Header's library string
+        """
         stream = open(path, "xb")  # noqa: SIM115 - closed in sync_close() / abandon()
         try:
             writer = McapWriter(stream, chunks, chunk_size)
@@ -59,12 +69,21 @@ class McapFile:
         return self._writer
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        """An MCAP metadata record (indexed in the summary)."""
+        """An MCAP metadata record (indexed in the summary).
+
+        :param name: the record's name
+        :param data: its key -> value mapping
+        """
         self._live().add_metadata(name, data)
 
     def add_channel(self, topic: str, schema_name: str, schema_text: bytes,
                     metadata: dict[str, str]) -> None:
-        """Register ``topic`` (cdr) with its ``ros2msg`` schema, the schema once per type."""
+        """Register ``topic`` (cdr) with its ``ros2msg`` schema, the schema once per type.
+
+        :param schema_name: the type ``pkg/msg/Type``
+        :param schema_text: its ``ros2msg`` text with dependencies
+        :param metadata: the channel's metadata (offered QoS, type hash)
+        """
         writer = self._live()
         if schema_name not in self._schemas:
             self._schemas[schema_name] = writer.register_schema(schema_name, "ros2msg",
@@ -74,7 +93,13 @@ class McapFile:
 
     def write(self, topic: str, log_time_ns: int, data: bytes, publish_time_ns: int,
               sequence: int) -> None:
-        """Append one message of a registered topic."""
+        """Append one message of a registered topic.
+
+        :param log_time_ns: when it was received (ns)
+        :param data: its CDR bytes
+        :param publish_time_ns: when it was sent (ns)
+        :param sequence: its sequence number on the topic
+        """
         self._live().add_message(self._channels[topic], log_time_ns, data, publish_time_ns,
                                  sequence)
         self.info.add(log_time_ns)

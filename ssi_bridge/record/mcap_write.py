@@ -93,6 +93,10 @@ class ChunkBuffers:
     resident part changes page by page as chunks hash into them; made per chunk, with the
     node's fixed mmap threshold, it is one mapping taken and given back (the measurements:
     docs/recording.md "Memory over hours").
+
+    :param compression: "zstd", "lz4" or "" (none)
+    :param capacity: initial bytes of the record buffer (it grows as needed)
+    :raises ValueError: an unknown compression
     """
 
     def __init__(self, compression: str, capacity: int = INITIAL_CAPACITY) -> None:
@@ -124,13 +128,23 @@ class ChunkBuffers:
         return at
 
     def add_record(self, data: bytes) -> None:
-        """A whole record (schema, channel) into the chunk."""
+        """A whole record (schema, channel) into the chunk.
+
+        :param data: the whole record (opcode, length, body)
+        """
         at = self._reserve(len(data))
         self.records[at:at + len(data)] = data
 
     def add_message(self, channel_id: int, sequence: int, log_time_ns: int,
                     publish_time_ns: int, data: bytes) -> None:
-        """A message record and its message-index entry, written in place."""
+        """A message record and its message-index entry, written in place.
+
+        :param channel_id: the message's channel
+        :param sequence: its sequence number
+        :param log_time_ns: when it was received (ns)
+        :param publish_time_ns: when it was sent (ns)
+        :param data: its bytes
+        """
         size = _MESSAGE.size + len(data)
         at = self._reserve(size)
         _MESSAGE.pack_into(self.records, at, OP_MESSAGE, size - 9, channel_id, sequence,
@@ -200,7 +214,12 @@ class ChunkBuffers:
 
 class McapWriter:
     """One MCAP file (chunked, indexed, with a summary) written through a session's
-    :class:`ChunkBuffers`; what it keeps per chunk is its packed ChunkIndex record."""
+    :class:`ChunkBuffers`; what it keeps per chunk is its packed ChunkIndex record.
+
+    :param stream: the file's binary stream
+    :param chunks: the session's chunk buffers
+    :param chunk_size: bytes of a chunk before it is written
+    """
 
     def __init__(self, stream: BinaryIO, chunks: ChunkBuffers, chunk_size: int) -> None:
         self._stream = stream
@@ -216,12 +235,21 @@ class McapWriter:
         self._end_ns = 0
 
     def start(self, profile: str, library: str) -> None:
-        """The magic and the Header record; the chunk buffers start empty."""
+        """The magic and the Header record; the chunk buffers start empty.
+
+        :param profile: the Header's profile (``ros2``)
+        :param library: the Header's library string
+        """
         self._chunks.reset()
         self._stream.write(MAGIC + record(OP_HEADER, _string(profile), _string(library)))
 
     def register_schema(self, name: str, encoding: str, data: bytes) -> int:
-        """A Schema record (into the open chunk and the summary); returns its id."""
+        """A Schema record (into the open chunk and the summary); returns its id.
+
+        :param name: the schema's name (the type)
+        :param encoding: e.g. ``ros2msg``
+        :param data: the schema text
+        """
         schema_id = len(self._schemas) + 1
         rec = record(OP_SCHEMA, _U16.pack(schema_id), _string(name), _string(encoding),
                      _U32.pack(len(data)), data)
@@ -231,7 +259,13 @@ class McapWriter:
 
     def register_channel(self, topic: str, message_encoding: str, schema_id: int,
                          metadata: dict[str, str]) -> int:
-        """A Channel record (into the open chunk and the summary); returns its id."""
+        """A Channel record (into the open chunk and the summary); returns its id.
+
+        :param topic: the channel's topic
+        :param message_encoding: e.g. ``cdr``
+        :param schema_id: a registered schema
+        :param metadata: the channel's metadata
+        """
         channel_id = len(self._channels) + 1
         rec = record(OP_CHANNEL, _U16.pack(channel_id), _U16.pack(schema_id), _string(topic),
                      _string(message_encoding), _string_map(metadata))
@@ -241,7 +275,14 @@ class McapWriter:
 
     def add_message(self, channel_id: int, log_time_ns: int, data: bytes,
                     publish_time_ns: int, sequence: int) -> None:
-        """A Message into the open chunk; the chunk is written once it exceeds the size."""
+        """A Message into the open chunk; the chunk is written once it exceeds the size.
+
+        :param channel_id: a registered channel
+        :param log_time_ns: when it was received (ns)
+        :param data: its bytes
+        :param publish_time_ns: when it was sent (ns)
+        :param sequence: its sequence number
+        """
         self.message_count += 1
         self._channel_counts[channel_id] = self._channel_counts.get(channel_id, 0) + 1
         self._chunks.add_message(channel_id, sequence, log_time_ns, publish_time_ns, data)
@@ -249,7 +290,11 @@ class McapWriter:
             self._write_chunk()
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        """A Metadata record in the data section, indexed in the summary."""
+        """A Metadata record in the data section, indexed in the summary.
+
+        :param name: the record's name
+        :param data: its key -> value mapping
+        """
         offset = self._stream.tell()
         rec = record(OP_METADATA, _string(name), _string_map(data))
         self._stream.write(rec)

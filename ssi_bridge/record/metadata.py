@@ -108,7 +108,11 @@ def file_name(bag_name: str, index: int) -> str:
 
 
 def file_index(bag_name: str, name: str) -> int | None:
-    """The index ``i`` of a file named ``<bag_name>_<i>.mcap``, else None."""
+    """The index ``i`` of a file named ``<bag_name>_<i>.mcap``, else None.
+
+    :param bag_name: the bag directory's name
+    :param name: a file name
+    """
     prefix, suffix = f"{bag_name}_", ".mcap"
     if not (name.startswith(prefix) and name.endswith(suffix)):
         return None
@@ -132,7 +136,10 @@ def _topic_entry(topic: TopicInfo) -> dict[str, Any]:
 
 
 def metadata_dict(info: BagInfo) -> dict[str, Any]:
-    """The ``rosbag2_bagfile_information`` mapping, keys in rosbag2's order."""
+    """The ``rosbag2_bagfile_information`` mapping, keys in rosbag2's order.
+
+    :param info: the bag as known now
+    """
     duration = {"nanoseconds": info.duration_ns}
     start = {"nanoseconds_since_epoch": info.start_ns}
     return {
@@ -159,13 +166,19 @@ def metadata_text(info: BagInfo) -> str:
 
     PyYAML writes the QoS list in the same block style as :func:`qos.qos_text`, so each
     topic's ``offered_qos_profiles`` lines are the channel string's lines, indented.
+
+    :param info: the bag as known now
     """
     return yaml.safe_dump({"rosbag2_bagfile_information": metadata_dict(info)},
                           sort_keys=False, default_flow_style=False)
 
 
 def write_metadata(directory: Path, info: BagInfo) -> Path:
-    """Write ``directory/metadata.yaml`` atomically (temp file + rename) and return its path."""
+    """Write ``directory/metadata.yaml`` atomically (temp file + rename) and return its path.
+
+    :param directory: the bag directory
+    :param info: the bag as known now
+    """
     target = directory / METADATA_FILE
     tmp = directory / f".{METADATA_FILE}.tmp"
     tmp.write_text(metadata_text(info), encoding="utf-8")

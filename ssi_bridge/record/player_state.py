@@ -65,6 +65,12 @@ def select_topics(available: Iterable[str], topics: list[str] | None = None,
     does not have, a malformed expression, or a selection that leaves nothing to play. A topic
     in ``exclude_topics`` that the bag does not have excludes nothing and is no error, as for
     ``ros2 bag play`` (its storage filter only tests whether a recorded topic is in the list).
+
+    :param available: the bag's topics
+    :param topics: only these (``--topics``; None: all)
+    :param regex: only topics matching it (``--regex``)
+    :param exclude_topics: not these (``--exclude-topics``)
+    :param exclude_regex: not topics matching it (``--exclude-regex``)
     """
     have = sorted(available)
     unknown = [t for t in topics or [] if t not in have]
@@ -124,6 +130,10 @@ class PlayerState:
     ``first_ns``..``end_ns`` is the bag's span (a seek is clamped into it), ``start_ns`` where
     playback starts (the bag start plus ``--start-offset``), ``until_ns`` where it stops.
     ``clock`` is the monotonic clock (a test passes its own).
+
+    :param rate: the playback rate (1.0 = recorded speed)
+    :param paused: start paused
+    :param clock: the monotonic clock the time line runs on
     """
 
     def __init__(self, first_ns: int, end_ns: int, *, start_ns: int | None = None,
@@ -335,7 +345,11 @@ class PlayerState:
         self._notify("ended")
 
     def wait_for_seek(self, generation: int, timeout: float | None) -> bool:
-        """After the end: wait until a seek (True) or :meth:`stop` / ``timeout`` (False)."""
+        """After the end: wait until a seek (True) or :meth:`stop` / ``timeout`` (False).
+
+        :param generation: the time line's generation seen at the end (a seek makes a new one)
+        :param timeout: longest wait (s; None: no limit)
+        """
         with self._cond:
             self._cond.wait_for(lambda: self._stopped or self._generation != generation,
                                 timeout)

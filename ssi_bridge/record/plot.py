@@ -54,6 +54,8 @@ def load_session(path: Path) -> SessionData:
     """Read joint states, diagnostics and events of a bag (ours or rosbag2's).
 
     :raises RecordingError: the bag cannot be read or has no JointState topic
+
+    :param path: the bag directory or MCAP file
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
@@ -86,7 +88,13 @@ def load_session(path: Path) -> SessionData:
 
 def draw_session(data: SessionData, title: str = "", width_in: float = 12.0,
                  dpi: int = 100) -> tuple[Figure, dict[str, object]]:
-    """Draw the session figure; return it and the axes by role (``pos:<joint>`` ...)."""
+    """Draw the session figure; return it and the axes by role (``pos:<joint>`` ...).
+
+    :param data: what :func:`load_session` read
+    :param title: the figure's title
+    :param width_in: the figure's width (inches)
+    :param dpi: its resolution
+    """
     joints = sorted(data.joints)
     rows = 2 * len(joints) + (1 if data.diagnostics else 0) + (1 if data.events else 0)
     ratios = [3.0] * (2 * len(joints)) + [1.0] * (rows - 2 * len(joints))

@@ -46,7 +46,10 @@ def _duration(value: Duration) -> dict[str, int]:
 
 
 def qos_dict(qos: QoSProfile) -> dict[str, Any]:
-    """One profile as the mapping rosbag2 writes (keys in rosbag2's order)."""
+    """One profile as the mapping rosbag2 writes (keys in rosbag2's order).
+
+    :param qos: the profile
+    """
     return {
         "history": _policy_name(qos.history),
         "depth": int(qos.depth),
@@ -61,7 +64,10 @@ def qos_dict(qos: QoSProfile) -> dict[str, Any]:
 
 
 def qos_text(profiles: list[QoSProfile]) -> str:
-    """The ``offered_qos_profiles`` string of the MCAP channel metadata (block YAML)."""
+    """The ``offered_qos_profiles`` string of the MCAP channel metadata (block YAML).
+
+    :param profiles: the offered profiles (empty: "")
+    """
     if not profiles:
         return ""
     return yaml.safe_dump([qos_dict(p) for p in profiles], sort_keys=False,
@@ -91,7 +97,10 @@ def _to_duration(value: dict[str, int] | None) -> Duration:
 
 
 def parse_qos(text: str | list[dict[str, Any]] | None) -> list[QoSProfile]:
-    """Profiles from a channel string or a metadata.yaml list (v8 integers or v9 names)."""
+    """Profiles from a channel string or a metadata.yaml list (v8 integers or v9 names).
+
+    :param text: the channel metadata's string, a metadata.yaml list, or None
+    """
     items = yaml.safe_load(text) if isinstance(text, str) else text
     profiles = []
     for item in items or []:

@@ -49,6 +49,9 @@ def find_mcaps(path: Path) -> list[Path]:
     A bag directory's files come from metadata.yaml's ``relative_file_paths`` (several for a
     split session); without metadata.yaml (a session cut by a crash and not recovered yet) its
     ``<name>_<k>.mcap`` files in index order.
+
+    :raises RecordingError: no such path, a bad or unsupported metadata.yaml, files it names
+        that are missing, or no MCAP file at all
     """
     path = Path(path)
     if not path.exists():
@@ -88,7 +91,11 @@ def bag_files(directory: Path) -> list[Path]:
 
 def read_summary(stream: BinaryIO, path: Path) -> tuple[McapReader, Summary]:
     """Check the magic, footer and summary of one MCAP file; RecordingError says what is
-    wrong (foreign, truncated: run ``--recover``, damaged)."""
+    wrong (foreign, truncated: run ``--recover``, damaged).
+
+    :param stream: the file, open for binary reading
+    :param path: its path (for the messages)
+    """
     stream.seek(0)
     head = stream.read(8)
     if head != MCAP_MAGIC:

@@ -32,7 +32,10 @@ SPACE, RIGHT, UP, DOWN = b" ", (b"\x1b[C", b"\x1bOC"), (b"\x1b[A", b"\x1bOA"), (
 
 
 def progress_text(snap: Snapshot) -> str:
-    """One progress line (without the carriage return)."""
+    """One progress line (without the carriage return).
+
+    :param snap: the time line's state
+    """
     mark = "E" if snap.ended else "P" if snap.paused else "R"
     sec, nsec = divmod(snap.bag_ns, NS)
     return (f"[{mark}] {(snap.bag_ns - snap.first_ns) / NS:8.3f} / "
@@ -73,7 +76,10 @@ def apply_key(state: PlayerState, key: bytes) -> str | None:
 
 
 def split_keys(data: bytes) -> list[bytes]:
-    """Bytes read from the terminal as keys: escape sequences of three bytes kept whole."""
+    """Bytes read from the terminal as keys: escape sequences of three bytes kept whole.
+
+    :param data: bytes read from the terminal
+    """
     keys, i = [], 0
     while i < len(data):
         if data[i:i + 1] == b"\x1b" and i + 2 < len(data):

@@ -51,7 +51,13 @@ class MessageRing:
         self.dropped = 0
 
     def append(self, topic: str, log_time_ns: int, publish_time_ns: int, data: bytes) -> None:
-        """Add one message; drop what is older than the duration before the newest entry."""
+        """Add one message; drop what is older than the duration before the newest entry.
+
+        :param topic: the message's topic
+        :param log_time_ns: when it was received (ns)
+        :param publish_time_ns: when it was sent (ns)
+        :param data: its CDR bytes
+        """
         index = self._topic_index.get(topic)
         if index is None:
             index = self._topic_index[topic] = len(self._topics)

@@ -45,7 +45,11 @@ class MessageSchema:
 
 
 def split_type(type_name: str) -> tuple[str, str]:
-    """Split ``pkg/msg/Type`` or ``pkg/Type`` into ``(pkg, Type)``."""
+    """Split ``pkg/msg/Type`` or ``pkg/Type`` into ``(pkg, Type)``.
+
+    :param type_name: ``pkg/msg/Type`` or ``pkg/Type``
+    :raises RecordingError: another form
+    """
     parts = type_name.split("/")
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[1] != "msg") or not all(parts):
         raise RecordingError(f"message type {type_name!r}: expected 'pkg/msg/Type'")
@@ -62,7 +66,12 @@ def _interface_file(pkg: str, name: str, suffix: str) -> Path:
 
 
 def msg_text(pkg: str, name: str) -> str:
-    """The installed ``.msg`` text of ``pkg/Type``."""
+    """The installed ``.msg`` text of ``pkg/Type``.
+
+    :param pkg: the package
+    :param name: the type's name
+    :raises RecordingError: the package is not installed or has no such ``.msg``
+    """
     path = _interface_file(pkg, name, ".msg")
     try:
         return path.read_text(encoding="utf-8")
@@ -92,7 +101,11 @@ def dependencies(pkg: str, text: str) -> list[tuple[str, str]]:
 
 
 def type_hash(pkg: str, name: str) -> str:
-    """RIHS01 hash of ``pkg/msg/Type`` from its installed type description, or ``""``."""
+    """RIHS01 hash of ``pkg/msg/Type`` from its installed type description, or ``""``.
+
+    :param pkg: the package
+    :param name: the type's name
+    """
     path = _interface_file(pkg, name, ".json")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))

@@ -22,7 +22,10 @@ NAME_FORMAT = "ssi_bridge_%Y_%m_%d-%H_%M_%S"
 
 
 def timestamped_name(now: datetime | None = None) -> str:
-    """A bag directory name from the local time, like rosbag2's default."""
+    """A bag directory name from the local time, like rosbag2's default.
+
+    :param now: the time (default: now)
+    """
     return (now or datetime.now()).strftime(NAME_FORMAT)
 
 

@@ -35,7 +35,12 @@ class SplitPolicy:
             raise RecordingError(f"max_duration {self.max_duration_s}: 0 (no split) or > 0 s")
 
     def due(self, file: FileInfo, size: int, log_time_ns: int) -> bool:
-        """True when the file (``size`` bytes so far) must close before this message."""
+        """True when the file (``size`` bytes so far) must close before this message.
+
+        :param file: the open file's counts (first message time)
+        :param size: its bytes so far
+        :param log_time_ns: the next message's log time (ns)
+        """
         if file.message_count == 0:
             return False
         if self.max_size and size >= self.max_size:

@@ -13,7 +13,11 @@ from ssi_bridge.exceptions import RecordingError
 
 
 def message_class(type_name: str) -> type:
-    """Import the rclpy message class of ``pkg/msg/Type`` or ``pkg/Type``."""
+    """Import the rclpy message class of ``pkg/msg/Type`` or ``pkg/Type``.
+
+    :param type_name: ``pkg/msg/Type`` or ``pkg/Type``
+    :raises RecordingError: another form, or the type is not installed
+    """
     parts = type_name.split("/")
     if len(parts) not in (2, 3) or not all(parts):
         raise RecordingError(f"message type {type_name!r}: expected 'pkg/msg/Type'")

@@ -10,13 +10,13 @@ WARN.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from ssi_bridge.core.health import (
-    ERROR, OK, WARN, ChannelCounters, ChannelHealth, channel_level,
+    ERROR, OK, WARN, ChannelCounters, ChannelHealth, Level, channel_level,
 )
+from ssi_bridge.protocol.frame_check import FrameVerdict
 
 
 def status_name(node_fqn: str, item: str) -> str:
@@ -59,7 +59,8 @@ def channel_status(name: str, hardware_id: str, counters: ChannelCounters,
         values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
-def _with_frame_findings(level: int, message: str, frame: Any) -> tuple[int, str]:
+def _with_frame_findings(level: Level, message: str, frame: FrameVerdict
+                         ) -> tuple[Level, str]:
     """Raise level/message by what the frame check saw in the raw SSI frame.
 
     The frame check sees a bit at once while the module's own status (SSI_DIAG ...) passes the

@@ -26,21 +26,29 @@ watches).
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
+
+from rclpy.node import Node
+from rclpy.publisher import Publisher
 
 from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.ros.params import NodeSettings
 
-if TYPE_CHECKING:
-    from rclpy.node import Node
+if TYPE_CHECKING:  # the SDK is imported only when the server starts
+    import foxglove
+    from foxglove.websocket import ChannelView, Client, ServerListener, WebSocketServer
 
-    from ssi_bridge.ros.params import NodeSettings
+    from ssi_bridge.ros.liveview_params import ParameterBridge
+    from ssi_bridge.ros.services import BridgeServices
 
 #: addresses that keep the server on this host
 LOOPBACK = ("127.0.0.1", "::1", "localhost")
 
 
-def type_name(msg_class: type) -> str:
+def type_name(msg_class: object) -> str:
     """``pkg/msg/Type`` of an rclpy message class (its module is ``pkg.msg._type``)."""
+    assert isinstance(msg_class, type), f"{msg_class!r} is no message class"
     return f"{msg_class.__module__.split('.', 1)[0]}/msg/{msg_class.__name__}"
 
 
@@ -52,26 +60,26 @@ class _Subscriptions:
         self._lock = threading.Lock()
         self.count = 0
 
-    def on_subscribe(self, client: Any, channel: Any) -> None:
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         with self._lock:
             self.count += 1
         self._node.get_logger().info(f"live view: client {client.id} subscribed to "
                                      f"{channel.topic}")
 
-    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
         with self._lock:
             self.count = max(0, self.count - 1)
         self._node.get_logger().info(f"live view: client {client.id} left {channel.topic}")
 
     # the parameter requests (Capability.Parameters only): ros/liveview_params.py
-    params: Any = None
+    params: ParameterBridge | None = None
 
-    def on_get_parameters(self, client: Any, param_names: list[str],
-                          request_id: str | None = None) -> list[Any]:
+    def on_get_parameters(self, client: Client, param_names: list[str],
+                          request_id: str | None = None) -> list[foxglove.Parameter]:
         return self.params.get(param_names) if self.params is not None else []
 
-    def on_set_parameters(self, client: Any, parameters: list[Any],
-                          request_id: str | None = None) -> list[Any]:
+    def on_set_parameters(self, client: Client, parameters: list[foxglove.Parameter],
+                          request_id: str | None = None) -> list[foxglove.Parameter]:
         return self.params.set(parameters) if self.params is not None else []
 
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
@@ -86,18 +94,19 @@ class _Subscriptions:
 class LiveView:
     """The Foxglove WebSocket server of one node and a channel per offered publisher."""
 
-    def __init__(self, node: Node, settings: NodeSettings, handlers: Any = None) -> None:
+    def __init__(self, node: Node, settings: NodeSettings,
+                 handlers: BridgeServices | None = None) -> None:
         """``handlers``: the node's BridgeServices, whose services are offered (None: none)."""
         self._node = node
         self._handlers = handlers if settings.foxglove_services else None
         self._with_parameters = settings.foxglove_parameters
         #: resolved names of the services the server offers
         self.services: list[str] = []
-        self._channels: dict[Any, Any] = {}
-        self._server: Any = None
-        self._context: Any = None
+        self._channels: dict[Publisher, foxglove.Channel] = {}
+        self._server: WebSocketServer | None = None
+        self._context: foxglove.Context | None = None
         self._listener = _Subscriptions(node)
-        self._serialize: Any = None
+        self._serialize: Callable[[Any], bytes] | None = None  # a message: untyped
         #: why the server is not running although asked for; shown on the bus diagnostics
         self.error = ""
         self.port = 0
@@ -129,11 +138,12 @@ class LiveView:
         if self._with_parameters:
             self._listener.params = ParameterBridge(self._node)
             capabilities.append(Capability.Parameters)
+        # the listener is a ServerListener by its methods (no SDK import before the start)
         try:
             self._context = foxglove.Context()
             self._server = foxglove.start_server(
                 name=self._node.get_fully_qualified_name(), host=address, port=port,
-                context=self._context, server_listener=self._listener,
+                context=self._context, server_listener=cast("ServerListener", self._listener),
                 capabilities=capabilities, supported_encodings=["cdr"], services=services)
         except (RuntimeError, ValueError, OSError) as err:
             reason = str(err).removeprefix("FoxgloveError: ")
@@ -160,7 +170,7 @@ class LiveView:
         if params is not None:
             params.stop()
 
-    def offer(self, publisher: Any) -> None:
+    def offer(self, publisher: Publisher) -> None:
         """Advertise ``publisher``'s topic with its ros2msg schema (no-op while off)."""
         if self._context is None:
             return
@@ -180,18 +190,18 @@ class LiveView:
             schema=foxglove.Schema(name=schema.name, encoding="ros2msg",
                                    data=schema.text.encode("utf-8")))
 
-    def wants(self, publisher: Any) -> bool:
+    def wants(self, publisher: Publisher) -> bool:
         """True while a client is subscribed to ``publisher``'s topic."""
         channel = self._channels.get(publisher)
         return channel is not None and channel.has_sinks()
 
-    def publish(self, publisher: Any, msg: Any) -> None:
+    def publish(self, publisher: Publisher, msg: Any) -> None:
         """Send ``msg`` (just published on ``publisher``) to the subscribed clients, if any."""
         channel = self._channels.get(publisher)
-        if channel is None or not channel.has_sinks():
+        if channel is None or not channel.has_sinks() or self._serialize is None:
             return
         # no log_time: the SDK stamps the receive time itself (system clock, as ROS time is
-        # here), which saves the ~15 us of an rclpy clock call per message
+        # here), which saves an rclpy clock call per message (docs/node.md "Live view")
         channel.log(self._serialize(msg))
 
     def counters(self) -> dict[str, int]:

@@ -19,16 +19,22 @@ is published to the clients that subscribed to that parameter.
 from __future__ import annotations
 
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, TypeGuard
+
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+if TYPE_CHECKING:  # the SDK is imported only when the live view starts
+    import foxglove
+    from foxglove.websocket import WebSocketServer
 
 #: separator between the node's name and a parameter's name (foxglove_bridge's)
 SEPARATOR = "."
 
 
-def to_foxglove(name: str, param: Any) -> Any:
+def to_foxglove(name: str, param: Parameter) -> foxglove.Parameter:
     """A ``foxglove.Parameter`` named ``name`` holding rclpy parameter ``param``'s value."""
     import foxglove
-    from rclpy.parameter import Parameter
 
     kind, value = param.type_, param.value
     if kind == Parameter.Type.NOT_SET:
@@ -47,12 +53,10 @@ def to_foxglove(name: str, param: Any) -> Any:
     return foxglove.Parameter(name, value=value)
 
 
-def to_rclpy(name: str, value: Any, declared: Any) -> Any:
+def to_rclpy(name: str, value: object, declared: Parameter.Type) -> Parameter:
     """The rclpy ``Parameter`` ``name`` = ``value``, a whole number taken as the float a
     DOUBLE (array) parameter ``declared`` holds; any other type is left for rclpy to refuse."""
-    from rclpy.parameter import Parameter
-
-    def whole(v: Any) -> bool:
+    def whole(v: object) -> TypeGuard[int]:
         return isinstance(v, int) and not isinstance(v, bool)
 
     if declared == Parameter.Type.DOUBLE and whole(value):
@@ -69,14 +73,15 @@ class ParameterBridge:
         path of a change
     """
 
-    def __init__(self, node: Any) -> None:
+    def __init__(self, node: Node) -> None:
         self._node = node
         self._prefix = node.get_fully_qualified_name() + SEPARATOR
         self._lock = threading.Lock()
         self._set_lock = threading.Lock()
         #: names (live view spelling) some client subscribed to
         self.subscribed: set[str] = set()
-        self.server: Any = None  # set once the server runs (status and value updates)
+        #: set once the server runs (status and value updates)
+        self.server: WebSocketServer | None = None
         node.add_post_set_parameters_callback(self._on_changed)
 
     def _local(self, name: str) -> str:
@@ -85,7 +90,7 @@ class ParameterBridge:
     def _view(self, name: str) -> str:
         return self._prefix + name
 
-    def get(self, names: list[str]) -> list[Any]:
+    def get(self, names: list[str]) -> list[foxglove.Parameter]:
         """The named parameters (every declared one if ``names`` is empty); unknown names
         are left out, as the protocol asks."""
         node = self._node
@@ -93,12 +98,14 @@ class ParameterBridge:
         return [to_foxglove(self._view(n), node.get_parameter(n))
                 for n in local if node.has_parameter(n)]
 
-    def set(self, params: list[Any]) -> list[Any]:
+    def set(self, params: list[foxglove.Parameter]) -> list[foxglove.Parameter]:
         """Set each through ``node.set_parameters``; the values they hold afterwards.
 
         A refusal (rclpy's or the node's) is sent to every client as a warning status.
         """
-        node, refusals, names = self._node, [], []
+        node = self._node
+        refusals: list[str] = []
+        names: list[str] = []
         with self._set_lock:  # two clients' sets one after the other, as the ROS service's
             for param in params:
                 self._set_one(node, param, refusals, names)
@@ -107,7 +114,8 @@ class ParameterBridge:
             self._status(text)
         return self.get(names)
 
-    def _set_one(self, node: Any, param: Any, refusals: list[str], names: list[str]) -> None:
+    def _set_one(self, node: Node, param: foxglove.Parameter, refusals: list[str],
+                 names: list[str]) -> None:
         """Set one parameter; its refusal text appended to ``refusals``."""
         from rclpy.exceptions import ParameterException
 
@@ -143,7 +151,7 @@ class ParameterBridge:
         with self._lock:
             self.subscribed.difference_update(names)
 
-    def _on_changed(self, params: list[Any]) -> None:
+    def _on_changed(self, params: list[Parameter]) -> None:
         """rclpy's post-set callback: send the new values to the clients subscribed to them,
         whichever way the change came."""
         if self.server is None:

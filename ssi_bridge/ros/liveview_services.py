@@ -40,7 +40,7 @@ class ServiceDefinition:
     response: str
 
 
-def srv_type_name(srv_type: type) -> str:
+def srv_type_name(srv_type: type[Any]) -> str:
     """``pkg/srv/Type`` of an rclpy service class (its module is ``pkg.srv._type``)."""
     return f"{srv_type.__module__.split('.', 1)[0]}/srv/{srv_type.__name__}"
 
@@ -115,7 +115,7 @@ class ServiceBridge:
             self.names.append(name)
         return out
 
-    def _caller(self, srv_type: type, name: str,
+    def _caller(self, srv_type: type[Any], name: str,
                 handler: Callable[[Any, Any], Any]) -> Callable[[Any], bytes]:
         """The Foxglove handler of one service: decode, queue, serve, encode.
 

@@ -7,9 +7,11 @@ diagnostics (ERROR) and never stops the publishing.
 
 A session can be paused (messages are not written until resumed: a gap in the bag, the CAN
 log goes on) and split at once into its next file (``~/pause_recording``,
-``~/resume_recording``, ``~/split_recording``, as rosbag2's recorder names them). With
-``record.snapshot.duration`` every message also goes into the fault snapshot's ring
-(``ros/snapshot.py``), session or not. Once the node is finalized every start is refused.
+``~/resume_recording``, ``~/split_recording``, as rosbag2's recorder names them; the
+services are ``ros/recording_services.py``). With ``record.snapshot.duration`` every message
+also goes into the fault snapshot's ring (``ros/snapshot.py``), session or not. Once the node
+is finalized every start is refused. A bag's topic types and metadata:
+``ros/recording_meta.py``.
 """
 
 from __future__ import annotations
@@ -18,32 +20,27 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ssi_bridge import __version__
-from ssi_bridge.exceptions import BusError, RecordingError
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
 from ssi_bridge.base.realtime import normal_this_thread
+from ssi_bridge.exceptions import BusError, RecordingError
 from ssi_bridge.record import cdr
-from ssi_bridge.protocol.settings import BusConfig
-from ssi_bridge.ros.snapshot import ErrorWatch, FrameTap, snapshot_config
+from ssi_bridge.ros.params import NodeSettings
+from ssi_bridge.ros.recording_meta import bus_config, session_metadata, type_of
+from ssi_bridge.ros.snapshot import NodeSnapshots, node_snapshots
 
 if TYPE_CHECKING:
-    from rclpy.node import Node
-
     from ssi_bridge.client.sniffer import CanSniffer
     from ssi_bridge.record.bag import BagRecorder
-    from ssi_bridge.record.snapshot import SnapshotKeeper
-    from ssi_bridge.ros.params import NodeSettings
-
-#: type of every topic the node records, by the suffix of its resolved name
-TOPIC_TYPES = {
-    "joint_states": "sensor_msgs/msg/JointState",
-    "status": "ssi_bridge_msgs/msg/Status",
-    "events": "ssi_bridge_msgs/msg/Event",
-    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-}
 
 
 class SessionRecorder:
-    """Starts, feeds and stops one bag at a time for a node."""
+    """Starts, feeds and stops one bag at a time for a node.
+
+    :param node: the node whose clock gives the log times and whose logger says what happened
+    :param settings: the node's settings at the first configure (record.*, the bus, joints)
+    """
 
     def __init__(self, node: Node, settings: NodeSettings) -> None:
         self._node = node
@@ -51,7 +48,7 @@ class SessionRecorder:
         self._lock = threading.Lock()
         self._bag: BagRecorder | None = None
         self._topics: set[str] = set()
-        self._qos: dict[str, Any] = {}
+        self._qos: dict[str, QoSProfile] = {}
         self._sniffer: CanSniffer | None = None
         #: threads finishing sessions that a write error ended (see record())
         self._salvage: list[threading.Thread] = []
@@ -62,12 +59,11 @@ class SessionRecorder:
         self.paused = False
         #: the node ended (lifecycle shutdown): starts are refused (set by :meth:`finalize`)
         self.finalized = False
-        self._frame_tap: FrameTap | None = None
-        self.snapshots: SnapshotKeeper | None = self._snapshot_keeper()
-        self._errors = ErrorWatch()
+        #: the fault snapshots (``record.snapshot.duration`` > 0), else None
+        self.snapshots: NodeSnapshots | None = node_snapshots(node, settings, self._qos)
         self.open_frame_tap()
 
-    def offer(self, topic: str, qos: Any) -> None:
+    def offer(self, topic: str, qos: QoSProfile) -> None:
         """Record ``topic`` with the QoS its publisher offers (rosbag2 stores it per channel)."""
         self._qos[topic] = qos
 
@@ -77,7 +73,13 @@ class SessionRecorder:
         return self._bag is not None
 
     def start(self, requested: str = "") -> Path:
-        """Open a new bag under ``record.root``; raises RecordingError with the reason."""
+        """Open a new bag under ``record.root`` (``requested``: its name or path; empty: a
+        timestamped name); returns its directory.
+
+        :raises RecordingError: finalized, a session already runs, the root cannot be made,
+            the bag cannot be opened
+        :raises ValueError: ``requested`` is not a usable bag name
+        """
         from ssi_bridge.record.bag import BagRecorder
         from ssi_bridge.record.session import resolve_bag_path
 
@@ -95,7 +97,7 @@ class SessionRecorder:
             except OSError as err:
                 raise RecordingError(f"cannot create recording root {root}: {err}") from err
             path = resolve_bag_path(root, requested)
-            metadata = self._metadata()
+            metadata = session_metadata(self._settings)
             self._bag = BagRecorder.open(path, compression=self._settings.record_compression,
                                          metadata=metadata,
                                          max_size=self._settings.record_max_size,
@@ -114,6 +116,9 @@ class SessionRecorder:
 
         A session ended by a write error is finished first (its bag rebuilt), so that a
         shutdown right after it leaves no half-written file behind.
+
+        :raises RecordingError: the bag could not be closed (the error is kept for the
+            diagnostics)
         """
         while self._salvage:
             self._salvage.pop().join()
@@ -153,7 +158,7 @@ class SessionRecorder:
         now_ns = self._node.get_clock().now().nanoseconds  # the bag keeps log times in order
         if snapshots is not None:
             try:
-                self._keep(snapshots, topic, msg, data, now_ns, stamp_ns)
+                snapshots.keep(topic, msg, data, now_ns, stamp_ns)
             except Exception as err:  # noqa: BLE001 - a snapshot never stops the publishing
                 self._node.get_logger().error(f"fault snapshot: {type(err).__name__}: {err}",
                                               throttle_duration_sec=1.0)
@@ -161,7 +166,7 @@ class SessionRecorder:
             return
         try:
             if topic not in self._topics:
-                bag.add_topic(topic, self._type_of(topic), self._qos.get(topic))
+                bag.add_topic(topic, type_of(topic), self._qos.get(topic))
                 self._topics.add(topic)
             bag.write_serialized(topic, data, log_time_ns=now_ns, publish_time_ns=stamp_ns)
         except (RecordingError, OSError) as err:
@@ -175,17 +180,6 @@ class SessionRecorder:
                                       name="recording-salvage", daemon=True)
             self._salvage.append(worker)
             worker.start()
-
-    def _keep(self, snapshots: SnapshotKeeper, topic: str, msg: Any, data: bytes,
-              now_ns: int, stamp_ns: int) -> None:
-        """Into the snapshot ring; a status of /diagnostics newly at ERROR triggers one."""
-        snapshots.add(topic, data, now_ns, stamp_ns)
-        if topic == "/diagnostics" and snapshots.config.on_error:
-            for item in self._errors.new_errors(msg):
-                path, extended = snapshots.trigger(item, now_ns)
-                self._node.get_logger().warning(
-                    f"{item} reached ERROR: snapshot {path.name} "
-                    + ("extended" if extended else "started"))
 
     def _end_failed_session(self, bag: BagRecorder, sniffer: CanSniffer | None) -> None:
         """After a bag write error: close the CAN log, then give the bag its summary with
@@ -212,10 +206,10 @@ class SessionRecorder:
             f"bag {bag.directory} rebuilt after the write error: {summary.message_count} "
             f"messages readable")
 
-    def counters(self) -> dict[str, int]:
+    def counters(self) -> dict[str, object]:
         """Recording figures for the bus diagnostics."""
         bag, sniffer = self._bag, self._sniffer
-        out: dict[str, Any] = {
+        out: dict[str, object] = {
             "recording": int(bag is not None), "is_paused": bag is not None and self.paused,
             "recorded_messages": bag.message_count if bag is not None else 0,
             "recorded_files": len(bag.files) if bag is not None else 0,
@@ -229,52 +223,25 @@ class SessionRecorder:
         from ssi_bridge.client.sniffer import CanSniffer
 
         try:
-            self._sniffer = CanSniffer(self._bus_config(), bag_dir / "can_0.log",
+            self._sniffer = CanSniffer(bus_config(self._settings), bag_dir / "can_0.log",
                                        on_error=self._on_can_log_error)
         except BusError as err:
             # the bag still records; the reason shows on the bus diagnostics
             self.error = f"CAN log not written: {err}"
             self._node.get_logger().error(self.error)
 
-    def _bus_config(self) -> BusConfig:
-        """The node's bus, for a listener of its own (the CAN log, the snapshot's frames)."""
-        s = self._settings
-        return BusConfig(interface=s.bus_interface, channel=s.bus_channel,
-                         bitrate=s.bus_bitrate, node_id=s.node_id)
-
     def _on_can_log_error(self, reason: str) -> None:
         """The CAN log hit a write error (sniffer thread): ERROR on the bus diagnostics at once
         (the node checks :attr:`error` every cycle); the bag goes on recording."""
         self.error = reason
 
-    def on_start(self, request: Any, response: Any) -> Any:
-        """~/start_recording."""
-        try:
-            response.bag_directory = str(self.start(request.path))
-            response.success, response.message = True, f"recording to {response.bag_directory}"
-        except (RecordingError, OSError, ValueError) as err:
-            response.success, response.message = False, f"start_recording: {err}"
-        return response
-
-    def on_stop(self, request: Any, response: Any) -> Any:
-        """~/stop_recording."""
-        try:
-            done = self.stop()
-        except (RecordingError, OSError) as err:
-            response.success, response.message = False, f"stop_recording: {err}"
-            return response
-        if done is None:
-            response.success, response.message = False, "stop_recording: no recording is running"
-            return response
-        response.bag_directory, response.message_count = str(done[0]), done[1]
-        response.success = True
-        response.message = f"closed {done[0]} with {done[1]} messages"
-        return response
-
-    # -- recorder control (rosbag2's pause / resume / split_bagfile) and snapshots ----------
+    # -- recorder control (rosbag2's pause / resume / split_bagfile) --------------------------
     def set_paused(self, paused: bool) -> str:
-        """Pause or resume the running session; returns what was done (RecordingError: no
-        session). Pausing a paused session (or resuming a running one) changes nothing."""
+        """Pause or resume the running session; returns what was done. Pausing a paused
+        session (or resuming a running one) changes nothing.
+
+        :raises RecordingError: no session runs
+        """
         with self._lock:
             bag = self._bag
             if bag is None:
@@ -289,7 +256,10 @@ class SessionRecorder:
 
     def split(self) -> Path:
         """Close the session's open file and go on in the next ``<bag>_<k>.mcap`` at once;
-        returns its path (RecordingError: no session, or nothing written to the open file)."""
+        returns its path.
+
+        :raises RecordingError: no session runs, or nothing was written to the open file
+        """
         bag = self._bag
         if bag is None:
             raise RecordingError("no recording is running")
@@ -304,97 +274,24 @@ class SessionRecorder:
         try:
             return self.stop()
         finally:
-            self.close_frame_tap()
             if self.snapshots is not None:
                 self.snapshots.close()
-
-    def on_pause(self, request: Any, response: Any) -> Any:
-        """~/pause_recording (std_srvs/Trigger)."""
-        return self._answer(response, "pause_recording", lambda: self.set_paused(True))
-
-    def on_resume(self, request: Any, response: Any) -> Any:
-        """~/resume_recording (std_srvs/Trigger)."""
-        return self._answer(response, "resume_recording", lambda: self.set_paused(False))
-
-    def on_split(self, request: Any, response: Any) -> Any:
-        """~/split_recording (std_srvs/Trigger): the message names the new file."""
-        return self._answer(response, "split_recording", lambda: f"writing {self.split()}")
-
-    def on_snapshot(self, request: Any, response: Any) -> Any:
-        """~/snapshot (std_srvs/Trigger): write the ring now (or extend the one running)."""
-        def snapshot() -> str:
-            if self.finalized:
-                raise RecordingError("the node is finalized (lifecycle shutdown)")
-            if self.snapshots is None:
-                raise RecordingError("record.snapshot.duration is 0: no ring is kept; set it "
-                                     "(seconds before a snapshot) to take snapshots")
-            path, extended = self.snapshots.trigger("request")
-            self._node.get_logger().info(f"snapshot on request: {path}"
-                                         + (" (extended)" if extended else ""))
-            return f"{'extended' if extended else 'writing'} {path}"
-        return self._answer(response, "snapshot", snapshot)
-
-    @staticmethod
-    def _answer(response: Any, kind: str, action: Any) -> Any:
-        """Fill a Trigger response from ``action()`` (its text) or the refusal."""
-        try:
-            response.success, response.message = True, action()
-        except (RecordingError, OSError, ValueError) as err:
-            response.success, response.message = False, f"{kind}: {err}"
-        return response
-
-    def _snapshot_keeper(self) -> SnapshotKeeper | None:
-        """The fault snapshot's ring and writer when ``record.snapshot.duration`` > 0."""
-        from ssi_bridge.record.bag import BagRecorder
-        from ssi_bridge.record.snapshot import SnapshotKeeper
-
-        s = self._settings
-        config = snapshot_config(self._node, s.record_root, s.record_can_log)
-        if config is None:
-            return None
-
-        def open_bag(path: Path) -> BagRecorder:
-            meta = {**self._metadata(), "snapshot": path.name}
-            return BagRecorder.open(path, compression=s.record_compression, metadata=meta)
-
-        clock = self._node.get_clock()
-        return SnapshotKeeper(config, open_bag, lambda t: (self._type_of(t), self._qos.get(t)),
-                              clock_ns=lambda: clock.now().nanoseconds,
-                              log=self._node.get_logger())
 
     def open_frame_tap(self) -> None:
         """Snapshots with ``record.can_log``: listen on the node's bus for the frames' ring
         (each configure); a bus that cannot be opened leaves the messages' ring running."""
-        keeper = self.snapshots
-        if keeper is None or not keeper.config.can_log or self._frame_tap or self.finalized:
+        if self.snapshots is None or self.finalized:
             return
         try:
-            self._frame_tap = FrameTap(self._bus_config(), keeper)
+            self.snapshots.open_frame_tap()
         except BusError as err:
             self.error = f"snapshot CAN ring not kept: {err}"
             self._node.get_logger().error(self.error)
 
     def close_frame_tap(self) -> None:
         """Stop listening on the bus (cleanup closes the bus side; the ring keeps its frames)."""
-        if (tap := self._frame_tap) is not None:
-            self._frame_tap = None
-            tap.close()
+        if self.snapshots is not None:
+            self.snapshots.close_frame_tap()
 
-    def _type_of(self, topic: str) -> str:
-        for suffix, type_name in TOPIC_TYPES.items():
-            if topic == suffix or topic.endswith("/" + suffix.lstrip("/")):
-                return type_name
-        raise RecordingError(f"no message type known for topic {topic}")
 
-    def _metadata(self) -> dict[str, str]:
-        s = self._settings
-        meta = {"package_version": __version__, "bus": f"{s.bus_interface}:{s.bus_channel}",
-                "bus_bitrate": str(s.bus_bitrate), "node_id": str(s.node_id),
-                "stations": ",".join(str(i) for i in s.station_ids),
-                "simulation": str(s.simulation), "publish_rate": f"{s.publish_rate:g}",
-                "can_log": "can_0.log" if s.record_can_log else ""}
-        for j in s.joints:
-            meta[f"joint.{j.name}"] = (f"station={j.station or s.node_id} slot={j.slot} "
-                                       f"family={j.family} "
-                                       f"para1=0x{j.para1:08X}")
-        return meta
+__all__ = ["SessionRecorder"]

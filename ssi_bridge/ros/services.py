@@ -23,6 +23,8 @@ from rclpy.node import Node
 from ssi_bridge.core.bridge import Bridge, register_name
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import BusError, RegisterError, SsiBridgeError
+from ssi_bridge.ros.recording import SessionRecorder
+from ssi_bridge.ros.recording_services import RecorderServices
 from ssi_bridge.ros.request_queue import SERVICE_QOS, RequestQueue
 from ssi_bridge.ros.sdo_services import SdoServices
 from ssi_bridge.core.sdo_access import ObjectAccess
@@ -43,11 +45,13 @@ class BridgeServices:
 
     :param node: the ROS node the services, the ``~/events`` publisher and the log belong to
     :param bridge: the operations (registers, preset, reset, control, faults)
-    :param recorder: the session recorder (``offer``, ``record``, ``on_start``, ``on_stop``)
+    :param recorder: the session recorder: records every event; its services
+        (``ros/recording_services.py``) are registered with the others
     :param publish: the node's publish (shutdown-safe, mirrored to the live view)
     """
 
-    def __init__(self, node: Node, bridge: Bridge, recorder: Any, publish: Publish) -> None:
+    def __init__(self, node: Node, bridge: Bridge, recorder: SessionRecorder,
+                 publish: Publish) -> None:
         self.node = node
         self.bridge = bridge
         self.recorder = recorder
@@ -61,13 +65,13 @@ class BridgeServices:
         self._busy_logged = 0.0
         #: (type, resolved name, handler) of every service :meth:`register` created: the
         #: live view offers the same list (ros/liveview_services.py)
-        self.offered: list[tuple[type, str, Callable[[Any, Any], Any]]] = []
+        self.offered: list[tuple[type[Any], str, Callable[[Any, Any], Any]]] = []
 
     def register(self, group: Any = None) -> None:
         """Create every service of the contract; their requests go through :attr:`queue`
         (one at a time: a handshake per slot is serialised anyway). ``group`` is unused: no
         executor runs these services."""
-        node, rec = self.node, self.recorder
+        node, rec = self.node, RecorderServices(self.recorder)
         for srv_type, name, handler in (
                 (ReadRegister, "~/read_register", self.read_register),
                 (WriteRegister, "~/write_register", self.write_register),

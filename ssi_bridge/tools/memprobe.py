@@ -37,7 +37,10 @@ class _Mallinfo2(ctypes.Structure):
 
 
 def malloc_figures(libc: ctypes.CDLL) -> dict[str, Any]:
-    """glibc's heap: in use, free but kept, mmapped (MB) and the number of arenas."""
+    """glibc's heap: in use, free but kept, mmapped (MB) and the number of arenas.
+
+    :param libc: glibc, loaded (``mallinfo2``)
+    """
     libc.mallinfo2.restype = _Mallinfo2
     m = libc.mallinfo2()
     out: dict[str, Any] = {"malloc_in_use_mb": m.uordblks / 2**20,

@@ -85,6 +85,10 @@ class MonitorState:
 
         ``waited``: seconds since the monitor started; before :data:`DISCOVERY_S` a node not
         seen yet is still being discovered.
+
+        :param topic: the joint_states topic watched
+        :param elapsed: seconds since the last report
+        :param node_seen: the node is in the ROS graph
         """
         rate = self.received / elapsed if elapsed > 0 else 0.0
         self.received = 0

@@ -40,7 +40,11 @@ INTERRUPTED = 128 + signal.SIGINT
 
 
 def seconds(text: str) -> Decimal:
-    """A time in seconds, kept exact (``sec.nsec`` of a ROS time has 19 digits)."""
+    """A time in seconds, kept exact (``sec.nsec`` of a ROS time has 19 digits).
+
+    :param text: seconds as given on the command line (``sec`` or ``sec.nsec``)
+    :raises ValueError: not a finite decimal number
+    """
     try:
         value = Decimal(text)
     except ArithmeticError:

@@ -68,6 +68,8 @@ def params_file_problem(argv: list[str]) -> str | None:
 
     rcl would report it too, but over several lines (its own log line, then the error with
     source positions); checked first, a missing or malformed file is one clear line.
+
+    :param argv: the node's command line
     """
     import yaml
 

@@ -39,11 +39,8 @@ def test_no_tracker_numbers_in_docs_or_code():
 
 
 def test_no_ticket_numbers_in_docs_or_the_package():
-    """The docs and the package's code say what and why, not "(#22 item 5)".
-
-    ros/ joins once its recomposition lands (ros/lifecycle.py still names one)."""
-    texts = [*DOCS, *sorted(p for p in (REPO / "ssi_bridge").rglob("*.py")
-                            if "ros" not in p.relative_to(REPO / "ssi_bridge").parts[:1])]
+    """The docs and the package's code say what and why, not "(#22 item 5)"."""
+    texts = [*DOCS, *sorted((REPO / "ssi_bridge").rglob("*.py"))]
     found = [f"{rel(p)}:{n}" for p in texts
              for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
              if HASH_TRACKER.search(line)]
@@ -133,8 +130,8 @@ def test_readme_explains_the_environment_where_it_shows_the_tools():
 
 
 def test_architecture_says_where_each_concept_lives():
-    """docs/architecture.md "Where each concept lives" has a line for every module outside
-    ``ros/`` (an ``__init__.py`` only when it defines something), in its folder's table."""
+    """docs/architecture.md "Where each concept lives" has a line for every module (an
+    ``__init__.py`` only when it defines something), in its folder's table."""
     text = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
     section = text.split("## Where each concept lives", 1)[1].split("\n## ", 1)[0]
     tables = {m.group(1): m.group(2) for m in re.finditer(
@@ -142,7 +139,7 @@ def test_architecture_says_where_each_concept_lives():
     missing = []
     for path in sorted((REPO / "ssi_bridge").rglob("*.py")):
         parts = path.relative_to(REPO / "ssi_bridge").parts
-        if len(parts) == 1 or parts[0] == "ros":
+        if len(parts) == 1:
             continue
         tree = ast.parse(path.read_text(encoding="utf-8"))
         if path.name == "__init__.py" and not any(

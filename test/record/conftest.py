@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from ssi_bridge.record.bag import BagRecorder
@@ -57,6 +58,21 @@ TOPICS = {
     "/diagnostics": ("diagnostic_msgs/msg/DiagnosticArray", diagnostics, 10),
     "/ssi_bridge/events": ("ssi_bridge_msgs/msg/Event", event, 250),
 }
+
+
+def joint_states_bag(path: Path, n: int, topics: tuple[str, ...] = ("/joint_states",),
+                     period_ns: int = 10_000_000) -> Path:
+    """A closed bag at ``path`` of ``n`` JointStates ``period_ns`` apart on each of ``topics``
+    (reliable, depth 50); message i is :func:`joint_state` (i) at T0 + i periods. Returns its
+    directory."""
+    rec = BagRecorder.open(path)
+    for topic in topics:
+        rec.add_topic(topic, "sensor_msgs/msg/JointState",
+                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    for i in range(n):
+        for topic in topics:
+            rec.write(topic, joint_state(i), T0 + i * period_ns)
+    return rec.close().directory
 
 
 def write_session(directory: Path, n: int, compression: str = "zstd") -> Path:

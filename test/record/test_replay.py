@@ -18,9 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from ssi_bridge.record.bag import BagRecorder
-
-from .conftest import T0, joint_state
+from .conftest import T0, joint_states_bag
 
 N = 100           # messages, 10 ms apart: a 0.99 s bag
 PERIOD_NS = 10_000_000
@@ -28,12 +26,7 @@ PERIOD_NS = 10_000_000
 
 @pytest.fixture(scope="module")
 def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    rec = BagRecorder.open(tmp_path_factory.mktemp("replay") / "short")
-    rec.add_topic("/joint_states", "sensor_msgs/msg/JointState",
-                  QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-    for i in range(N):
-        rec.write("/joint_states", joint_state(i), T0 + i * PERIOD_NS)
-    return rec.close().directory
+    return joint_states_bag(tmp_path_factory.mktemp("replay") / "short", N, period_ns=PERIOD_NS)
 
 
 @pytest.fixture

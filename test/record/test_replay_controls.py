@@ -23,6 +23,7 @@ import termios
 import threading
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -33,9 +34,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from ssi_bridge.record.bag import BagRecorder
+from support import waiting
 
-from .conftest import T0, joint_state
+from .conftest import T0, joint_states_bag
 
 PERIOD_NS = 10_000_000   # 100 Hz
 MS = 1_000_000
@@ -43,31 +44,19 @@ RELIABLE = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 ARM, BASE = "/arm/joint_states", "/base/joint_states"
 
 
-def write_bag(path: Path, topics: list[str], n: int) -> Path:
-    """``n`` JointStates 10 ms apart on each topic; message i has position 0.001 i."""
-    rec = BagRecorder.open(path)
-    for topic in topics:
-        rec.add_topic(topic, "sensor_msgs/msg/JointState",
-                      QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-    for i in range(n):
-        for topic in topics:
-            rec.write(topic, joint_state(i), T0 + i * PERIOD_NS)
-    return rec.close().directory
-
-
 @pytest.fixture(scope="module")
 def one_s(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_bag(tmp_path_factory.mktemp("ctl") / "one_s", ["/joint_states"], 100)
+    return joint_states_bag(tmp_path_factory.mktemp("ctl") / "one_s", 100, period_ns=PERIOD_NS)
 
 
 @pytest.fixture(scope="module")
 def two_topics(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_bag(tmp_path_factory.mktemp("ctl") / "two", [ARM, BASE], 30)
+    return joint_states_bag(tmp_path_factory.mktemp("ctl") / "two", 30, (ARM, BASE), PERIOD_NS)
 
 
 @pytest.fixture(scope="module")
 def four_s(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return write_bag(tmp_path_factory.mktemp("ctl") / "four_s", ["/joint_states"], 400)
+    return joint_states_bag(tmp_path_factory.mktemp("ctl") / "four_s", 400, period_ns=PERIOD_NS)
 
 
 def index(msg: JointState) -> int:
@@ -148,10 +137,9 @@ def run(bag: Path, *args: str) -> subprocess.CompletedProcess[str]:
 
 
 def wait_for(cond: Callable[[], bool], timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.01)
+    """:func:`support.waiting.wait_for`, polling every 10 ms, failing with
+    "timed out waiting for ``what``"."""
+    waiting.wait_for(cond, f"timed out waiting for {what}", timeout, poll=0.01)
 
 
 def settle(rx: list, quiet: float = 0.5, timeout: float = 10.0) -> None:
@@ -358,15 +346,29 @@ def _foreground(tty_fd: int) -> Callable[[], None]:
     return preexec
 
 
-def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe) -> None:
-    rx = probe.subscribe("/joint_states")
+@contextmanager
+def in_a_terminal(args: list[str]) -> Iterator[tuple[subprocess.Popen, Screen, int, int, list]]:
+    """Run ``args`` on a new pseudo-terminal as its foreground program: (process, its screen,
+    the master and slave ends, the terminal's settings from before the start). On exit the
+    process is killed if still running and both ends are closed."""
     master, slave = os.openpty()
     settings = termios.tcgetattr(slave)
-    proc = subprocess.Popen(command(four_s, "--start-paused", "--wait-for-subscribers", "20"),
-                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
+    proc = subprocess.Popen(args, stdin=slave, stdout=slave, stderr=slave, close_fds=True,
                             start_new_session=True, preexec_fn=_foreground(slave))
-    screen = Screen(master)
     try:
+        yield proc, Screen(master), master, slave, settings
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+        os.close(slave)
+        os.close(master)
+
+
+def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe) -> None:
+    rx = probe.subscribe("/joint_states")
+    args = command(four_s, "--start-paused", "--wait-for-subscribers", "20")
+    with in_a_terminal(args) as (proc, screen, master, slave, settings):
         wait_for(screen.shows(r"^\[P\] +0\.000 / 3\.990 s  t 1700000000\.000000000  "
                               r"rate 1\.00x  0 msgs"), 30, "the progress line, paused")
         time.sleep(0.3)
@@ -393,12 +395,6 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
         os.write(master, b" ")
         assert proc.wait(60) == 0, screen.text[-2000:]
         assert termios.tcgetattr(slave) == settings, "the terminal gets its settings back"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        os.close(slave)
-        os.close(master)
     settle(rx)
     assert indices(rx) == list(range(400))
     assert "[E]" in screen.text and "replayed 400 messages" in screen.text, screen.text[-500:]
@@ -406,23 +402,12 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
 
 def test_ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four_s: Path,
                                                                             probe: Probe) -> None:
-    master, slave = os.openpty()
-    settings = termios.tcgetattr(slave)
-    proc = subprocess.Popen(command(four_s, "--wait-for-subscribers", "0"),
-                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
-                            start_new_session=True, preexec_fn=_foreground(slave))
-    screen = Screen(master)
-    try:
+    args = command(four_s, "--wait-for-subscribers", "0")
+    with in_a_terminal(args) as (proc, screen, master, slave, settings):
         wait_for(screen.shows(r"^\[R\]"), 30, "the progress line, running")
         os.write(master, b"\x03")              # Ctrl-C: the terminal sends SIGINT
         assert proc.wait(30) == 0, screen.text[-2000:]  # as ros2 bag play (ros2bag >= 0.18)
         assert termios.tcgetattr(slave) == settings, "the terminal gets its settings back"
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
-        os.close(slave)
-        os.close(master)
     assert "Traceback" not in screen.text, screen.text[-2000:]
 
 
@@ -465,21 +450,12 @@ def test_loop_plays_the_selection_again_from_the_start_offset(one_s: Path, probe
 
 def test_disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None:
     rx = probe.subscribe("/joint_states")
-    master, slave = os.openpty()
-    proc = subprocess.Popen(command(four_s, "--start-paused", "--disable-keyboard-controls",
-                                    "--wait-for-subscribers", "20"),
-                            stdin=slave, stdout=slave, stderr=slave, close_fds=True,
-                            start_new_session=True, preexec_fn=_foreground(slave))
-    screen = Screen(master)
-    try:
+    args = command(four_s, "--start-paused", "--disable-keyboard-controls",
+                   "--wait-for-subscribers", "20")
+    with in_a_terminal(args) as (_, screen, master, slave, _):
         wait_for(screen.shows(r"^\[P\]"), 30, "the progress line, paused")
         os.write(master, b" \x1b[C")
         time.sleep(1.5)
         assert not rx and screen.shows(r"^\[P\] .* 0 msgs")(), screen.last_line()
         assert "keys:" not in screen.text
         assert termios.tcgetattr(slave)[3] & termios.ICANON, "the terminal stays line-buffered"
-    finally:
-        proc.kill()
-        proc.wait(10)
-        os.close(slave)
-        os.close(master)

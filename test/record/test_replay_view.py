@@ -22,11 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from ssi_bridge.record.bag import BagRecorder
-
-from .conftest import T0, joint_state
+from .conftest import T0, joint_states_bag
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = struct.Struct("<BIQ")
@@ -38,12 +35,7 @@ PLAYING, PAUSED, ENDED = 0, 1, 3
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    rec = BagRecorder.open(tmp_path_factory.mktemp("view") / "four_s")
-    rec.add_topic("/joint_states", "sensor_msgs/msg/JointState",
-                  QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
-    for i in range(N):
-        rec.write("/joint_states", joint_state(i), T0 + i * PERIOD_NS)
-    return rec.close().directory
+    return joint_states_bag(tmp_path_factory.mktemp("view") / "four_s", N, period_ns=PERIOD_NS)
 
 
 def free_port() -> int:

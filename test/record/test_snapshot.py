@@ -20,6 +20,8 @@ from ssi_bridge.record.can_frames import pack_frame, unpack_frame
 from ssi_bridge.record.ring import ENTRY_OVERHEAD, MessageRing
 from ssi_bridge.record.snapshot import CAN_LOG, PREFIX, SnapshotConfig, SnapshotKeeper
 
+from support.waiting import wait_for
+
 from .conftest import T0, joint_state
 
 MS = 1_000_000
@@ -141,10 +143,7 @@ def test_a_failed_snapshot_is_reported_and_the_ring_goes_on(tmp_path: Path):
     k = keeper(blocker, clock)
     feed(k, clock, 0, 100)
     k.trigger("joint1", clock.now)
-    deadline = time.monotonic() + 10
-    while not k.error:
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    wait_for(lambda: k.error, "no snapshot write error reported within 10 s", 10, poll=0.02)
     assert "not written" in k.error
     feed(k, clock, 100, 100)
     assert len(k.ring) == 200 and k.counters()["snapshot_writing"] == 0

@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 import yaml
 
+from support.node_truth import latest_status
 from support.ros_process import NodeProcess, dds_env, installed_executable  # noqa: F401
 
 REPO = Path(__file__).resolve().parents[2]
@@ -348,15 +349,6 @@ def joint_of(msg: Any, name: str) -> tuple[float, float] | None:
 
 
 # -- /diagnostics and fault injection, as the node tests read and drive them ---------------------
-def latest_status(diags: list[tuple[float, Any]], name: str) -> Any:
-    """The newest DiagnosticStatus called ``name`` among received DiagnosticArrays, or None."""
-    for _, arr in reversed(diags):
-        for st in arr.status:
-            if st.name == name:
-                return st
-    return None
-
-
 def wait_for_level(probe: "RosProbe", node: NodeProcess, diags: list[tuple[float, Any]],
                    name: str, level: bytes, timeout: float) -> None:
     """Wait until the newest status ``name`` has ``level``."""

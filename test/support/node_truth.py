@@ -30,7 +30,8 @@ from ssi_bridge_msgs.msg import Status
 from ssi_bridge_msgs.srv import InjectFault, SdoRead
 
 from ssi_bridge.base.udp_bus import open_udp_bus
-from support.truth import TruthOracle, samples_from_joint_states
+from support.stations import children
+from support.truth import TruthOracle, flatten, samples_from_joint_states
 
 K = InjectFault.Request
 RATE = 200.0
@@ -51,13 +52,7 @@ def latest_status(diags: list[tuple[float, Any]], name: str) -> Any:
 
 def station_pids(node: Any) -> list[int]:
     """The pids of a node's simulated station children (one per station on udp_multicast)."""
-    kids: list[int] = []
-    for task in Path(f"/proc/{node.proc.pid}/task").iterdir():
-        try:
-            kids += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return [k for k in kids
+    return [k for k in children(node.proc.pid)
             if b"ssi_bridge.sim.program" in Path(f"/proc/{k}/cmdline").read_bytes()]
 
 
@@ -250,21 +245,11 @@ def foreign_syncs(wire: str, rate: float, seconds: float, stop: threading.Event)
     return sent
 
 
-def _flat(values: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in values.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
-
-
 def two_stations(channel: str) -> dict[str, Any]:
     """The shipped two-station example (AFM60 sine, TTK70 linear, GENERIC on a second
     station), on this test's bus."""
     doc = yaml.safe_load((REPO / "config" / "ssi_bridge_two_stations.yaml").read_text())
-    params = _flat(doc["/**"]["ros__parameters"])
+    params = flatten(doc["/**"]["ros__parameters"])
     params.update({"bus.channel": channel, "publish_rate": RATE, "diagnostics_period": 0.25,
                    "simulation.transport": "udp_multicast"})
     return params

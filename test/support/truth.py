@@ -115,11 +115,13 @@ class TruthReport:
         return text
 
 
-def _flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+def flatten(values: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested parameters as the node's dotted names: ``{"j": {"slot": 1}}`` ->
+    ``{"j.slot": 1}``."""
     out: dict[str, Any] = {}
     for key, value in values.items():
         if isinstance(value, Mapping):
-            out.update(_flatten(value, f"{prefix}{key}."))
+            out.update(flatten(value, f"{prefix}{key}."))
         else:
             out[f"{prefix}{key}"] = value
     return out
@@ -129,7 +131,7 @@ def joints_of(params: Mapping[str, Any]) -> tuple[JointSettings, ...]:
     """The joints the node makes of ``params`` (dotted or nested names), as the node
     assigns them: ``<joint>.station`` (0: the first of ``stations``, else ``bus.node_id``),
     ``<joint>.slot`` (0: the joint's place among its station's joints)."""
-    values = _flatten(params)
+    values = flatten(params)
     names = [str(n) for n in values.get("joints", ["joint1"])]
     stations = [int(s) for s in values.get("stations", [0]) if int(s)] or \
         [int(values.get("bus.node_id", 1))]
@@ -257,7 +259,7 @@ class TruthOracle:
         joints = joints_of(params)
         epochs = (dict(epoch) if isinstance(epoch, Mapping)
                   else {j.station: float(epoch) for j in joints})
-        window = int(_flatten(params).get("velocity_window", DEFAULT_WINDOW))
+        window = int(flatten(params).get("velocity_window", DEFAULT_WINDOW))
         return cls(joints, epochs, offsets, window)
 
     def _joint(self, joint: str) -> JointTruth:

@@ -9,11 +9,12 @@ from collections.abc import Callable
 import pytest
 
 
-def wait_for(condition: Callable[[], object], message: str, timeout: float = 2.0) -> None:
-    """Poll ``condition`` every millisecond until true; fail with ``message`` after
+def wait_for(condition: Callable[[], object], message: str, timeout: float = 2.0,
+             poll: float = 0.001) -> None:
+    """Poll ``condition`` every ``poll`` s until true; fail with ``message`` after
     ``timeout`` s."""
     end = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > end:
             pytest.fail(message)
-        time.sleep(0.001)
+        time.sleep(poll)

@@ -94,7 +94,11 @@ def _plain_area_shift(cfg: EncoderConfig) -> int | None:
 
 
 class SsiEncoder:
-    """An absolute encoder with an SSI output, driven by a motion profile."""
+    """An absolute encoder with an SSI output, driven by a motion profile.
+
+    :param config: its layout, scaling and timing
+    :param motion: the shaft's motion (the ground truth)
+    """
 
     def __init__(self, config: EncoderConfig, motion: MotionProfile) -> None:
         self.config = config
@@ -176,6 +180,9 @@ class SsiEncoder:
 
         A layout without error bits still records the error (it shows as ERROR_VALUE or
         ALL_ONES where the family does that, 004 §3.3/§3.7).
+
+        :param active: raise (True) or clear (False)
+        :param bits: which error bits
         """
         if bits is None:
             bits = {b for b in self.config.special_bits if b in ERROR_BITS} or {SpecialBit.ERROR}
@@ -187,6 +194,8 @@ class SsiEncoder:
 
         Only the zero point moves (an integer offset), so the speed does not jump.
         Returns the new offset in steps.
+
+        :raises ConfigError: ``value`` outside the encoder's range
         """
         cfg = self.config
         value = cfg.preset_value if value is None else value
@@ -290,5 +299,10 @@ class SsiEncoder:
 
 
 def make_encoder(family: str, motion: MotionProfile | None = None, **overrides: Any) -> SsiEncoder:
-    """An :class:`SsiEncoder` of a named family driven by ``motion`` (default: at rest)."""
+    """An :class:`SsiEncoder` of a named family driven by ``motion`` (default: at rest).
+
+    :param family: the preset's name
+    :param overrides: :class:`EncoderConfig` fields to change (``family_config``)
+    :raises ConfigError: an unknown family or overrides that make no valid configuration
+    """
     return SsiEncoder(family_config(family, **overrides), motion or Still())

@@ -67,7 +67,13 @@ class ConstantVelocity(MotionProfile):
 
 
 class Sine(MotionProfile):
-    """``position(t) = offset + amplitude * sin(2π f t)``: an oscillating axis."""
+    """``position(t) = offset + amplitude * sin(2π f t)``: an oscillating axis.
+
+    :param amplitude: rev or m
+    :param frequency_hz: f (>= 0)
+    :param offset: rev or m
+    :raises ConfigError: a negative frequency
+    """
 
     def __init__(self, amplitude: float, frequency_hz: float, offset: float = 0.0) -> None:
         if frequency_hz < 0:
@@ -92,6 +98,8 @@ class Trapezoid(MotionProfile):
     Accelerates at ``accel`` up to ``v_max``, cruises, decelerates at ``accel``; the move
     begins at ``t0``. When the distance is too short to reach ``v_max`` the profile is
     triangular. Before ``t0`` the axis rests at ``start``, after the move at ``end``.
+
+    :raises ConfigError: ``v_max`` or ``accel`` not positive
     """
 
     def __init__(self, start: float, end: float, v_max: float, accel: float,
@@ -146,6 +154,9 @@ class Waypoints(MotionProfile):
     starts there); acceleration is 0 between knots (it is an impulse at the knots, which a
     piecewise-linear script cannot represent). Before the first point and after the last
     the axis rests there.
+
+    :param points: ``(time s, position)`` pairs, times strictly increasing
+    :raises ConfigError: no point, or times that do not increase
     """
 
     def __init__(self, points: Sequence[tuple[float, float]]) -> None:

@@ -33,7 +33,11 @@ def cam_active(value: int, on: int, off: int) -> bool:
 
 
 class DirectionMonitor:
-    """Going up / going down with stand-still time and one-step hysteresis (001 §5.5.3)."""
+    """Going up / going down with stand-still time and one-step hysteresis (001 §5.5.3).
+
+    :param standstill_s: no step for this long is a stand-still (s)
+    :param hysteresis_steps: steps back before a reversal counts
+    """
 
     def __init__(self, standstill_s: float, hysteresis_steps: int) -> None:
         self.standstill_s = standstill_s
@@ -63,7 +67,10 @@ class DirectionMonitor:
 
 
 class SpecialState:
-    """Per-encoder state for the special bits; ``levels()`` gives the logical bit values."""
+    """Per-encoder state for the special bits; ``levels()`` gives the logical bit values.
+
+    :param cfg: the encoder's layout (which special bits it has, its limits)
+    """
 
     def __init__(self, cfg: EncoderConfig) -> None:
         self.cfg = cfg
@@ -73,7 +80,14 @@ class SpecialState:
 
     def active(self, t: float, value: int, speed_rps: float,
                errors: frozenset[SpecialBit], power_fail: bool) -> set[SpecialBit]:
-        """Set of special bits (excluding parity) that are logically active."""
+        """Set of special bits (excluding parity) that are logically active.
+
+        :param t: the formation time (s)
+        :param value: the output value (steps)
+        :param speed_rps: the shaft's speed (rev/s or m/s)
+        :param errors: the error bits raised
+        :param power_fail: the supply is below its limit
+        """
         cfg = self.cfg
         out: set[SpecialBit] = set(errors)
         if power_fail:

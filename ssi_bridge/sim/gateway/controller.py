@@ -146,7 +146,10 @@ class RxFifo:
         return handled
 
     def set_queueing(self, on: bool) -> None:
-        """Queue every frame (QUEUE_BACKLOG) or hold ``depth`` again; forgets the FIFO."""
+        """Queue every frame (QUEUE_BACKLOG) or hold ``depth`` again; forgets the FIFO.
+
+        :param on: queue every frame (True) or hold the controller's depth (False)
+        """
         self.queueing = bool(on)
         self._left.clear()
         self.episode_lost = 0
@@ -161,6 +164,13 @@ class ControllerListener(GuardedListener):
     (which answers SYNCs) takes SCHED_FIFO ``priority`` with its first frame, as a station
     process's threads do (``simulation.station_priority``); it is the simulated firmware,
     and its delays put the station's answers late on the wire.
+
+    :param network: the gateway's canopen network (its subscribers get the frames)
+    :param name: names the listener in log lines
+    :param fifo: the controller's receive FIFO
+    :param on_overrun: called with the frames lost so far when an overrun episode begins
+    :param clock: the wire clock the handling times are on
+    :param priority: SCHED_FIFO priority of the receive thread (0: normal)
     """
 
     def __init__(self, network: canopen.Network, name: str, fifo: RxFifo,
@@ -174,6 +184,12 @@ class ControllerListener(GuardedListener):
         self._priority = priority
 
     def handling_time(self, msg: can.Message, wire_t: float) -> float | None:
+        """When the firmware handles ``msg``, which ended on the wire at ``wire_t``: its time through
+        the FIFO, or None when the FIFO was full and the frame is lost (an overrun).
+
+        :param msg: the received frame
+        :param wire_t: its wire time (s; 0: the frame's own timestamp)
+        """
         if self._priority:
             priority, self._priority = self._priority, 0
             if not fifo_this_thread(priority):

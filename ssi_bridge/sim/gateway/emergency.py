@@ -45,7 +45,11 @@ ERROR_REGISTER, ERROR_FIELD = 0x1001, 0x1003
 
 
 class Emergencies:
-    """Track module diagnostics and produce EMCYs through ``send(code, register, data)``."""
+    """Track module diagnostics and produce EMCYs through ``send(code, register, data)``.
+
+    :param slots: the station's modules (1-8)
+    :param send: puts one EMCY on the bus
+    """
 
     def __init__(self, slots: int, send: Callable[[int, int, bytes], None]) -> None:
         self._send = send
@@ -76,7 +80,10 @@ class Emergencies:
 
     def overrun(self, lost: int, *, may_send: bool) -> None:
         """An overrun episode began (the controller lost a frame; ``lost`` frames so far):
-        EMCY 0x8110 once, error register bit 4 until :meth:`overrun_over`, a 0x1003 entry."""
+        EMCY 0x8110 once, error register bit 4 until :meth:`overrun_over`, a 0x1003 entry.
+
+        :param may_send: the NMT state allows EMCYs (not in STOPPED)
+        """
         self.overrun_active = True
         self.error_register = self._register()
         self._push(EMCY_CAN_OVERRUN)
@@ -87,7 +94,10 @@ class Emergencies:
 
     def overrun_over(self, *, may_send: bool) -> None:
         """The overrun episode is over: bit 4 clears; the error-reset EMCY when no error is
-        left."""
+        left.
+
+        :param may_send: the NMT state allows EMCYs (not in STOPPED)
+        """
         if not self.overrun_active:
             return
         self.overrun_active = False
@@ -96,7 +106,11 @@ class Emergencies:
             self._send(0x0000, 0, bytes(5))
 
     def update(self, diags: Sequence[Diag], *, may_send: bool) -> None:
-        """Compare each slot's diagnostics byte with the last one and emit EMCYs."""
+        """Compare each slot's diagnostics byte with the last one and emit EMCYs.
+
+        :param diags: each slot's diagnostics byte after the cycle
+        :param may_send: the NMT state allows EMCYs (not in STOPPED)
+        """
         was_active = self._module_error
         for tracker, diag in zip(self._trackers, diags):
             if diag == tracker.current:
@@ -123,7 +137,13 @@ class Emergencies:
                     self._send(0x0000, 0, bytes(5))
 
     def on_read(self, index: int, subindex: int, od: object) -> int | None:
-        """LocalNode read callback for 0x1001 and 0x1003."""
+        """LocalNode read callback for 0x1001 and 0x1003.
+
+        :param index: the object's index
+        :param subindex: its subindex
+        :param od: the dictionary entry (unused)
+        :returns: the value, or None for another object (stored data)
+        """
         if index == ERROR_REGISTER:
             return self.error_register
         if index == ERROR_FIELD:
@@ -133,7 +153,14 @@ class Emergencies:
         return None
 
     def on_write(self, index: int, subindex: int, od: object, data: bytes) -> None:
-        """0x1003 sub 0: writing 0 clears the history, anything else is refused (CiA 301)."""
+        """0x1003 sub 0: writing 0 clears the history, anything else is refused (CiA 301).
+
+        :param index: the object's index
+        :param subindex: its subindex
+        :param od: the dictionary entry (unused)
+        :param data: the written bytes
+        :raises SdoAbortedError: 0x1003:0 written with anything but 0 (0x06090030)
+        """
         if index == ERROR_FIELD and subindex == 0:
             if data[0] != 0:
                 raise SdoAbortedError(SdoAbort.INVALID_VALUE)

@@ -28,7 +28,12 @@ from ssi_bridge.protocol.can_errors import (
 
 def error_frame(mask: int, crtl: int = 0, tx: int = 0, rx: int = 0) -> can.Message:
     """A SocketCAN error frame as python-can delivers it: ``is_error_frame``, the class
-    ``mask`` as identifier, 8 data bytes (controller status in data[1], counters in 6/7)."""
+    ``mask`` as identifier, 8 data bytes (controller status in data[1], counters in 6/7).
+
+    :param crtl: the controller status byte (data[1])
+    :param tx: the transmit error counter (data[6])
+    :param rx: the receive error counter (data[7])
+    """
     data = bytearray(CAN_ERR_DLC)
     data[1], data[6], data[7] = crtl, tx, rx
     return can.Message(arbitration_id=mask, is_extended_id=False, is_error_frame=True,
@@ -50,7 +55,11 @@ def error_frames(*, bus_off: bool, on: bool) -> list[can.Message]:
 
 
 def report_error_frames(bus: can.BusABC, *, bus_off: bool, on: bool) -> None:
-    """Put the frames of :func:`error_frames` on ``bus`` (a LossyBus: past its mute)."""
+    """Put the frames of :func:`error_frames` on ``bus`` (a LossyBus: past its mute).
+
+    :param bus_off: the BUS_OFF set of frames, else ERROR_PASSIVE
+    :param on: the condition begins (True) or ends (False)
+    """
     send = getattr(bus, "report", bus.send)
     for msg in error_frames(bus_off=bus_off, on=on):
         send(msg)

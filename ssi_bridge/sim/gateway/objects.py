@@ -60,7 +60,10 @@ POSITION = 0x6820
 
 
 class EncoderObjects:
-    """Map object (index, slot) onto :class:`Xn1Ssi` calls; subindex = slot number (1-based)."""
+    """Map object (index, slot) onto :class:`Xn1Ssi` calls; subindex = slot number (1-based).
+
+    :param modules: the station's modules, slot 1 first
+    """
 
     def __init__(self, modules: Sequence[Xn1Ssi]) -> None:
         self.modules = list(modules)
@@ -88,7 +91,12 @@ class EncoderObjects:
 
     # -- SDO read ---------------------------------------------------------------------------
     def on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
-        """LocalNode read callback: the live value, or None to fall back to stored data."""
+        """LocalNode read callback: the live value, or None to fall back to stored data.
+
+        :param index: the object's index
+        :param subindex: the slot
+        :param od: the dictionary entry (its data type)
+        """
         module = self._module(subindex)
         if module is None or index not in SERVED:
             return None
@@ -141,6 +149,9 @@ class EncoderObjects:
         bytes unchanged) and 0x6820:s (REG_SSI_POS as Integer32). The bytes equal what
         ``LocalNode.get_data`` would build through :meth:`on_read`, without the object
         lookups and int round trips; any other object takes that generic path (None).
+
+        :param index: the mapped object's index
+        :param subindex: the slot
         """
         module = self._module(subindex)
         if module is None:
@@ -158,6 +169,8 @@ class EncoderObjects:
         The encoder default PDOs 9-12 carry REG_SSI_POS of a slot pair (000 Table 15): one
         ``struct`` pack of both Integer32 values instead of one reader per entry and a join.
         Same bytes as the per-entry readers (``ssi_pos`` is kept within 0..0xFFFFFFFF).
+
+        :param entries: the TPDO's mapped ``(index, subindex)`` pairs
         """
         if len(entries) < 2 or any(index != POSITION for index, _ in entries):
             return None
@@ -173,7 +186,15 @@ class EncoderObjects:
 
     # -- SDO write --------------------------------------------------------------------------
     def on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
-        """LocalNode write callback: apply the write to the module or refuse it."""
+        """LocalNode write callback: apply the write to the module or refuse it.
+
+        :param index: the object's index
+        :param subindex: the slot
+        :param od: the dictionary entry (its data type)
+        :param data: the written bytes
+        :raises SdoAbortedError: a value the object or the module refuses (0x06090031 too high,
+            0x06070010 not an integer, 0x06090030 refused by the module's rules)
+        """
         module = self._module(subindex)
         if module is None or index not in SERVED:
             return
@@ -214,7 +235,10 @@ class EncoderObjects:
 
     # -- cycle ------------------------------------------------------------------------------
     def cycle(self, t: float) -> None:
-        """Run one module cycle per slot, pulsing pending flag resets for that one cycle."""
+        """Run one module cycle per slot, pulsing pending flag resets for that one cycle.
+
+        :param t: the cycle's latch time (model time, s)
+        """
         if not self._clear_armed:  # the common case: no flag reset pending
             for module in self.modules:
                 module.cycle(t)

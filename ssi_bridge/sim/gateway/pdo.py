@@ -95,7 +95,15 @@ class _Pdo:
 
 
 class PdoEngine:
-    """Read PDO parameters from ``node`` and transmit / apply PDO data."""
+    """Read PDO parameters from ``node`` and transmit / apply PDO data.
+
+    :param node: the station's canopen ``LocalNode`` (its PDO objects)
+    :param send: puts a batch of frames on the bus
+    :param fast_reader: a direct reader per mapped object (``EncoderObjects.pdo_reader``)
+    :param fast_packer: one reader of a whole payload (``EncoderObjects.pdo_packer``)
+    :param lock: the station lock the dictionary is read under
+    :param clock: the monotonic clock of the event timers and inhibit times
+    """
 
     def __init__(self, node: canopen.LocalNode, send: SendMany,
                  fast_reader: FastReader | None = None,
@@ -238,7 +246,12 @@ class PdoEngine:
         return pdo.cob_id, data
 
     def check_write(self, index: int, subindex: int, data: bytes) -> None:
-        """Refuse a PDO parameter write CiA 301 forbids (raises ``SdoAbortedError``)."""
+        """Refuse a PDO parameter write CiA 301 forbids (raises ``SdoAbortedError``).
+
+        :param index: the object's index
+        :param subindex: its subindex
+        :param data: the bytes to be written
+        """
         is_tx = index >= TPDO_COM
         base = index & 0xFE00
         is_map = base in (RPDO_MAP, TPDO_MAP)

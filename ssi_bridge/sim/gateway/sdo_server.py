@@ -58,7 +58,12 @@ class StationSdo(SdoServer):
         self.report: Report | None = None
 
     def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        """Serve one 8-byte request (network thread) in PRE-OPERATIONAL/OPERATIONAL."""
+        """Serve one 8-byte request (network thread) in PRE-OPERATIONAL/OPERATIONAL.
+
+        :param can_id: 0x600 + the node id
+        :param data: the request's 8 bytes
+        :param timestamp: its wire time (s)
+        """
         with self._station.lock:
             if self._station.nmt.state not in self._states:
                 return
@@ -87,7 +92,10 @@ class StationSdo(SdoServer):
             super().on_request(can_id, data, timestamp)  # type: ignore[no-untyped-call]
 
     def send_response(self, response: bytes | bytearray) -> None:
-        """Send the answer and note whether a segmented transfer runs on after it."""
+        """Send the answer and note whether a segmented transfer runs on after it.
+
+        :param response: the 8 bytes of the answer
+        """
         scs = response[0] & 0xE0
         if scs == SCS_ABORT:
             self.segments = None

@@ -99,7 +99,12 @@ class Channels(Protocol):
 
 
 class SimulationControl:
-    """Serves 0x4000-0x4004 on a gateway and applies the faults to its station's channels."""
+    """Serves 0x4000-0x4004 on a gateway and applies the faults to its station's channels.
+
+    :param sim: the station's channels the faults act on
+    :param gateway: the gateway whose objects 0x4000-0x4004 are served
+    :param clock: the monotonic clock of fault durations
+    """
 
     def __init__(self, sim: Channels, gateway: XnGateway,
                  clock: object = time.monotonic) -> None:
@@ -157,7 +162,11 @@ class SimulationControl:
             self.command(word & 0xFF, word >> 8)
 
     def command(self, kind: int, slot: int) -> None:
-        """Apply the command (raises SdoAbortedError for an impossible one)."""
+        """Apply the command (raises SdoAbortedError for an impossible one).
+
+        :param kind: the fault (a ``FaultKind``)
+        :param slot: the module's slot (0: the bus)
+        """
         try:
             fault = FaultKind(kind)
         except ValueError:

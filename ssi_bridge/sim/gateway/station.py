@@ -56,7 +56,11 @@ class SimChannel:
 
 
 class SimStation:
-    """All simulated modules of one gateway station; ``modules[slot - 1]`` sits in slot 1-8."""
+    """All simulated modules of one gateway station; ``modules[slot - 1]`` sits in slot 1-8.
+
+    :param joints: the station's joints, each with its slot, encoder, cable and motion
+    :param storage_path: where the retentive banks are kept (empty: in memory)
+    """
 
     def __init__(self, joints: tuple[JointSettings, ...], storage_path: str = "") -> None:
         n_slots = max(j.slot for j in joints)

@@ -58,6 +58,8 @@ class Wire:
     Shared by every :class:`WireBus` of one channel in a process (the gateway's and the
     master's), so their frames never overlap; frames from another process (udp_multicast)
     are learnt when they arrive (their timestamp is their end on the wire).
+
+    :param bitrate: the wire's bit rate (bit/s)
     """
 
     def __init__(self, bitrate: int) -> None:
@@ -149,7 +151,11 @@ class Wire:
             return oldest
 
     def observe(self, end: float, sync: bool = False) -> None:
-        """A frame of another process ended at ``end``: the wire was busy until then."""
+        """A frame of another process ended at ``end``: the wire was busy until then.
+
+        :param end: the frame's end on the wire (s)
+        :param sync: it was a SYNC
+        """
         if sync and end > self.last_sync:
             self.last_sync = end
         if end > self.busy_until:
@@ -177,12 +183,15 @@ class WireBus(can.BusABC):
 
     ``send`` puts the frame on the :class:`Wire` after whatever is on it (SOF to IFS with its
     actual stuff bits, ``protocol/wire.py``), stamps it with its end and hands it to the
-    receivers only then (sleeping, not spinning: Python sleeps ~0.05-0.1 ms late, which does
-    not add up over a burst because every frame's end is computed, not measured).
+    receivers only then (sleeping, not spinning: a late wake-up, docs/canopen.md "Time and
+    the wire", does not add up over a burst because every frame's end is computed).
     :meth:`send_batch` sends frames that are ready together in arbitration order (lowest
     identifier first), as CAN arbitration would. Frames two nodes make ready within the same
     bit time are sent in the order they were handed over (first come), not arbitrated.
     Received frames extend the wire's busy time (frames of other processes).
+
+    :param inner: the python-can bus the frames travel on
+    :param wire: the wire's time line, shared by every end in the process
     """
 
     def __init__(self, inner: can.BusABC, wire: Wire) -> None:
@@ -196,7 +205,11 @@ class WireBus(can.BusABC):
         self.channel_info = f"wire({inner.channel_info}, {wire.bitrate} bit/s)"
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Send one frame; returns when its last bit is on the wire."""
+        """Send one frame; returns when its last bit is on the wire.
+
+        :param msg: the frame
+        :param timeout: as python-can's ``BusABC.send``
+        """
         self.send_batch([msg], timeout=timeout)
 
     def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None,
@@ -208,6 +221,9 @@ class WireBus(can.BusABC):
         The frames are ready now, when this thread really hands them over: a sending thread
         that ran late (a station process starved or stopped) puts them on the wire late, as
         a late device does, and never claims a wire time in the past.
+
+        :param msgs: the frames
+        :param timeout: as python-can's ``BusABC.send``
         """
         ordered = sorted(msgs, key=lambda m: m.arbitration_id) if len(msgs) > 1 else msgs
         if answering is not None:
@@ -276,7 +292,12 @@ class WireBus(can.BusABC):
 
 def take_bus(source: BusConfig | can.BusABC | None, owner: str) -> can.BusABC:
     """The bus a gateway runs on: the simulated wire's for a config (:func:`open_bus`), or the
-    one handed over (:func:`ssi_bridge.base.buses.take_bus`)."""
+    one handed over (:func:`ssi_bridge.base.buses.take_bus`).
+
+    :param source: a bus configuration or an open bus
+    :param owner: names the taker in the error
+    :raises BusError: the bus was handed over and shut down already
+    """
     return take_any_bus(source, owner, open_bus)
 
 
@@ -292,6 +313,13 @@ class DuePeriodicTask:
     in a burst. A muted bus owes nothing (the "gateway silent" fault is a real silence).
     Implements what canopen's ``PeriodicMessageTask`` uses: ``stop()``, ``modify_data(msg)``.
     ``bus`` is the device's :class:`~ssi_bridge.sim.gateway.bus.LossyBus` (its ``muted``).
+
+    :param bus: the device's bus
+    :param wire: the wire's time line
+    :param msg: the frame sent every period
+    :param period: seconds between frames (> 0)
+    :param autostart: start at once
+    :raises ValueError: ``period`` not positive
     """
 
     def __init__(self, bus: Any, wire: Wire, msg: can.Message, period: float, *,

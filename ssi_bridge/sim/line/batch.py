@@ -97,7 +97,14 @@ def _frames(enc: SsiEncoder, ts: np.ndarray) -> np.ndarray:
 
 def read_batch(line: SsiLine, times: np.ndarray, n_bits: int, bit_rate_hz: float,
                rng: np.random.Generator | None = None) -> BatchReadout:
-    """Clock one burst of ``n_bits + 1`` clocks at each time in ``times``."""
+    """Clock one burst of ``n_bits + 1`` clocks at each time in ``times``.
+
+    :param line: the line to read (its encoder, cable and faults)
+    :param times: the bursts' start times (s)
+    :param n_bits: data bits per burst
+    :param bit_rate_hz: the clock rate
+    :param rng: the bit-noise source (default: one seeded with the line's ``seed``)
+    """
     enc, faults = line.encoder, line.faults
     times = np.asarray(times, dtype=np.float64)
     length = enc.frame_bits

@@ -136,7 +136,11 @@ class _Burst(NamedTuple):
 
 
 class SsiLine:
-    """An encoder at the end of a cable, read by bursts of clocks (an ``SsiReader``)."""
+    """An encoder at the end of a cable, read by bursts of clocks (an ``SsiReader``).
+
+    :param encoder: the encoder at the far end
+    :param config: cable, delay and monoflop (default: :class:`LineConfig`'s)
+    """
 
     def __init__(self, encoder: SsiEncoder, config: LineConfig | None = None) -> None:
         self.encoder = encoder
@@ -351,6 +355,11 @@ class SsiLine:
 
     def read_status(self, t: float, n_bits: int, bit_rate_hz: float
                     ) -> tuple[LineReadout, MasterStatus]:
-        """Read and evaluate with the default master checks (ZERO test on)."""
+        """Read and evaluate with the default master checks (ZERO test on).
+
+        :param t: the burst's start (s)
+        :param n_bits: data bits
+        :param bit_rate_hz: the clock rate
+        """
         r = self.read(t, n_bits, bit_rate_hz)
         return r, check_readout(r)

@@ -40,7 +40,13 @@ class MultiReadout:
 
 
 class MultipleTransmission:
-    """Reads an :class:`SsiLine` with 1, 2 or 3 bursts per sample (003 0x80n0 "Number of clock bursts")."""
+    """Reads an :class:`SsiLine` with 1, 2 or 3 bursts per sample (003 0x80n0 "Number of clock bursts").
+
+    :param line: the line to read
+    :param bursts: 1, 2 or 3
+    :param gap_periods: clock periods between bursts
+    :raises ConfigError: another number of bursts
+    """
 
     def __init__(self, line: SsiLine, bursts: int = 2, gap_periods: float = 1.0) -> None:
         if bursts not in (1, 2, 3):
@@ -51,7 +57,13 @@ class MultipleTransmission:
 
     def read(self, t: float, n_bits: int, bit_rate_hz: float, *,
              zero_test: bool = True) -> MultiReadout:
-        """Clock ``self.bursts`` bursts from ``t`` and compare their values."""
+        """Clock ``self.bursts`` bursts from ``t`` and compare their values.
+
+        :param t: the first burst's start (s)
+        :param n_bits: data bits per burst
+        :param bit_rate_hz: the clock rate
+        :param zero_test: check the bit after the frame is 0 (003 SB.1)
+        """
         period = 1.0 / bit_rate_hz
         first = self.line.read(t, n_bits, bit_rate_hz)
         reads = [first]

@@ -26,7 +26,10 @@ BASE_DELAY_S = 100e-9
 
 
 def recommended_bit_rate(cable_length_m: float) -> float | None:
-    """Upper bit rate the 004 §2.7 table recommends for a cable, None beyond 400 m."""
+    """Upper bit rate the 004 §2.7 table recommends for a cable, None beyond 400 m.
+
+    :param cable_length_m: the cable (m)
+    """
     for length, rate in CABLE_TABLE:
         if cable_length_m < length:
             return rate
@@ -34,13 +37,25 @@ def recommended_bit_rate(cable_length_m: float) -> float | None:
 
 
 def data_delay(cable_length_m: float) -> float:
-    """tv: encoder delay plus the round trip of clock and data over the cable (s)."""
+    """tv: encoder delay plus the round trip of clock and data over the cable (s).
+
+    :param cable_length_m: the cable (m)
+    """
     return BASE_DELAY_S + 2.0 * CABLE_DELAY_S_PER_M * cable_length_m
 
 
 def static_warnings(enc: EncoderConfig, cable_length_m: float, tm: float, tv: float,
                     n_bits: int, bit_rate_hz: float, check_cable_table: bool) -> tuple[str, ...]:
-    """Warnings that depend only on the configuration and the burst shape."""
+    """Warnings that depend only on the configuration and the burst shape.
+
+    :param enc: the encoder's configuration
+    :param cable_length_m: the cable (m)
+    :param tm: the monoflop time (s)
+    :param tv: the data delay (s)
+    :param n_bits: data bits per burst
+    :param bit_rate_hz: the clock rate
+    :param check_cable_table: also hold the bit rate against 004 §2.7's cable table
+    """
     out: list[str] = []
     period = 1.0 / bit_rate_hz
     if bit_rate_hz > MAX_BIT_RATE_HZ:
@@ -64,7 +79,13 @@ def static_warnings(enc: EncoderConfig, cable_length_m: float, tm: float, tv: fl
 
 def pause_warnings(enc: EncoderConfig, pause: float, prev_pause: float | None,
                    tm: float) -> list[str]:
-    """Warnings about the pause since the previous burst (s)."""
+    """Warnings about the pause since the previous burst (s).
+
+    :param enc: the encoder's configuration
+    :param pause: the pause since the previous burst (s)
+    :param prev_pause: the pause before that (None: first)
+    :param tm: the monoflop time (s)
+    """
     out: list[str] = []
     if pause < tm:
         out.append(f"pause {pause * 1e6:.1f} us < tm {tm * 1e6:.1f} us: monoflop still "

@@ -55,6 +55,9 @@ def extract(readout: LineReadout, para: Para1) -> Acquired:
     check (skipped entirely when DIS_ERR_SSI = 1, "disable SSI error detection", DeviceNet
     attribute 124) is the ZERO test after the last bit (``trailer_bit`` must be 0) plus the
     start level (a data wire break reads LOW where the idle "pause 1" is expected).
+
+    :param readout: what the module clocked in
+    :param para: the REG_PARA1 set in force
     """
     n = para.ssi_frame_len
     frame = readout.data & ((1 << n) - 1)
@@ -72,6 +75,9 @@ def ssi_status(frame: int, mask: int) -> tuple[int, bool]:
     copies frame bit SSI_FRAME_BIT_SELx (bits 4..0; bit 0 = last bit clocked) into SSI_STSx;
     SSI_DIAG = OR over x of (SSI_STSx & EN_Dx_DS), as the manual's formula is written, so a
     status bit reaches SSI_DIAG only when it is also copied (EN_Dx_RMSx = 1).
+
+    :param frame: the frame as clocked in
+    :param mask: REG_SSI_MASK
     """
     if not mask & _EN_RMS_ANY:
         return 0, False  # no status bit copied (the default mask 0): nothing to look at
@@ -92,6 +98,12 @@ def compare(pos: int, cmp_value: int, *, enabled: bool, clear: bool,
     EN_CMPx = 0: all three 0 and the latched flag forgotten.  STS = (pos == cmp),
     REL = (pos >= cmp) (signed), FLAG latches a match and is cleared by CLR_CMPx = 1 only
     while the values do not match ("Reset of FLAG_CMPx not possible when values match").
+
+    :param pos: REG_SSI_POS
+    :param cmp_value: REG_CMPx
+    :param enabled: EN_CMPx
+    :param clear: CLR_CMPx
+    :param flag: FLAG_CMPx before this step
     """
     if not enabled:
         return False, False, False
@@ -109,6 +121,10 @@ def limits(pos: int, lower: int, upper: int) -> tuple[bool, bool]:
     At the defaults (upper 0xFFFFFFFF, lower 0) no unsigned value can be above / below them,
     which is why the tables give STS_OFLW = STS_UFLW = 0 there.  A REG_SSI_POS that went
     "negative" below REG_OFFSET is a large unsigned number: above an active upper limit.
+
+    :param pos: REG_SSI_POS
+    :param lower: REG_LOWER_LIMIT
+    :param upper: REG_UPPER_LIMIT
     """
     return pos > upper, pos < lower
 
@@ -118,6 +134,10 @@ def direction(previous: int | None, current: int, width: int) -> tuple[bool, boo
 
     The difference is taken modulo 2**width, so a multiturn wrap (max -> 0) counts as one
     step up, not a jump down.  Both bits are 0 when the value is constant.
+
+    :param previous: the value of the cycle before (None: the first)
+    :param current: the value now
+    :param width: the value's bits
     """
     if previous is None or width <= 0:
         return False, False

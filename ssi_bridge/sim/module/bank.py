@@ -51,7 +51,11 @@ class Endurance:
 
 
 class RegisterBank:
-    """Values of the writable registers, the REG_PARA1 set in force and ERR_PARA."""
+    """Values of the writable registers, the REG_PARA1 set in force and ERR_PARA.
+
+    :param store: where the retentive registers are kept (default: nothing kept)
+    :param slot: the module's slot (named in messages)
+    """
 
     def __init__(self, store: BankStore | None = None, slot: int = 0) -> None:
         self.store = store
@@ -73,7 +77,10 @@ class RegisterBank:
                          self._values[Reg.REG_PARA1], problem)
 
     def value(self, reg: Reg) -> int:
-        """Current value of a writable register."""
+        """Current value of a writable register.
+
+        :param reg: a writable register
+        """
         return self._values[reg]
 
     def endurance(self) -> dict[Reg, Endurance]:
@@ -81,7 +88,13 @@ class RegisterBank:
         return {reg: Endurance(reg, n) for reg, n in self._counts.items()}
 
     def write(self, reg: Reg, value: int) -> None:
-        """Write a writable register through the process-data rules (raises RegisterWriteError)."""
+        """Write a writable register through the process-data rules (raises RegisterWriteError).
+
+        :param reg: a writable register
+        :param value: its new value
+        :raises RegisterWriteError: a value out of range
+        :raises ParameterError: REG_PARA1 with an invalid parameter set (ERR_PARA is set)
+        """
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= VALUE_MAX:
             raise RegisterWriteError(reg, f"value {value!r} out of range 0..0x{VALUE_MAX:08X}")
         if reg is Reg.REG_SF:
@@ -98,7 +111,10 @@ class RegisterBank:
             self._values[reg] = value
 
     def write_para1(self, value: int) -> None:
-        """Parameter interface: an invalid set sets ERR_PARA and raises ParameterError."""
+        """Parameter interface: an invalid set sets ERR_PARA and raises ParameterError.
+
+        :param value: the new REG_PARA1
+        """
         problem = validate_para1(value)
         if problem:
             self.err_para = True

@@ -54,7 +54,11 @@ class BankSnapshot:
 
     @classmethod
     def decode(cls, data: bytes, source: str = "<bytes>") -> BankSnapshot:
-        """Parse a bank file; raises StorageError naming what is wrong."""
+        """Parse a bank file; raises StorageError naming what is wrong.
+
+        :param data: the file's bytes
+        :param source: the file's name, for the message
+        """
         try:
             doc = json.loads(data.decode())
             if doc.get("format") != BANK_FORMAT or doc.get("version") != BANK_VERSION:
@@ -88,7 +92,10 @@ class BankStore(Protocol):
 
 
 class MemoryStore:
-    """A bank kept in memory: survives a module object being rebuilt, not the process."""
+    """A bank kept in memory: survives a module object being rebuilt, not the process.
+
+    :param snapshot: the bank to start with (None: none stored yet)
+    """
 
     def __init__(self, snapshot: BankSnapshot | None = None) -> None:
         self.snapshot = snapshot
@@ -105,7 +112,11 @@ class MemoryStore:
 
 
 class RetentiveStore:
-    """A bank file at ``path`` (configurable per slot), replaced atomically on every save."""
+    """A bank file at ``path`` (configurable per slot), replaced atomically on every save.
+
+    :param path: the bank file
+    :param fsync: fsync each save before the replace (the simulated station passes False)
+    """
 
     def __init__(self, path: str | os.PathLike[str], *, fsync: bool = True) -> None:
         self.path = Path(path)
@@ -115,7 +126,10 @@ class RetentiveStore:
         return f".{self.path.name}.*.tmp"
 
     def load(self) -> BankSnapshot | None:
-        """Read the bank (None if there is no file); remove temp files a crash left behind."""
+        """Read the bank (None if there is no file); remove temp files a crash left behind.
+
+        :raises StorageError: the file cannot be read or is not a valid bank
+        """
         for stale in self.path.parent.glob(self._tmp_glob()):
             logger.info("removing %s left by an interrupted save", stale)
             stale.unlink(missing_ok=True)
@@ -128,7 +142,11 @@ class RetentiveStore:
         return BankSnapshot.decode(data, str(self.path))
 
     def save(self, snapshot: BankSnapshot) -> None:
-        """Write the bank to a temp file, fsync, ``os.replace`` it over the old one."""
+        """Write the bank to a temp file, fsync, ``os.replace`` it over the old one.
+
+        :param snapshot: the bank
+        :raises StorageError: the file cannot be written (the old one is kept)
+        """
         data = snapshot.encode()
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
         try:

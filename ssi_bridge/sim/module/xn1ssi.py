@@ -254,7 +254,11 @@ class Xn1Ssi:
         return live(self) if live is not None else self.bank.value(Reg(addr))
 
     def write_register(self, addr: int, value: int) -> None:
-        """Write register ``addr`` as the process output would (raises RegisterWriteError)."""
+        """Write register ``addr`` as the process output would (raises RegisterWriteError).
+
+        :param addr: the register
+        :param value: its new value
+        """
         if not 0 <= addr < REGISTER_COUNT:
             raise RegisterWriteError(addr, f"out of range 0..{REGISTER_COUNT - 1}")
         reason = describe_refusal(addr, write=True)
@@ -279,6 +283,9 @@ class Xn1Ssi:
         exercised end to end.  Default: the set in force with the reserved SSI_BIT_RATE 8
         (000 Table 19: 8..15 reserved).  REG_PARA1 keeps its valid value, as the manual says
         of a rejected set; :meth:`clear_parameter_error` sends that valid set again.
+
+        :param value: the invalid REG_PARA1 (default: one that breaks a rule of 000 Table 19)
+        :raises ValueError: ``value`` is a valid set (it would not raise ERR_PARA)
         """
         if value is None:
             value = (self.bank.para.encode() & ~0x000F0000) | (8 << 16)

@@ -19,7 +19,7 @@ from ssi_bridge.protocol.encoder_config import EncoderConfig
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.sim.supervisor.faults import FaultInjector, ObjectWriter, StationFaults
-from ssi_bridge.sim.supervisor.settings import NodeSettings
+from ssi_bridge.sim.supervisor.settings import AnySettings, NodeSettings
 from ssi_bridge.sim.supervisor.station import (
     ChildStation, InProcessStation, StationGroup, start_stations, with_station_bus,
 )
@@ -34,8 +34,8 @@ class Simulation:
         self.stations: ChildStation | InProcessStation | StationGroup | None = None
 
     @staticmethod
-    def bus_settings(settings: NodeSettings, node: str,
-                     domain: int | None = None) -> NodeSettings:
+    def bus_settings(settings: AnySettings, node: str,
+                     domain: int | None = None) -> AnySettings:
         """``settings`` with the bus the node ``node`` (its fully qualified name) in DDS domain
         ``domain`` (default: ``ROS_DOMAIN_ID``) shares with its simulated stations."""
         return with_station_bus(settings, node, domain)

@@ -21,7 +21,11 @@ NMT_ERROR_CONTROL = 0x700
 
 
 class BootWatch:
-    """Listens on an open bus from construction on; :meth:`wait` returns at the boot-up."""
+    """Listens on an open bus from construction on; :meth:`wait` returns at the boot-up.
+
+    :param bus: the open bus (receiving starts now, so no boot-up is missed)
+    :param node_id: the station's node id
+    """
 
     def __init__(self, bus: can.BusABC, node_id: int) -> None:
         self.bus = bus

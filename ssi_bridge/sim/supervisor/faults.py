@@ -34,7 +34,8 @@ MAX_DURATION = (2**32 - 1) / 1000.0
 class ObjectWriter(Protocol):
     """The master's SDO access (BridgeClient)."""
 
-    def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None: ...
+    def write_object(self, index: int, subindex: int, value: int | float | bytes) -> None:
+        """SDO download of ``value`` to ``index``:``subindex`` (raises SsiBridgeError)."""
 
 
 @dataclass(frozen=True)
@@ -79,7 +80,13 @@ class FaultInjector:
         self.active: list[ActiveFault] = []
 
     def inject(self, kind: int, joint: str, rate: float = 0.0, duration: float = 0.0) -> str:
-        """Apply a fault and return a sentence saying what now happens; raises ConfigError."""
+        """Apply a fault and return a sentence saying what now happens; raises ConfigError.
+
+        :param kind: the fault (``InjectFault`` constants; 0 clears all)
+        :param joint: the joint whose encoder, line or module is faulted (empty: the first)
+        :param rate: probability per frame or cycle, where the kind has one
+        :param duration: seconds, 0 = until cleared
+        """
         try:
             fault = FaultKind(kind)
         except ValueError:
@@ -155,7 +162,12 @@ class StationFaults:
         return [f for inj in self._injectors.values() for f in inj.active]
 
     def inject(self, kind: int, joint: str, rate: float = 0.0, duration: float = 0.0) -> str:
-        """Route the fault to the joint's station (see :meth:`FaultInjector.inject`)."""
+        """Route the fault to the joint's station (see :meth:`FaultInjector.inject`).
+
+        Parameters ``kind``, ``joint``, ``rate`` and ``duration`` as there.
+
+        :raises ConfigError: ``joint`` is no joint of any station
+        """
         if kind == FaultKind.CLEAR_ALL:
             for inj in self._injectors.values():
                 inj.inject(kind, joint, rate, duration)

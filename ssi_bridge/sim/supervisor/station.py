@@ -35,7 +35,7 @@ from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.base.udp_bus import derive_channel
 from ssi_bridge.protocol.settings import BusConfig, JOINT_DEFAULTS, JointSettings, StationSettings
 from ssi_bridge.sim.gateway.station import Station
-from ssi_bridge.sim.supervisor.settings import NodeSettings
+from ssi_bridge.sim.supervisor.settings import AnySettings, NodeSettings
 
 logger = logging.getLogger(__name__)
 
@@ -61,8 +61,8 @@ def ros_domain_id() -> int:
         return DEFAULT_DOMAIN
 
 
-def with_station_bus(s: NodeSettings, node: str = DEFAULT_NODE,
-                     domain: int | None = None) -> NodeSettings:
+def with_station_bus(s: AnySettings, node: str = DEFAULT_NODE,
+                     domain: int | None = None) -> AnySettings:
     """``s`` with the bus the node ``node`` (fully qualified name) shares with its station.
 
     udp_multicast: the user's udp_multicast channel, else a group and port of their own on
@@ -89,7 +89,11 @@ def station_bus(s: NodeSettings) -> BusConfig:
 
 
 def station_params(s: NodeSettings, bus: BusConfig) -> dict[str, Any]:
-    """The node's station parameters as a ROS 2 params file document for the ``station``."""
+    """The node's station parameters as a ROS 2 params file document for the ``station``.
+
+    :param s: the node's settings
+    :param bus: the station's end of the bus
+    """
     values: dict[str, Any] = {
         "joints": [j.name for j in s.joints], "storage_path": s.storage_path,
         "bus.interface": bus.interface, "bus.channel": str(bus.channel),
@@ -123,7 +127,11 @@ FORWARD_DRAIN_S = 2.0
 
 
 class ChildStation:
-    """The ``station`` program as a child process of the node, on the given bus."""
+    """The ``station`` program as a child process of the node, on the given bus.
+
+    :param s: the node's settings (the station's joints, node id, storage, priority)
+    :param bus: the bus the station opens
+    """
 
     def __init__(self, s: NodeSettings, bus: BusConfig) -> None:
         self.settings = s
@@ -251,7 +259,10 @@ class InProcessStation:
         self.start_time = 0.0
 
     def start(self, timeout: float) -> None:
-        """Start the station and wait for its boot-up on the bus."""
+        """Start the station and wait for its boot-up on the bus.
+
+        :param timeout: longest wait for the boot-up (s)
+        """
         watch = open_bus(self.bus)
         try:
             t0 = time.monotonic()
@@ -308,6 +319,8 @@ def start_stations(s: NodeSettings) -> ChildStation | InProcessStation | Station
 
     A station gets only its own joints and its node id; a ``storage_path`` is suffixed with
     ``.node<id>`` so the stations keep their registers apart.
+
+    :param s: the node's settings
     """
     ids = s.station_ids
     if len(ids) == 1:

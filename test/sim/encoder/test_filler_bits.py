@@ -31,6 +31,7 @@ as the value needs and then placed, so in Gray code too the non-assigned bits ar
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import pytest
@@ -147,6 +148,33 @@ ATM60_BIN = Layout("tannenbaum", 25, turn_bits=12)          # 004 §3.4 Figure 1
 ATM60_1312 = Layout("tannenbaum", 25, turn_bits=13)         # 004 §3.4 Figure 17
 ATM60_RA = Layout("right", 24, trailing_zeros=1)            # 004 §3.4 right aligned on 24th bit
 
+#: AFS60 (004 §3.2): position bits directly followed by 3 error bits
+AFS60_CASES = [
+    Case("AFS60", B, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
+    Case("AFS60", G, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
+    Case("AFS60", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1,
+         Layout("msb", 12, error_bits=3)),
+    Case("AFS60", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1,
+         Layout("msb", 12, error_bits=3)),
+]
+#: AFM60 (004 §3.2): 12 multiturn + singleturn bits + 3 error bits
+AFM60_CASES = [
+    Case("AFM60_MULTI", B, {"steps_per_rev": 8192}, 8192, 4096,
+         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
+    Case("AFM60_MULTI", G, {"steps_per_rev": 8192}, 8192, 4096,
+         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
+    Case("AFM60_MULTI", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 4096,
+         Layout("msb", 24, error_bits=3)),
+    Case("AFM60_MULTI", BCD, {**OUTSIDE, "steps_per_rev": 1000, "revolutions_numerator": 10,
+                              "data_bits": 24}, 1000, 10, Layout("msb", 24, error_bits=3)),
+]
+
+
+def as_family(family: str, cases: list[Case]) -> list[Case]:
+    """The same rows for another family whose frames are the same."""
+    return [dataclasses.replace(c, family=family) for c in cases]
+
+
 CASES = [
     # GENERIC: the XN-1SSI default frame, 25 clocks right-justified
     Case("GENERIC", B, {"steps_per_rev": 4096}, 4096, 4096, Layout("right", 25)),
@@ -160,37 +188,11 @@ CASES = [
     Case("AHM36_MULTI", B, {"steps_per_rev": 3600}, 3600, 4096, AHM36_MSB),
     Case("AHM36_MULTI", G, {"steps_per_rev": 3000, "revolutions_numerator": 16}, 3000, 16,
          AHM36_MSB),
-    # AFS60 (004 §3.2): position bits directly followed by 3 error bits
-    Case("AFS60", B, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60", G, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1,
-         Layout("msb", 12, error_bits=3)),
-    Case("AFS60", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1,
-         Layout("msb", 12, error_bits=3)),
-    # AFM60 (004 §3.2): 12 multiturn + singleturn bits + 3 error bits
-    Case("AFM60_MULTI", B, {"steps_per_rev": 8192}, 8192, 4096,
-         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60_MULTI", G, {"steps_per_rev": 8192}, 8192, 4096,
-         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60_MULTI", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 4096,
-         Layout("msb", 24, error_bits=3)),
-    Case("AFM60_MULTI", BCD, {**OUTSIDE, "steps_per_rev": 1000, "revolutions_numerator": 10,
-                              "data_bits": 24}, 1000, 10, Layout("msb", 24, error_bits=3)),
+    *AFS60_CASES,
+    *AFM60_CASES,
     # AFS/AFM60S Pro (004 §3.3): as AFS/AFM60 while healthy
-    Case("AFS60S_PRO", B, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60S_PRO", G, {"steps_per_rev": 8192}, 8192, 1, Layout("msb", 13, error_bits=3)),
-    Case("AFS60S_PRO", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 1,
-         Layout("msb", 12, error_bits=3)),
-    Case("AFS60S_PRO", BCD, {**OUTSIDE, "steps_per_rev": 1000}, 1000, 1,
-         Layout("msb", 12, error_bits=3)),
-    Case("AFM60S_PRO", B, {"steps_per_rev": 8192}, 8192, 4096,
-         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60S_PRO", G, {"steps_per_rev": 8192}, 8192, 4096,
-         Layout("tannenbaum", 25, turn_bits=12, error_bits=3)),
-    Case("AFM60S_PRO", GX, {**OUTSIDE, "steps_per_rev": 3600}, 3600, 4096,
-         Layout("msb", 24, error_bits=3)),
-    Case("AFM60S_PRO", BCD, {**OUTSIDE, "steps_per_rev": 1000, "revolutions_numerator": 10,
-                             "data_bits": 24}, 1000, 10, Layout("msb", 24, error_bits=3)),
+    *as_family("AFS60S_PRO", AFS60_CASES),
+    *as_family("AFM60S_PRO", AFM60_CASES),
     # ATM60 (004 §3.4): Tannenbaum with a lower resolution, or right aligned on the 24th bit
     Case("ATM60", B, {"steps_per_rev": 4096, "revolutions_numerator": 1024}, 4096, 1024,
          ATM60_BIN),

@@ -7,34 +7,21 @@ fails a test that leaves a virtual bus open.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
-import can.interfaces.virtual as virtual
 import canopen
 import pytest
 
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.sim.gateway.gateway import XnGateway
-from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
+from support.virtual_bus import ScriptedReader, private_channel
 from support.waiting import wait_for
 
-_channels = itertools.count()
 NODE_ID = 7
-
-
-class ScriptedReader:
-    """An SsiReader returning the value the test sets, on a healthy line."""
-
-    def __init__(self, value: int = 0) -> None:
-        self.value = value
-
-    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
-        return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
-                           end_time=t + (n_bits + 1) / bit_rate_hz)
 
 
 @dataclass
@@ -58,28 +45,35 @@ class Station:
 @pytest.fixture
 def channel(request: pytest.FixtureRequest) -> Iterator[str]:
     """A virtual channel private to this test; fails the test if a bus is left open on it."""
-    name = f"gateway-{next(_channels)}-{request.node.name}"
-    yield name
-    with virtual.channels_lock:
-        leaked = len(virtual.channels.get(name, []))
-    assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
+    yield from private_channel("gateway", request.node.name)
+
+
+@contextmanager
+def canopen_master(channel: str, slots: int, sdo_timeout: float = 0.5,
+                   ) -> Iterator[tuple[canopen.Network, canopen.RemoteNode]]:
+    """canopen's own master on ``channel`` with a RemoteNode for a station of ``slots``
+    modules at NODE_ID (SDO answers awaited ``sdo_timeout`` s); disconnected on exit."""
+    network = canopen.Network()
+    network.NOTIFIER_CYCLE = 0.05
+    try:
+        network.connect(interface="virtual", channel=channel)
+        node = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, slots))
+        node.sdo.RESPONSE_TIMEOUT = sdo_timeout
+        network.add_node(node)
+        yield network, node
+    finally:
+        network.disconnect()
 
 
 def make_station(channel: str, slots: int) -> Iterator[Station]:
     readers = [ScriptedReader(1000 * (s + 1)) for s in range(slots)]
     gateway = XnGateway(BusConfig(channel=channel, node_id=NODE_ID), NODE_ID,
                         [Xn1Ssi(r, slot=i + 1) for i, r in enumerate(readers)])
-    network = canopen.Network()
-    network.NOTIFIER_CYCLE = 0.05
     gateway.start()
     try:
-        network.connect(interface="virtual", channel=channel)
-        node = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, slots))
-        node.sdo.RESPONSE_TIMEOUT = 0.5
-        network.add_node(node)
-        yield Station(gateway, network, node, readers)
+        with canopen_master(channel, slots) as (network, node):
+            yield Station(gateway, network, node, readers)
     finally:
-        network.disconnect()
         gateway.stop()
 
 

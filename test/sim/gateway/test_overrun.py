@@ -14,10 +14,8 @@ import struct
 import time
 from collections.abc import Iterator
 
-import canopen
 import pytest
 
-from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.dictionary import SIM_COMMAND
 from ssi_bridge.protocol.settings import BusConfig
@@ -26,7 +24,10 @@ from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.gateway.simulation import FaultKind, SimulationControl, command_word
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import NODE_ID, ScriptedReader, Station, wait_for
+from support.virtual_bus import ScriptedReader
+from support.waiting import wait_for
+
+from .conftest import NODE_ID, Station, canopen_master
 
 GRACE = 0.005
 STALL_SYNCS = 20
@@ -41,18 +42,14 @@ def stalling(channel: str) -> Iterator[Station]:
                         [Xn1Ssi(reader, slot=1)])
     gateway.stall_grace = GRACE
     control = SimulationControl(_NoChannels(), gateway)
-    network = canopen.Network()
-    network.NOTIFIER_CYCLE = 0.05
     gateway.start()
     try:
-        network.connect(interface="virtual", channel=channel)
-        node = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, 1))
-        node.sdo.RESPONSE_TIMEOUT = 0.5
-        network.add_node(node)
-        yield Station(gateway, network, node, [reader])
+        with canopen_master(channel, 1) as (network, node):
+            try:
+                yield Station(gateway, network, node, [reader])
+            finally:
+                control.stop()
     finally:
-        control.stop()
-        network.disconnect()
         gateway.stop()
 
 

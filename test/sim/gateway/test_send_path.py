@@ -18,7 +18,7 @@ from ssi_bridge.sim.gateway.objects import EncoderObjects
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader
+from support.virtual_bus import ScriptedReader
 
 FIELDS = [name for name in can.Message.__slots__ if name != "__weakref__"]
 

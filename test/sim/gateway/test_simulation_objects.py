@@ -28,7 +28,7 @@ from ssi_bridge.sim.gateway.simulation import FaultKind, command_word
 from ssi_bridge.sim.gateway.station import Station
 from ssi_bridge.protocol.images import ModuleStatus
 
-from .conftest import wait_for
+from support.waiting import wait_for
 
 
 @pytest.fixture

@@ -12,9 +12,7 @@ from __future__ import annotations
 import os
 import time
 
-import canopen
 
-from ssi_bridge.base.od import build_dictionary
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
@@ -22,7 +20,9 @@ from ssi_bridge.sim.gateway.station import SimStation
 from ssi_bridge.sim.module.store import RetentiveStore
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import NODE_ID, ScriptedReader
+from support.virtual_bus import ScriptedReader
+
+from .conftest import NODE_ID, canopen_master
 
 SLOW_FSYNC_S = 2.0
 #: another REG_PARA1 the module accepts: 25 data bits, Gray (000 Table 19)
@@ -41,19 +41,14 @@ def test_a_reg_para1_write_is_answered_without_waiting_on_the_disk(channel, tmp_
     store = SimStation._store(str(tmp_path / "retentive.json"), 1)
     gateway = XnGateway(BusConfig(channel=channel, node_id=NODE_ID), NODE_ID,
                         [Xn1Ssi(ScriptedReader(1000), slot=1, store=store)])
-    network = canopen.Network()
     gateway.start()
     try:
-        network.connect(interface="virtual", channel=channel)
-        node = canopen.RemoteNode(NODE_ID, build_dictionary(NODE_ID, 1))
-        node.sdo.RESPONSE_TIMEOUT = 1.0
-        network.add_node(node)
-        start = time.monotonic()
-        node.sdo[0x5801][1].raw = PARA1
-        answered = time.monotonic() - start
-        assert node.sdo[0x5801][1].raw == PARA1
+        with canopen_master(channel, 1, sdo_timeout=1.0) as (_, node):
+            start = time.monotonic()
+            node.sdo[0x5801][1].raw = PARA1
+            answered = time.monotonic() - start
+            assert node.sdo[0x5801][1].raw == PARA1
     finally:
-        network.disconnect()
         gateway.stop()
     assert answered < SLOW_FSYNC_S / 2, f"the SDO answer took {answered:.2f} s"
     assert synced == [], "the station's bank is saved without fsync"

@@ -19,19 +19,8 @@ from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.base.timebase import ModelClock
 from ssi_bridge.client.master import BridgeClient
-from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
-
-
-class ScriptedReader:
-    """A healthy SSI line with a fixed encoder value."""
-
-    def __init__(self, value: int) -> None:
-        self.value = value
-
-    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
-        return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
-                           end_time=t + (n_bits + 1) / bit_rate_hz)
+from support.virtual_bus import ScriptedReader
 
 REPO = Path(__file__).resolve().parents[3]
 _ch = itertools.count()

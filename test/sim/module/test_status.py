@@ -13,26 +13,28 @@ from ssi_bridge.protocol.registers import Reg
 M = ModuleStatus
 
 
-@pytest.mark.parametrize("upper, pos, oflw", [
-    (0xFFFFFFFF, 0x1FFFFFF, False),   # Table 1: default -> STS_OFLW = 0
-    (1000, 1000, False), (1000, 1001, True), (1000, 0, False)])
-def test_upper_limit_table_1(reader, module, master, upper, pos, oflw) -> None:
-    module.write_register(Reg.REG_UPPER_LIMIT, upper)
-    reader.push(pos)
-    image = master.cycle()
-    assert bool(image.sts & M.STS_OFLW) == oflw, f"Table 1: pos {pos} upper {upper:#x}"
-    assert (Diag.STS_OFLW in module.diag) == oflw, "diagnostics bit 2 'Encoder value overflow'"
+#: each limit: its register, the status bit and diagnostics bit it sets, the table of 000 that
+#: states it, the assertion message (pos, limit) and the diagnostics bit's text (000 Table 27)
+LIMITS = {
+    "upper": (Reg.REG_UPPER_LIMIT, M.STS_OFLW, Diag.STS_OFLW, "Table 1: pos {} upper {:#x}",
+              "diagnostics bit 2 'Encoder value overflow'"),
+    "lower": (Reg.REG_LOWER_LIMIT, M.STS_UFLW, Diag.STS_UFLW, "Table 2: pos {} lower {}",
+              "diagnostics bit 3 'Encoder value underflow'"),
+}
 
 
-@pytest.mark.parametrize("lower, pos, uflw", [
-    (0, 0, False),                    # Table 2: default -> STS_UFLW = 0
-    (100, 100, False), (100, 99, True), (100, 5000, False)])
-def test_lower_limit_table_2(reader, module, master, lower, pos, uflw) -> None:
-    module.write_register(Reg.REG_LOWER_LIMIT, lower)
+@pytest.mark.parametrize("side, limit, pos, hit", [
+    ("upper", 0xFFFFFFFF, 0x1FFFFFF, False),   # Table 1: default -> STS_OFLW = 0
+    ("upper", 1000, 1000, False), ("upper", 1000, 1001, True), ("upper", 1000, 0, False),
+    ("lower", 0, 0, False),                    # Table 2: default -> STS_UFLW = 0
+    ("lower", 100, 100, False), ("lower", 100, 99, True), ("lower", 100, 5000, False)])
+def test_limits_tables_1_and_2(reader, module, master, side, limit, pos, hit) -> None:
+    reg, sts_bit, diag_bit, table, diag_text = LIMITS[side]
+    module.write_register(reg, limit)
     reader.push(pos)
     image = master.cycle()
-    assert bool(image.sts & M.STS_UFLW) == uflw, f"Table 2: pos {pos} lower {lower}"
-    assert (Diag.STS_UFLW in module.diag) == uflw, "diagnostics bit 3 'Encoder value underflow'"
+    assert bool(image.sts & sts_bit) == hit, table.format(pos, limit)
+    assert (diag_bit in module.diag) == hit, diag_text
 
 
 @pytest.mark.parametrize("upper, lower, pos, oflw, uflw", [

@@ -1,0 +1,35 @@
+"""The simulated parts a bus test builds a station from: a python-can virtual channel private
+to one test, and an SSI line that answers with the value the test sets."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+
+import can.interfaces.virtual as virtual
+
+from ssi_bridge.protocol.readout import LineReadout
+
+_channels = itertools.count()
+
+
+def private_channel(prefix: str, test_name: str) -> Iterator[str]:
+    """Yield a virtual channel name no other test uses (``prefix``-n-``test_name``); after
+    the test, fail it if a bus was left open on that channel."""
+    name = f"{prefix}-{next(_channels)}-{test_name}"
+    yield name
+    with virtual.channels_lock:
+        leaked = len(virtual.channels.get(name, []))
+    assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
+
+
+class ScriptedReader:
+    """An SsiReader returning the encoder value the test sets, on a healthy line: ``data`` is
+    ``value`` cut to the frame length, the line busy for ``n_bits + 1`` clocks."""
+
+    def __init__(self, value: int = 0) -> None:
+        self.value = value
+
+    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
+        return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
+                           end_time=t + (n_bits + 1) / bit_rate_hz)
