@@ -92,11 +92,19 @@ class _Subscriptions:
 
 
 class LiveView:
-    """The Foxglove WebSocket server of one node and a channel per offered publisher."""
+    """The Foxglove WebSocket server of one node and a channel per offered publisher.
+
+    A server that cannot start is no error: :attr:`error` says why (the bus diagnostics show
+    it) and every method goes on as if the port were 0.
+
+    :param node: the node whose name the server carries and whose parameters it offers
+    :param settings: ``foxglove.*`` (port 0: no server, the SDK not imported)
+    :param handlers: the node's services, offered with the same handlers and request queue
+        (None, or ``foxglove.services`` false: none)
+    """
 
     def __init__(self, node: Node, settings: NodeSettings,
                  handlers: BridgeServices | None = None) -> None:
-        """``handlers``: the node's BridgeServices, whose services are offered (None: none)."""
         self._node = node
         self._handlers = handlers if settings.foxglove_services else None
         self._with_parameters = settings.foxglove_parameters

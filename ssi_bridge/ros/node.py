@@ -34,7 +34,6 @@ from ssi_bridge.core.cycle import Cycle
 from ssi_bridge.core.cycle_log import StationLog
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
-from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.bus_side import BusSide, StationFactory
 from ssi_bridge.ros.cycle import CycleThread, cycle_wire_time
@@ -49,6 +48,7 @@ from ssi_bridge.ros.params import NodeSettings, declare_parameters
 from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
 from ssi_bridge.ros.rclpy_compat import RCLError
 from ssi_bridge.ros.recording import SessionRecorder
+from ssi_bridge.ros.recording_meta import bus_config
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
@@ -60,6 +60,11 @@ class SsiBridgeNode(LifecycleNode):
     configures and activates the node and raises the reason if that fails (nothing left
     open); off, it returns unconfigured with nothing open.
 
+    :param stop: ends the process's spin cleanly (default: shuts the context down)
+    :param kwargs: rclpy ``Node``'s (``parameter_overrides``, ``context`` ...)
+    :raises ConfigError: a parameter is invalid; with autostart also what configure or
+        activate failed on (SsiBridgeError, OSError)
+
     It owns its parts: :attr:`bus` (ros/bus_side.py), :attr:`lifecycle` (ros/lifecycle.py;
     rclpy's transition callbacks go to it), :attr:`parameters` (ros/node_params.py), and
     from the first configure :attr:`handlers` (ros/services.py), :attr:`recorder`
@@ -69,16 +74,14 @@ class SsiBridgeNode(LifecycleNode):
     def __init__(self, stop: Callable[[], None] | None = None, autostart: bool = True,
                  **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
-        #: ends the process's spin cleanly (main's stop request; without main: the context)
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         autostart = declare_autostart(self, autostart)
         self.settings: NodeSettings = replay_settings(declare_parameters(self), self)
         #: makes the simulated station(s) (simulation: true; None on real hardware)
         simulation: StationFactory | None = None
-        if self.settings.simulation:
-            # the node's one import of the simulator (docs/architecture.md): a node on
-            # real hardware loads nothing of ssi_bridge.sim
+        if self.settings.simulation:  # the node's one import of the simulator: a node on
+            # real hardware loads nothing of ssi_bridge.sim (docs/architecture.md)
             from ssi_bridge.sim.supervisor import Simulation
 
             # the node and its simulated station meet on this bus (sim/supervisor/station.py)
@@ -104,12 +107,10 @@ class SsiBridgeNode(LifecycleNode):
         self.bridge = Bridge(self.joints, self.client_of,
                              lambda joint, value: self.parameters.mirror_para1(joint, value))
         self.parameters = RuntimeParameters(self, self.joints, self.bridge, self)
-        self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
-                                    bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
         #: the bus side (opened by configure, closed by cleanup; ros/bus_side.py)
-        self.bus = BusSide(self.bus_config, simulation, self.bridge, self.model_clock,
+        self.bus = BusSide(bus_config(s), simulation, self.bridge, self.model_clock,
                            self.get_logger().info)
         #: the achieved cycle rate; the cycle appends each cycle's monotonic time
         self.cycle_rate = CycleRate()
