@@ -30,7 +30,6 @@ import os
 import shutil
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +39,7 @@ from ssi_bridge import __version__
 from ssi_bridge.exceptions import RecordingError
 from ssi_bridge.record import cdr
 from ssi_bridge.record.heap import release_free_memory
-from ssi_bridge.record.mcap_file import McapFile
+from ssi_bridge.record.mcap_file import Channel, McapFile
 from ssi_bridge.record.mcap_write import ChunkBuffers
 from ssi_bridge.record.metadata import (
     ROS_DISTRO,
@@ -69,16 +68,6 @@ DEFAULT_QOS = QoSProfile(depth=10)
 CONFIG_METADATA_NAME = "ssi_bridge"
 
 
-@dataclass
-class _Topic:
-    """One registered topic: what every file's channel is made from, and the session count."""
-
-    info: TopicInfo
-    schema_text: bytes
-    channel_meta: dict[str, str]
-    sequence: int = 0
-
-
 class BagRecorder:
     """Write one bag; thread-safe ``write`` from any thread (e.g. the node's 1 kHz timer).
 
@@ -95,7 +84,7 @@ class BagRecorder:
         self._chunk_size = chunk_size
         self._split = split
         self._lock = threading.Lock()
-        self._topics: dict[str, _Topic] = {}
+        self._topics: dict[str, Channel] = {}
         self._file: McapFile | None = None
         #: finished files whose fsync + close the flush thread still owes
         self._closing: list[McapFile] = []
@@ -181,7 +170,7 @@ class BagRecorder:
             channel_meta = {"offered_qos_profiles": qtext}
             if schema.type_hash:
                 channel_meta["topic_type_hash"] = schema.type_hash
-            topic = _Topic(TopicInfo(name, schema.name, qtext, schema.type_hash),
+            topic = Channel(TopicInfo(name, schema.name, qtext, schema.type_hash),
                            schema.text.encode(), channel_meta)
             assert self._file is not None
             try:
@@ -307,28 +296,13 @@ class BagRecorder:
 
     # -- files ---------------------------------------------------------------------------------
     def _open_file(self) -> McapFile:
-        """Create the next ``<name>_<k>.mcap``: header, configuration, every schema and channel.
-
-        The schemas and channels go into the file's first chunk, which the first message
-        (already waiting when a split opens the file) completes.
-        """
+        """Start the next ``<name>_<k>.mcap`` (:meth:`McapFile.start`); a split that could
+        not start it (disk full) leaves no header without messages beside the closed files."""
         entry = FileInfo(file_name(self._directory.name, len(self._info.files)))
-        path = self._directory / entry.path
-        file = McapFile.create(path, entry, self._chunks, self._chunk_size,
-                               f"ssi_bridge {__version__}")
-        try:
-            if self._info.custom_data:
-                file.add_metadata(CONFIG_METADATA_NAME, self._info.custom_data)
-            for name, topic in self._topics.items():
-                file.add_channel(name, topic.info.type, topic.schema_text, topic.channel_meta)
-            file.flush()
-        except OSError:
-            file.abandon()
-            if self._info.files:
-                # a split that could not start its file (disk full) leaves the closed files
-                # complete; a header without messages is no part of the bag
-                path.unlink(missing_ok=True)
-            raise
+        file = McapFile.start(self._directory / entry.path, entry, self._chunks,
+                              self._chunk_size, f"ssi_bridge {__version__}",
+                              self._info.custom_data, CONFIG_METADATA_NAME, self._topics,
+                              remove_on_failure=bool(self._info.files))
         self._info.files.append(entry)
         return file
 

@@ -11,11 +11,23 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
 from ssi_bridge.record.mcap_write import ChunkBuffers, McapWriter
-from ssi_bridge.record.metadata import FileInfo
+from ssi_bridge.record.metadata import FileInfo, TopicInfo
+
+
+@dataclass
+class Channel:
+    """One registered topic: what every file's channel is made from, and the session count."""
+
+    info: TopicInfo
+    schema_text: bytes
+    channel_meta: dict[str, str]
+    sequence: int = 0
 
 
 class McapFile:
@@ -53,6 +65,34 @@ class McapFile:
                 stream.close()
             raise
         return cls(path, stream, writer, info)
+
+    @classmethod
+    def start(cls, path: Path, info: FileInfo, chunks: ChunkBuffers, chunk_size: int,
+              library: str, config: dict[str, str], config_name: str,
+              channels: Mapping[str, Channel], *, remove_on_failure: bool) -> McapFile:
+        """Create ``path`` with the header, the configuration metadata record and every
+        schema and channel, in the file's first chunk (the first message completes it), so
+        each file of a bag stands alone.
+
+        :param config: the session configuration (none written when empty), named ``config_name``
+        :param channels: the bag's topics so far, by name
+        :param remove_on_failure: delete the file when writing its start fails
+        :raises OSError: the file cannot be created or written (it is abandoned)
+        """
+        file = cls.create(path, info, chunks, chunk_size, library)
+        try:
+            if config:
+                file.add_metadata(config_name, config)
+            for name, channel in channels.items():
+                file.add_channel(name, channel.info.type, channel.schema_text,
+                                 channel.channel_meta)
+            file.flush()
+        except OSError:
+            file.abandon()
+            if remove_on_failure:
+                path.unlink(missing_ok=True)
+            raise
+        return file
 
     @property
     def size(self) -> int:
