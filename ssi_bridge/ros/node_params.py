@@ -130,6 +130,7 @@ class RuntimeParameters:
     def _apply_node_parameters(self, values: dict[str, object]) -> None:
         """publish_rate, diagnostics_period, frame_id, velocity_window, stale_cycles."""
         target = self._target
+        # each value has its field's type: rclpy checked it against the parameter's descriptor
         target.settings = dataclasses.replace(target.settings, **values)  # type: ignore[arg-type]
         s = target.settings
         if "publish_rate" in values and target.cycle is not None:
