@@ -11,7 +11,10 @@ for N slots). Each step of publishing a cycle is wrapped in a timer on the node 
   health of the SYNC before where it is judged after publishing (``Joint.settle``);
 * ``build``: the JointState message; ``publish``: ``publish_safe`` of joint_states;
 * ``levels``: the diagnostics' change test (``_publish_on_change``);
-* ``cycle``: all of ``_publish_cycle``;
+* ``cycle``: deciding the cycle and publishing its joint_states (``CyclePublisher._publish``,
+  on the receive thread for a cycle that completes); ``finish``: the rest of the cycle on the
+  cycle thread (``CyclePublisher._finish``: health of the SYNC before where it is judged
+  there, events, ``~/status`` for a listener, recording, ``levels``);
 * ``sync``: sending the SYNC (``client.sync``, the cycle thread), ``sync_cpu`` the CPU time
   of its thread meanwhile (the simulated wire sleeps until the frame's end); ``frame``: one received
   frame through the master's listener (counting, dispatch, slot table, frame log; the
@@ -40,8 +43,8 @@ from typing import Any
 sys.path.insert(0, __import__("os").path.dirname(__file__))
 from bench_node import case_rate  # noqa: E402
 
-STEPS = ("sync", "sync_cpu", "frame", "cycle", "decide", "verdict", "joint", "settle", "build", "publish",
-         "levels")
+STEPS = ("sync", "sync_cpu", "frame", "cycle", "decide", "verdict", "joint", "settle", "build",
+         "publish", "finish", "levels")
 
 
 def _timed(into: dict[str, list[int]], step: str, fn: Callable[..., Any],
@@ -124,7 +127,8 @@ def main(argv: list[str]) -> int:
     acc: dict[str, int] = defaultdict(int)
     measuring = threading.Event()
     profile = cProfile.Profile() if "--cprofile" in argv else None
-    whole = node._publish_cycle
+    publisher = node.cycle_publisher
+    whole = publisher._publish
 
     def cycle(*a: Any) -> Any:
         if not measuring.is_set():
@@ -152,7 +156,8 @@ def main(argv: list[str]) -> int:
         for line in counts:
             print(line)
         return 0
-    node._publish_cycle = cycle  # type: ignore[method-assign]
+    publisher._publish = cycle  # type: ignore[method-assign]
+    publisher._finish = _timed(per_cycle, "finish", publisher._finish)  # type: ignore
     sync = node.client.sync
 
     def timed_sync() -> float:
@@ -180,7 +185,10 @@ def main(argv: list[str]) -> int:
 
     listener.on_message_received = timed_frame  # type: ignore[method-assign]
     node.cycle_core.run = _timed(per_cycle, "decide", node.cycle_core.run)  # type: ignore
-    node._joint_state = _timed(per_cycle, "build", node._joint_state)  # type: ignore
+    from ssi_bridge.ros import cycle_publish
+
+    cycle_publish.joint_state_msg = _timed(per_cycle, "build",  # type: ignore
+                                           cycle_publish.joint_state_msg)
     node.publish_safe = _timed(per_cycle, "publish", node.publish_safe)  # type: ignore
     node._publish_on_change = _timed(per_cycle, "levels", node._publish_on_change)  # type: ignore
     for log in set(node.frame_logs.values()):

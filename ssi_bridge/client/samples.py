@@ -10,9 +10,11 @@ from __future__ import annotations
 import struct
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ssi_bridge.base.timebase import wire_now
+from ssi_bridge.client.cycle_gate import CycleGate as CycleGate
 from ssi_bridge.client.frame_sink import FrameSink
 from ssi_bridge.protocol.images import ProcessInput
 
@@ -20,6 +22,10 @@ from ssi_bridge.protocol.images import ProcessInput
 POSITION_PAIR = struct.Struct("<ii")
 #: SYNC times remembered to stamp late samples
 _KEEP_SYNC_TIMES = 64
+
+
+def _WAKE() -> None:
+    """What ``SlotTable._completes`` returns for "wake the waiters" (never run)."""
 
 
 @dataclass(frozen=True)
@@ -108,35 +114,15 @@ class SlotState:
     release_seq: int | None = None  # CLR released at this sync sequence: sent once more
 
 
-class CycleGate:
-    """One condition and one wake-up per cycle for the slot tables of several stations.
-
-    The master sets ``pending`` to the number of stations at each SYNC; a table whose cycle
-    completes counts it down, and only the last one wakes the cycle's waiter, so the cycle
-    thread is woken once per cycle however many stations answer.
-    """
-
-    def __init__(self) -> None:
-        self.cond = threading.Condition()
-        self.pending = 0
-
-    def open(self, stations: int) -> None:
-        """A SYNC for ``stations`` tables is about to go out (call under :attr:`cond`)."""
-        self.pending = stations
-
-    def wait(self, timeout: float) -> bool:
-        """Wait until every station's cycle is complete or ``timeout`` (s) elapses."""
-        with self.cond:
-            return self.cond.wait_for(lambda: self.pending <= 0, timeout)
-
-
 class SlotTable:
     """Per-slot state shared by the network, timer and service threads.
 
     The waiters are woken once per cycle, not per frame: ``_due`` counts the images and
     positions not yet received for the current SYNC (``image_seq``/``position_seq`` behind
     ``sync_seq``), so :meth:`cycle_complete` is ``_due == 0`` and a frame notifies only when
-    it completes the cycle or a handshake waits in :meth:`next_input`.
+    it completes the cycle or a handshake waits in :meth:`next_input`. A frame completing a
+    cycle the cycle thread armed on the gate (``client/cycle_gate.py``) runs that cycle on its
+    own thread, out of the lock, and the waiters are woken once it ended.
     """
 
     def __init__(self, slots: int, gate: CycleGate | None = None) -> None:
@@ -245,6 +231,7 @@ class SlotTable:
         A SYNC's TPDOs follow it on the wire, so an image that ended before the current
         SYNC belongs to an older cycle: kept as the newest image, not counted for this one.
         """
+        job: Callable[[], None] | None = None
         with self.cond:
             st = self._slots[slot]
             if self.sink is not None:
@@ -261,9 +248,12 @@ class SlotTable:
             st.image = data if type(data) is bytes else bytes(data)
             st.image_time = timestamp
             st.image_count += 1
-            if self._completes(completed) or self._input_waiters:
+            job = self._completes(completed)
+            if job is _WAKE or self._input_waiters:
                 self.cond.notify_all()
-            return st
+        if job is not None and job is not _WAKE:
+            self._hand_off(job)
+        return st
 
     def on_positions(self, slots: list[int], data: bytes | bytearray, timestamp: float = 0.0
                      ) -> None:
@@ -272,6 +262,7 @@ class SlotTable:
             values = POSITION_PAIR.unpack(data)
         else:
             values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
+        job: Callable[[], None] | None = None
         with self.cond:
             if self.sink is not None:
                 for slot, value in zip(slots, values):
@@ -291,17 +282,32 @@ class SlotTable:
                     completed = completed or self._due == 0
                 st.position = value
                 st.position_time = timestamp
-            if self._completes(completed):
+            job = self._completes(completed)
+            if job is _WAKE:
                 self.cond.notify_all()
+        if job is not None and job is not _WAKE:
+            self._hand_off(job)
 
-    def _completes(self, completed: bool) -> bool:
-        """Whether to wake the waiters: this frame completed the cycle (of every station)."""
-        if self._gate is None:
-            return self._due == 0
+    def _completes(self, completed: bool) -> Callable[[], None] | None:
+        """Under the lock: what this frame does once the lock is released: :data:`_WAKE` the
+        waiters (it completed the cycle of every station), run the cycle the cycle thread
+        armed (``CycleGate.take``: the caller hands it off, the waiters are woken after it),
+        or nothing (None)."""
+        gate = self._gate
+        if gate is None:
+            return _WAKE if self._due == 0 else None
         if not completed:
-            return False
-        self._gate.pending -= 1
-        return self._gate.pending <= 0
+            return None
+        gate.pending -= 1
+        if gate.pending > 0:
+            return None
+        job = gate.take()
+        return _WAKE if job is None else job
+
+    def _hand_off(self, job: Callable[[], None]) -> None:
+        """Run the armed cycle this frame completed, out of the lock (``CycleGate.run``)."""
+        assert self._gate is not None
+        self._gate.run(job)
 
     def seq_at(self, t: float) -> int:
         """The number of the newest SYNC recorded at wire time ``t`` (the current one if none:

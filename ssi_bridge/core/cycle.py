@@ -19,7 +19,7 @@ from ssi_bridge.core.cycle_log import StationLog, Verdict, VouchedSample
 from ssi_bridge.core.joint import Joint, JointOutput
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
 class JointCycle:
     """One joint's share of one cycle."""
 
@@ -62,34 +62,79 @@ class Cycle:
         #: cycles in which at least one joint was set aside
         self.incomplete_cycles = 0
 
-    def run(self, seq: int, t_sync: float) -> CycleResult:
+    def prepare(self, seq: int) -> None:
+        """Have every station's frame log ask rule 3 for SYNC ``seq`` now, while its answers
+        are on the wire (``StationLog.prepare``): :meth:`run` then finds it asked."""
+        for log in {id(log): log for log in self.logs.values()}.values():
+            log.prepare(seq)
+
+    def run(self, seq: int, t_sync: float, *, settle: bool = True) -> CycleResult:
         """Decide SYNC ``seq`` (wire time ``t_sync``) for every joint.
 
         Each joint's counters and health take the cycle whether it is published or not.
+        ``settle`` False leaves the health of the SYNC before (which nothing published
+        depends on) to :meth:`settle`, for a caller that publishes first.
         """
         result = CycleResult(seq, t_sync)
+        parts = result.joints
+        append = parts.append
+        logs = self.logs
+        decide = self._joint
+        # one pass over each station's slots: its frame log answers for all of them at once
+        answers: dict[int, dict[int, Verdict]] = {}
+        incomplete = False
         for joint in self.joints.values():
-            log = self.logs.get(joint.settings.station)
-            result.joints.append(self._joint(joint, log, seq, t_sync))
-        if any(j.output is None for j in result.joints):
+            log = logs.get(joint.settings.station)
+            if log is None:
+                joint.leave_out("no frame log for the joint's station")
+                append(JointCycle(joint, None, None, "no frame log", b""))
+                incomplete = True
+                continue
+            by_slot = answers.get(id(log))
+            if by_slot is None:
+                slots = log.slots
+                by_slot = answers[id(log)] = dict(zip(slots, log.verdicts(slots, seq)))
+            verdict = by_slot.get(joint.slot)
+            part = decide(joint, verdict if verdict is not None else log.verdict(joint.slot, seq),
+                          t_sync)
+            if part.output is None:
+                incomplete = True
+            append(part)
+        if incomplete:
             self.incomplete_cycles += 1
+        if settle:
+            self.settle(result)
         return result
 
+    def settle(self, result: CycleResult) -> None:
+        """The health of the SYNC before ``result``'s, judged now that its window is over
+        (``StationLog.settled``): every joint of a cycle :meth:`run` with ``settle`` False."""
+        seq = result.seq
+        logs = self.logs
+        answers: dict[int, dict[int, tuple[float, float] | None]] = {}
+        for part in result.joints:
+            joint = part.joint
+            log = logs.get(joint.settings.station)
+            if log is None:
+                joint.settle(seq, None)
+                continue
+            by_slot = answers.get(id(log))
+            if by_slot is None:
+                slots = log.slots
+                by_slot = answers[id(log)] = dict(zip(slots, log.settled_all(slots, seq - 1)))
+            slot = joint.slot
+            joint.settle(seq, by_slot[slot] if slot in by_slot else log.settled(slot, seq - 1))
+
     @staticmethod
-    def _joint(joint: Joint, log: StationLog | None, seq: int, t_sync: float) -> JointCycle:
-        if log is None:
-            joint.set_aside(seq, None, "no frame log for the joint's station")
-            return JointCycle(joint, None, None, "no frame log", b"")
-        settled = log.settled(joint.slot, seq - 1)
-        verdict: Verdict = log.verdict(joint.slot, seq)
+    def _joint(joint: Joint, verdict: Verdict, t_sync: float) -> JointCycle:
         sample = verdict.sample
         if sample is None:
-            joint.set_aside(seq, settled, verdict.reason, verdict.image, verdict.position)
+            joint.leave_out(verdict.reason, verdict.image, verdict.position)
             return JointCycle(joint, None, None, verdict.reason, verdict.image)
-        joint.count(t_sync, sample.process_input, sample.position, t_sync)
-        out = joint.update(t_sync, sample.process_input, sample.position, t_sync, seq=seq,
-                           settled=settled)
-        return JointCycle(joint, out, sample, "", sample.process_input)
+        image = sample.process_input
+        joint.count(t_sync, image, sample.position, t_sync)
+        out = joint.output(t_sync, image, sample.position, t_sync)
+        return JointCycle(joint, out, sample, "", image)
 
 
 __all__ = ["Cycle", "CycleResult", "JointCycle"]

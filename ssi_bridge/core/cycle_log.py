@@ -36,9 +36,11 @@ told from one in step on the wire: docs/node.md says so.
 
 from __future__ import annotations
 
+import math
 import threading
 from bisect import bisect_left, bisect_right, insort
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 #: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
@@ -57,7 +59,7 @@ KEEP_SYNCS = 256
 KEEP_FRAMES = 256
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
 class Frame:
     """One received TPDO of one slot: its kind, wire time (s) and content."""
 
@@ -71,7 +73,7 @@ class Frame:
     count: int
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
 class VouchedSample:
     """A slot's sample latched at the master's SYNC (within ``latch_bound``)."""
 
@@ -89,7 +91,7 @@ class VouchedSample:
     delay: float
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
 class Verdict:
     """What the log says of one slot at one of the master's SYNCs."""
 
@@ -103,6 +105,10 @@ class Verdict:
     image: bytes = b""
     #: the newest position in the window (None if none)
     position: int | None = None
+
+
+#: the verdict of every slot at a SYNC the log does not hold
+_UNKNOWN = Verdict(None, UNKNOWN_SYNC, 1.0)
 
 
 class StationLog:
@@ -128,11 +134,11 @@ class StationLog:
         self.latch_bound = latch_bound
         #: the station's slots that the master reads: each answers every SYNC it handles
         self.slots = tuple(sorted(set(slots)))
-        #: t_k -> (frames received so far, whether the station was in step before t_k), for
-        #: the SYNCs asked about lately: a cycle asks each joint of the station about its SYNC
-        #: and, for the health, the one before
-        self._in_step: dict[float, tuple[int, bool]] = {}
-        self._received = 0
+        #: t_k -> (wire time of the first of its windows, -inf when there are fewer; whether
+        #: the station was in step before t_k), for the SYNCs asked about lately: a cycle asks
+        #: about its SYNC and, for the health, the one before. An answer stands until a frame
+        #: or a SYNC within its windows changes (:meth:`_forget`)
+        self._in_step: dict[float, tuple[float, bool]] = {}
         #: windows before the SYNC that must show the station in step (rule 3)
         self.history = history
         self._lock = threading.Lock()
@@ -155,12 +161,14 @@ class StationLog:
                 if i < len(self._syncs) and self._syncs[i] == old:
                     del self._syncs[i]
                 self._own_times.discard(old)
+                self._forget(old)
             else:
                 self._own_order.append(seq)
                 if len(self._own_order) > KEEP_SYNCS:
                     gone = self._own.pop(self._own_order.popleft(), None)
                     if gone is not None:
                         self._own_times.discard(gone)
+                        self._forget(gone)
             self._own[seq] = t
             self._own_times.add(t)
             self._insert(t)
@@ -195,16 +203,31 @@ class StationLog:
             syncs.append(t)
         else:
             insort(syncs, t)
+        self._forget(t)
         if len(syncs) > KEEP_SYNCS:
-            del syncs[: len(syncs) - KEEP_SYNCS]
+            gone = len(syncs) - KEEP_SYNCS
+            self._forget(syncs[gone - 1])
+            del syncs[:gone]
 
     def _add(self, slot: int, frame: Frame) -> None:
         with self._lock:
-            self._received += 1
             frames = self._frames.get(slot)
             if frames is None:
                 frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
+            elif len(frames) == KEEP_FRAMES:
+                self._forget(frames[0].t)  # about to fall out
+            self._forget(frame.t)
             frames.append(frame)
+
+    def _forget(self, t: float) -> None:
+        """Under the lock: a frame or SYNC at wire time ``t`` came or went: drop the rule-3
+        answers whose windows (from the first one's SYNC to the SYNC asked about) hold ``t``.
+        A frame after the SYNC asked about, or a SYNC after it, changes no answer."""
+        cache = self._in_step
+        if cache:
+            stale = [key for key, (first, _ok) in cache.items() if first <= t <= key]
+            for key in stale:
+                del cache[key]
 
     # -- the cycle's side -------------------------------------------------------------------
     def sync_time(self, seq: int) -> float | None:
@@ -214,22 +237,38 @@ class StationLog:
 
     def verdict(self, slot: int, seq: int) -> Verdict:
         """Whether ``slot``'s sample of the master's SYNC ``seq`` is vouched for (see module)."""
+        return self.verdicts((slot,), seq)[0]
+
+    def verdicts(self, slots: Sequence[int], seq: int) -> list[Verdict]:
+        """:meth:`verdict` of each of ``slots`` at the master's SYNC ``seq``, in that order:
+        the SYNC looked up and rule 3 asked once for all of them."""
         with self._lock:
             t_k = self._own.get(seq)
             if t_k is None:
-                return Verdict(None, UNKNOWN_SYNC, 1.0)
+                return [_UNKNOWN] * len(slots)
             syncs = self._syncs
             i = bisect_left(syncs, t_k)
-            t_next = syncs[i + 1] if i + 1 < len(syncs) else None
-            images: list[Frame] = []
-            positions: list[Frame] = []
-            for f in reversed(self._frames.get(slot, ())):
-                if f.t < t_k:
-                    break
-                if t_next is None or f.t < t_next:
-                    (images if f.kind == IMAGE else positions).append(f)
+            t_next = syncs[i + 1] if i + 1 < len(syncs) else math.inf
             in_step = self._station_in_step(t_k, i)
-        return self._judge(slot, t_k, in_step, images, positions)
+            frames = self._frames
+            windows = [self._window(frames.get(slot, ()), t_k, t_next) for slot in slots]
+        judge = self._judge
+        return [judge(slot, t_k, in_step, images, positions)
+                for slot, (images, positions) in zip(slots, windows)]
+
+    @staticmethod
+    def _window(frames: Sequence[Frame], t_k: float, t_next: float
+                ) -> tuple[list[Frame], list[Frame]]:
+        """A slot's images and positions in the window [``t_k``, ``t_next``), newest first."""
+        images: list[Frame] = []
+        positions: list[Frame] = []
+        for f in reversed(frames):
+            t = f.t
+            if t < t_k:
+                break
+            if t < t_next:
+                (images if f.kind == IMAGE else positions).append(f)
+        return images, positions
 
     def _station_in_step(self, t_k: float, i: int) -> bool:
         """Rule 3 for the SYNC at ``t_k`` (index ``i`` of the SYNCs), under the lock: in each
@@ -237,34 +276,65 @@ class StationLog:
         (one image, one position), the first frame within ``latch_bound`` of the window's
         SYNC. A station whose answer spills over a SYNC (a wire too busy for its answers, a
         late or partial answer) is out of step, for all its slots: a slot's frames of one
-        window may then belong to different answers. Computed once per SYNC and frame count.
+        window may then belong to different answers. Computed once per SYNC, again only when
+        a frame or SYNC within its windows came or went since (:meth:`_forget`).
         """
-        cached = self._in_step.get(t_k)
-        if cached is not None and cached[0] == self._received:
+        cache = self._in_step
+        cached = cache.get(t_k)
+        if cached is not None:
             return cached[1]
         back = self.history
         bounds = self._syncs[max(i - back, 0): i + 1]
         # the windows are the master's own: with another producer's SYNC among them, a
         # station saturated by SYNCs can stay one answer behind, each answer looking prompt
-        ok = len(bounds) == back + 1 and all(t in self._own_times for t in bounds)
-        for slot in self.slots:
-            if not ok:
-                break
-            counts = [[0, 0, float("inf")] for _ in range(back)]
-            for f in reversed(self._frames.get(slot, ())):
-                if f.t >= t_k:
-                    continue
-                if f.t < bounds[0]:
-                    break
-                w = counts[bisect_right(bounds, f.t) - 1]
-                w[f.kind] += 1
-                w[2] = min(w[2], f.t)
-            ok = all(n_img == 1 and n_pos == 1 and first - t0 <= self.latch_bound
-                     for (n_img, n_pos, first), t0 in zip(counts, bounds))
-        if len(self._in_step) >= 4:
-            self._in_step.clear()
-        self._in_step[t_k] = (self._received, ok)
+        own = self._own_times
+        ok = (len(bounds) == back + 1 and all(t in own for t in bounds)
+              and self._all_answered_once(bounds))
+        if len(cache) >= 4:
+            del cache[min(cache)]
+        cache[t_k] = (bounds[0] if len(bounds) == back + 1 else -math.inf, ok)
         return ok
+
+    def prepare(self, seq: int) -> None:
+        """Ask rule 3 for the master's SYNC ``seq`` ahead of its verdicts (the cycle thread,
+        while the station's answers are on the wire): its windows are over, so the answer
+        usually stands when the cycle completes, and the verdicts need not compute it then."""
+        with self._lock:
+            t_k = self._own.get(seq)
+            if t_k is not None:
+                self._station_in_step(t_k, bisect_left(self._syncs, t_k))
+
+    def _all_answered_once(self, bounds: list[float]) -> bool:
+        """Under the lock: in each window between consecutive ``bounds`` (SYNC times, the
+        last one the SYNC asked about), every slot has exactly one image and one position,
+        the first of them within ``latch_bound`` of the window's SYNC (rule 3)."""
+        lo, t_k = bounds[0], bounds[-1]
+        back = len(bounds) - 1
+        bound = self.latch_bound
+        frames_of = self._frames
+        for slot in self.slots:
+            inside: list[Frame] = []
+            for f in reversed(frames_of.get(slot, ())):
+                t = f.t
+                if t >= t_k:
+                    continue
+                if t < lo:
+                    break
+                inside.append(f)
+            if len(inside) != 2 * back:  # every window needs exactly its two
+                return False
+            counts = [0] * (2 * back)  # per window: images, positions
+            first = [math.inf] * back
+            for f in inside:
+                t = f.t
+                w = bisect_right(bounds, t) - 1
+                counts[2 * w + f.kind] += 1
+                if t < first[w]:
+                    first[w] = t
+            for w in range(back):
+                if counts[2 * w] != 1 or counts[2 * w + 1] != 1 or first[w] - bounds[w] > bound:
+                    return False
+        return True
 
     def _judge(self, slot: int, t_k: float, in_step: bool, images: list[Frame],
                positions: list[Frame]) -> Verdict:
@@ -294,11 +364,21 @@ class StationLog:
         What the joint's health counts: a SYNC whose answer was on the wire in time counts as
         answered however late the master handled it; one set aside counts as lost.
         """
-        v = self.verdict(slot, seq)
+        return self.settled_all((slot,), seq)[0]
+
+    def settled_all(self, slots: Sequence[int], seq: int) -> list[tuple[float, float] | None]:
+        """:meth:`settled` of each of ``slots``, in that order (one look-up of the SYNC).
+
+        :param slots: the slots asked about
+        :param seq: the number of the SYNC whose cycle they belong to
+        :returns: per slot, (the SYNC's wire time, the share of the slot's answer not
+            vouched: 0.0 when its sample is), or None for each when the SYNC is not in the log
+        """
         t = self.sync_time(seq)
         if t is None:
-            return None
-        return t, (0.0 if v.sample is not None else (v.missing or 1.0))
+            return [None] * len(slots)
+        return [(t, 0.0 if v.sample is not None else (v.missing or 1.0))
+                for v in self.verdicts(slots, seq)]
 
 
 __all__ = ["IMAGE", "KEEP_FRAMES", "KEEP_SYNCS", "LATE", "NO_ANSWER", "PARTIAL", "POSITION",

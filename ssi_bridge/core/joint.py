@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
 from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
-from ssi_bridge.core.joint_scale import JointScale
+from ssi_bridge.core.joint_scale import JointScale, to_int32
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
@@ -120,6 +120,8 @@ class Joint:
         #: why the REG_PARA1 in force does not fit the encoder (a WARN), or ""
         self.para1_note = self._note(self.para1)
         self.scale = joint_scale(settings, self.config, self.para1)
+        #: the scale's joint units per count, read every cycle (follows ``scale``)
+        self._unit_per_count = self.scale.unit_per_count
         self.velocity = VelocityEstimator(self.scale, velocity_window, self.max_speed)
         #: samples latched at or before this wire time may carry another REG_PARA1 (inf: a
         #: change is in flight): their position and velocity are unknown (NaN)
@@ -129,6 +131,8 @@ class Joint:
         self.health = ChannelHealth()
         #: the last published position (joint units)
         self.position = 0.0
+        #: whether this cycle's sample was an implausible step, for :meth:`settle`
+        self._implausible = False
 
     # -- settings that change at run time ---------------------------------------------------
     def _limit(self, max_speed: float) -> float:
@@ -169,6 +173,7 @@ class Joint:
         unknown (NaN).
         """
         self.scale = joint_scale(self.settings, self.config, value)
+        self._unit_per_count = self.scale.unit_per_count
         estimator = VelocityEstimator(self.scale, self._window, self.max_speed)
         estimator.reset(after=since)
         self.velocity = estimator
@@ -208,6 +213,12 @@ class Joint:
             self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
                          lost=lost)
 
+    def settle(self, seq: int, settled: tuple[float, float] | None) -> None:
+        """The health of the SYNC before ``seq`` (:meth:`_settle`), after :meth:`output` or
+        :meth:`leave_out` of SYNC ``seq``: what :meth:`update` and :meth:`set_aside` do last,
+        for a caller that publishes the cycle first."""
+        self._settle(settled, seq, self._implausible)
+
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
         """No sample of this SYNC can be vouched for (``reason``, ``core/cycle_log.py``): the
@@ -217,6 +228,12 @@ class Joint:
         published). After ``stale_cycles`` of them the velocity estimate restarts, so a gap
         never becomes a speed. ``settled`` as for :meth:`update`.
         """
+        self.leave_out(reason, image, position)
+        self.settle(seq, settled)
+
+    def leave_out(self, reason: str, image: bytes = b"", position: int | None = None) -> None:
+        """:meth:`set_aside` but the health of the SYNC before (:meth:`settle`, due next)."""
+        self._implausible = False
         counters = self.counters
         counters.stale_cycles += 1
         counters.consecutive_stale += 1
@@ -232,7 +249,6 @@ class Joint:
             counters.last_position = position
         if counters.consecutive_stale >= self.stale_cycles:
             self.velocity.reset()
-        self._settle(settled, seq, False)
 
     def count(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float) -> bool:
         """Count the newest sample (latched at ``sample_time``) for the SYNC at ``t_sync``;
@@ -258,10 +274,17 @@ class Joint:
         """What the joint publishes for the sample it has at the SYNC ``t_sync`` (number
         ``seq``). Call :meth:`count` first; ``settled``: (wire time, share not vouched) of the
         SYNC before, judged once its window is over (None for the first SYNC)."""
+        out = self.output(sample_time, image, reg_ssi_pos, t_sync)
+        self.settle(seq, settled)
+        return out
+
+    def output(self, sample_time: float, image: bytes, reg_ssi_pos: int,
+               t_sync: float) -> JointOutput:
+        """:meth:`update` but the health of the SYNC before (:meth:`settle`, due next)."""
         counters = self.counters
         fresh = sample_time >= t_sync
         estimator = self.velocity
-        position = estimator.scale.position(reg_ssi_pos)
+        position = to_int32(reg_ssi_pos) * self._unit_per_count  # JointScale.position
         implausible = False
         out = JointOutput(position, math.nan)
         watch = self.frames
@@ -294,7 +317,7 @@ class Joint:
             velocity = math.nan
         else:
             velocity = estimator.velocity
-        self._settle(settled, seq, implausible)
+        self._implausible = implausible
         self.position = position
         out.position, out.velocity = position, velocity
         return out

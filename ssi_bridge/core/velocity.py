@@ -32,6 +32,9 @@ class VelocityEstimator:
         if not max_speed >= 0:
             raise ConfigError(f"max_speed {max_speed} must be >= 0 (0: no check)")
         self._scale = scale
+        #: the scale's constants, read every sample (JointScale is frozen)
+        self._unit_per_count = scale.unit_per_count
+        self._modulus = scale.modulus or 0
         self.window = window
         self.max_speed = max_speed
         #: samples whose step exceeded ``max_speed`` (since construction)
@@ -76,12 +79,14 @@ class VelocityEstimator:
             self._unwrapped = raw
         else:
             step = raw - self._last_raw
-            modulus = self._scale.modulus
+            modulus = self._modulus
             if modulus:
-                step = (step + modulus // 2) % modulus - modulus // 2
+                half = modulus // 2
+                step = (step + half) % modulus - half
             last_t = self._last_t
-            if (self.max_speed > 0 and last_t is not None and t > last_t
-                    and abs(step * self._scale.unit_per_count) > self.max_speed * (t - last_t)):
+            max_speed = self.max_speed
+            if (max_speed > 0 and last_t is not None and t > last_t
+                    and abs(step * self._unit_per_count) > max_speed * (t - last_t)):
                 # faster than the joint can move: this sample's speed is unknown and the
                 # window restarts here, so the jump never enters an estimate
                 self.implausible += 1
@@ -104,5 +109,6 @@ class VelocityEstimator:
         """Current estimate in joint units per second (NaN before two samples, or the held one)."""
         if len(self._samples) < 2:
             return self._held if self._held is not None else math.nan
-        (t0, c0), (t1, c1) = self._samples[0], self._samples[-1]
-        return (c1 - c0) / (t1 - t0) * self._scale.unit_per_count
+        samples = self._samples
+        (t0, c0), (t1, c1) = samples[0], samples[-1]
+        return (c1 - c0) / (t1 - t0) * self._unit_per_count

@@ -31,6 +31,9 @@ AHM36_TIMING: dict[str, Any] = dict(formation_period_s=125e-6, async_pause_toler
                                     async_max_pause_s=0.6)
 AHM36_SYNC: dict[str, Any] = dict(sync_reference=SyncReference.BURST_END, sync_delay_s=20e-6,
                                   min_pause_s=150e-6)
+#: ATM60 synchronous timing, both layouts (004 §3.4)
+ATM60_SYNC: dict[str, Any] = dict(sync_reference=SyncReference.LATCH, monoflop_s=150e-6,
+                                  min_pause_s=150e-6)
 
 
 def _is_binary(steps: float) -> bool:
@@ -140,13 +143,11 @@ FAMILIES: dict[str, Family] = {
     "ATM60": Family(
         dict(steps_per_rev=8192, revolutions_numerator=4096, data_bits=25, turn_bits=12,
              alignment=Alignment.TANNENBAUM, formation_period_s=150e-6),
-        dict(sync_reference=SyncReference.LATCH, monoflop_s=150e-6, min_pause_s=150e-6),
-        (_atm60_layout,), doc="004 §3.4: 25 bits Tannenbaum, 12 + 13, optional error bit"),
+        ATM60_SYNC, (_atm60_layout,), doc="004 §3.4: 25 bits Tannenbaum, 12 + 13, optional error bit"),
     "ATM60_13_12": Family(
         dict(steps_per_rev=4096, revolutions_numerator=8192, data_bits=25, turn_bits=13,
              alignment=Alignment.TANNENBAUM, formation_period_s=150e-6),
-        dict(sync_reference=SyncReference.LATCH, monoflop_s=150e-6, min_pause_s=150e-6),
-        (_atm60_layout,), doc="004 §3.4 Figure 17: 13 multiturn + 12 singleturn bits"),
+        ATM60_SYNC, (_atm60_layout,), doc="004 §3.4 Figure 17: 13 multiturn + 12 singleturn bits"),
     "ARS60": Family(
         dict(steps_per_rev=8192, data_bits=13, alignment=Alignment.LEFT, **_ROTARY_ST),
         fixes=(_ars60_layout,),

@@ -108,16 +108,19 @@ class CycleThread(LoopThread):
 
     A step that ends less than half a period late runs the next cycle at once; one that
     overruns further skips to the next slot boundary (the skipped slots are counted in
-    ``missed``) instead of bursting to catch up: a burst of SYNCs helps no master.
+    ``missed``) instead of bursting to catch up: a burst of SYNCs helps no master. ``end``,
+    if given, runs once on the thread after its last step (what a step left to the next one).
     """
 
     def __init__(self, period: float, step: Callable[[], None], name: str = "ssi_cycle",
-                 clock: Callable[[], float] = time.monotonic, priority: int = 0) -> None:
+                 clock: Callable[[], float] = time.monotonic, priority: int = 0,
+                 end: Callable[[], None] | None = None) -> None:
         if not period > 0:
             raise ValueError(f"cycle period {period} s must be > 0")
         super().__init__(name, priority)
         self.period = period
         self._step = step
+        self._end = end
         self._clock = clock
         #: cycles run and cycles skipped because a step overran its slot
         self.cycles = 0
@@ -141,3 +144,8 @@ class CycleThread(LoopThread):
                 self.missed += behind
                 deadline += behind * self.period
             self._stop.wait(deadline - now)
+        if self._end is not None:
+            try:
+                self._end()
+            except Exception:  # noqa: BLE001 - a thread never dies with an unlogged error
+                logger.exception("the cycle's end failed")

@@ -26,22 +26,29 @@ watches).
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, cast
 
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+
 from ssi_bridge.exceptions import RecordingError
+from ssi_bridge.ros.params import NodeSettings
 
-if TYPE_CHECKING:
-    from foxglove.websocket import ServerListener
-    from rclpy.node import Node
+if TYPE_CHECKING:  # the SDK is imported only when the server starts
+    import foxglove
+    from foxglove.websocket import ChannelView, Client, ServerListener, WebSocketServer
 
-    from ssi_bridge.ros.params import NodeSettings
+    from ssi_bridge.ros.liveview_params import ParameterBridge
+    from ssi_bridge.ros.services import BridgeServices
 
 #: addresses that keep the server on this host
 LOOPBACK = ("127.0.0.1", "::1", "localhost")
 
 
-def type_name(msg_class: type) -> str:
+def type_name(msg_class: object) -> str:
     """``pkg/msg/Type`` of an rclpy message class (its module is ``pkg.msg._type``)."""
+    assert isinstance(msg_class, type), f"{msg_class!r} is no message class"
     return f"{msg_class.__module__.split('.', 1)[0]}/msg/{msg_class.__name__}"
 
 
@@ -53,26 +60,26 @@ class _Subscriptions:
         self._lock = threading.Lock()
         self.count = 0
 
-    def on_subscribe(self, client: Any, channel: Any) -> None:
+    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         with self._lock:
             self.count += 1
         self._node.get_logger().info(f"live view: client {client.id} subscribed to "
                                      f"{channel.topic}")
 
-    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+    def on_unsubscribe(self, client: Client, channel: ChannelView) -> None:
         with self._lock:
             self.count = max(0, self.count - 1)
         self._node.get_logger().info(f"live view: client {client.id} left {channel.topic}")
 
     # the parameter requests (Capability.Parameters only): ros/liveview_params.py
-    params: Any = None
+    params: ParameterBridge | None = None
 
-    def on_get_parameters(self, client: Any, param_names: list[str],
-                          request_id: str | None = None) -> list[Any]:
+    def on_get_parameters(self, client: Client, param_names: list[str],
+                          request_id: str | None = None) -> list[foxglove.Parameter]:
         return self.params.get(param_names) if self.params is not None else []
 
-    def on_set_parameters(self, client: Any, parameters: list[Any],
-                          request_id: str | None = None) -> list[Any]:
+    def on_set_parameters(self, client: Client, parameters: list[foxglove.Parameter],
+                          request_id: str | None = None) -> list[foxglove.Parameter]:
         return self.params.set(parameters) if self.params is not None else []
 
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
@@ -85,20 +92,29 @@ class _Subscriptions:
 
 
 class LiveView:
-    """The Foxglove WebSocket server of one node and a channel per offered publisher."""
+    """The Foxglove WebSocket server of one node and a channel per offered publisher.
 
-    def __init__(self, node: Node, settings: NodeSettings, handlers: Any = None) -> None:
-        """``handlers``: the node's BridgeServices, whose services are offered (None: none)."""
+    A server that cannot start is no error: :attr:`error` says why (the bus diagnostics show
+    it) and every method goes on as if the port were 0.
+
+    :param node: the node whose name the server carries and whose parameters it offers
+    :param settings: ``foxglove.*`` (port 0: no server, the SDK not imported)
+    :param handlers: the node's services, offered with the same handlers and request queue
+        (None, or ``foxglove.services`` false: none)
+    """
+
+    def __init__(self, node: Node, settings: NodeSettings,
+                 handlers: BridgeServices | None = None) -> None:
         self._node = node
         self._handlers = handlers if settings.foxglove_services else None
         self._with_parameters = settings.foxglove_parameters
         #: resolved names of the services the server offers
         self.services: list[str] = []
-        self._channels: dict[Any, Any] = {}
-        self._server: Any = None
-        self._context: Any = None
+        self._channels: dict[Publisher, foxglove.Channel] = {}
+        self._server: WebSocketServer | None = None
+        self._context: foxglove.Context | None = None
         self._listener = _Subscriptions(node)
-        self._serialize: Any = None
+        self._serialize: Callable[[Any], bytes] | None = None  # a message: untyped
         #: why the server is not running although asked for; shown on the bus diagnostics
         self.error = ""
         self.port = 0
@@ -162,7 +178,7 @@ class LiveView:
         if params is not None:
             params.stop()
 
-    def offer(self, publisher: Any) -> None:
+    def offer(self, publisher: Publisher) -> None:
         """Advertise ``publisher``'s topic with its ros2msg schema (no-op while off)."""
         if self._context is None:
             return
@@ -182,18 +198,18 @@ class LiveView:
             schema=foxglove.Schema(name=schema.name, encoding="ros2msg",
                                    data=schema.text.encode("utf-8")))
 
-    def wants(self, publisher: Any) -> bool:
+    def wants(self, publisher: Publisher) -> bool:
         """True while a client is subscribed to ``publisher``'s topic."""
         channel = self._channels.get(publisher)
         return channel is not None and channel.has_sinks()
 
-    def publish(self, publisher: Any, msg: Any) -> None:
+    def publish(self, publisher: Publisher, msg: Any) -> None:
         """Send ``msg`` (just published on ``publisher``) to the subscribed clients, if any."""
         channel = self._channels.get(publisher)
-        if channel is None or not channel.has_sinks():
+        if channel is None or not channel.has_sinks() or self._serialize is None:
             return
         # no log_time: the SDK stamps the receive time itself (system clock, as ROS time is
-        # here), which saves the ~15 us of an rclpy clock call per message
+        # here), which saves an rclpy clock call per message (docs/node.md "Live view")
         channel.log(self._serialize(msg))
 
     def counters(self) -> dict[str, int]:

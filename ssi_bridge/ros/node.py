@@ -26,21 +26,20 @@ from ssi_bridge_msgs.msg import Status
 
 from ssi_bridge.base.timebase import ModelClock, wire_now
 from ssi_bridge.client.can_log_player import CanLogPlayer
-from ssi_bridge.client.cycle_feed import feed_frames, sync_number
-from ssi_bridge.client.listener import ListenOnlyClient, ObservedCycle
+from ssi_bridge.client.cycle_feed import feed_frames
+from ssi_bridge.client.listener import ListenOnlyClient
 from ssi_bridge.client.master import BridgeClient, CanMaster
 from ssi_bridge.core.bridge import Bridge
 from ssi_bridge.core.cycle import Cycle
 from ssi_bridge.core.cycle_log import StationLog
 from ssi_bridge.core.joint import Joint
 from ssi_bridge.exceptions import RecordingError
-from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.bus_side import BusSide, StationFactory
-from ssi_bridge.ros.cycle import CycleThread, cycle_waits, cycle_wire_time
+from ssi_bridge.ros.cycle import CycleThread, cycle_wire_time
+from ssi_bridge.ros.cycle_publish import CyclePublisher
 from ssi_bridge.ros.lifecycle import NodeLifecycle, RosParts, declare_autostart
 from ssi_bridge.ros.liveview import LiveView
-from ssi_bridge.ros.messages import joint_state_msg, status_msg, time_msg
 from ssi_bridge.ros.node_params import RuntimeParameters
 from ssi_bridge.ros.node_start import bridging_line, prepare_process, replay_settings
 from ssi_bridge.ros.node_status import CycleRate, NodeDiagnostics
@@ -49,6 +48,7 @@ from ssi_bridge.ros.params import NodeSettings, declare_parameters
 from ssi_bridge.ros.qos_overrides import overridable_publisher as publisher
 from ssi_bridge.ros.rclpy_compat import RCLError
 from ssi_bridge.ros.recording import SessionRecorder
+from ssi_bridge.ros.recording_meta import bus_config
 from ssi_bridge.ros.services import BridgeServices
 from ssi_bridge.ros.span_probe import probe_from_env
 from ssi_bridge.ros.stamps import Stamper
@@ -60,6 +60,11 @@ class SsiBridgeNode(LifecycleNode):
     configures and activates the node and raises the reason if that fails (nothing left
     open); off, it returns unconfigured with nothing open.
 
+    :param stop: ends the process's spin cleanly (default: shuts the context down)
+    :param kwargs: rclpy ``Node``'s (``parameter_overrides``, ``context`` ...)
+    :raises ConfigError: a parameter is invalid; with autostart also what configure or
+        activate failed on (SsiBridgeError, OSError)
+
     It owns its parts: :attr:`bus` (ros/bus_side.py), :attr:`lifecycle` (ros/lifecycle.py;
     rclpy's transition callbacks go to it), :attr:`parameters` (ros/node_params.py), and
     from the first configure :attr:`handlers` (ros/services.py), :attr:`recorder`
@@ -69,16 +74,14 @@ class SsiBridgeNode(LifecycleNode):
     def __init__(self, stop: Callable[[], None] | None = None, autostart: bool = True,
                  **kwargs: Any) -> None:
         super().__init__("ssi_bridge", **kwargs)
-        #: ends the process's spin cleanly (main's stop request; without main: the context)
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         autostart = declare_autostart(self, autostart)
         self.settings: NodeSettings = replay_settings(declare_parameters(self), self)
         #: makes the simulated station(s) (simulation: true; None on real hardware)
         simulation: StationFactory | None = None
-        if self.settings.simulation:
-            # the node's one import of the simulator (docs/architecture.md): a node on
-            # real hardware loads nothing of ssi_bridge.sim
+        if self.settings.simulation:  # the node's one import of the simulator: a node on
+            # real hardware loads nothing of ssi_bridge.sim (docs/architecture.md)
             from ssi_bridge.sim.supervisor import Simulation
 
             # the node and its simulated station meet on this bus (sim/supervisor/station.py)
@@ -98,16 +101,16 @@ class SsiBridgeNode(LifecycleNode):
         self.frame_logs: dict[int, StationLog] = {}
         #: the cycle decisions (core/cycle.py): ros/ only turns its results into messages
         self.cycle_core = Cycle(self.joints, self.frame_logs)
+        #: SYNC, the cycle's decisions and its messages (ros/cycle_publish.py)
+        self.cycle_publisher = CyclePublisher(self)
         self.parameters: RuntimeParameters  # the REG_PARA1 mirror below reaches it
         self.bridge = Bridge(self.joints, self.client_of,
                              lambda joint, value: self.parameters.mirror_para1(joint, value))
         self.parameters = RuntimeParameters(self, self.joints, self.bridge, self)
-        self.bus_config = BusConfig(interface=s.bus_interface, channel=s.bus_channel,
-                                    bitrate=s.bus_bitrate, node_id=s.node_id)
         self.cycle_wire_s = cycle_wire_time(s, self.get_logger().warning)
         self.cycle: CycleThread | ObservedCycleThread | None = None
         #: the bus side (opened by configure, closed by cleanup; ros/bus_side.py)
-        self.bus = BusSide(self.bus_config, simulation, self.bridge, self.model_clock,
+        self.bus = BusSide(bus_config(s), simulation, self.bridge, self.model_clock,
                            self.get_logger().info)
         #: the achieved cycle rate; the cycle appends each cycle's monotonic time
         self.cycle_rate = CycleRate()
@@ -199,12 +202,14 @@ class SsiBridgeNode(LifecycleNode):
         """The cycle loop (not started): SYNC master, or observer of another master's SYNC."""
         if isinstance(self.client, ListenOnlyClient):
             return ObservedCycleThread(
-                self.client, 1.0 / s.publish_rate, self._on_observed, self._on_quiet,
+                self.client, 1.0 / s.publish_rate, self.cycle_publisher.on_observed,
+                self._on_quiet,
                 ended=self.player.finished if self.player is not None else None,
                 on_end=self._on_replay_end,
                 silent_warning=None if self.player is not None else SILENT_WARNING_S,
                 priority=s.cycle_priority)
-        return CycleThread(1.0 / s.publish_rate, self._on_cycle, priority=s.cycle_priority)
+        return CycleThread(1.0 / s.publish_rate, self.cycle_publisher.on_cycle,
+                           priority=s.cycle_priority, end=self.cycle_publisher.on_end)
 
     def _start(self, s: NodeSettings) -> None:
         """Start-up recording, CPU pinning, then the cycle (and a log replay) begins."""
@@ -295,44 +300,7 @@ class SsiBridgeNode(LifecycleNode):
         """The diagnostics at once when a level changed since the last cycle."""
         self.diagnostics.publish_on_change()
 
-    # -- the cycle -------------------------------------------------------------------------
-    def _on_cycle(self) -> None:
-        """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
-        if not self.context.ok():
-            return
-        try:
-            self._cycle()
-        except RCLError:
-            if self.context.ok():
-                raise
-
-    def _cycle(self) -> None:
-        """SYNC, collect the TPDOs of this cycle, publish joint_states and ~/status."""
-        faults = self.bridge.faults
-        if faults is not None and faults.active:
-            for done in faults.expire():
-                self.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
-                                        True, "fault duration over, cleared")
-        t_sync = self.client.sync()  # the master's one SYNC: every station's cycle
-        # the TPDOs need their wire time (cycle.cycle_waits); a late cycle skips SYNC slots,
-        # counted in cycles_missed, instead of sending SYNCs nobody can answer. The master
-        # wakes once every station's cycle is complete.
-        assert self.master is not None
-        self.master.wait_cycle(*cycle_waits(1.0 / self.settings.publish_rate, self.cycle_wire_s))
-        self._cycle_times.append(time.monotonic())  # the achieved rate: an interval
-        self._publish_cycle(t_sync, sync_number(self.client, t_sync))
-
-    def _on_observed(self, cycle: ObservedCycle) -> None:
-        """Listen-only: publish the cycle of a SYNC another master (or the log) sent."""
-        if not self.context.ok():
-            return
-        self._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
-        try:
-            self._publish_cycle(cycle.sync_time, cycle.seq)
-        except RCLError:
-            if self.context.ok():
-                raise
-
+    # -- listen-only (the cycle itself: ros/cycle_publish.py) ------------------------------
     def _on_quiet(self) -> None:
         """Listen-only: a period without SYNC counts as a stale cycle for every joint."""
         now = wire_now()
@@ -350,39 +318,6 @@ class SsiBridgeNode(LifecycleNode):
                "; still running, diagnostics go STALE"))
         if self.settings.replay_exit_at_end:
             self._request_stop()
-
-    def _publish_cycle(self, t_sync: float, seq: int) -> None:
-        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time).
-
-        ``seq`` is the SYNC's sequence number. The cycle core decides every joint
-        (core/cycle.py); a joint it sets aside is left out of joint_states and says why in
-        ~/status, and a cycle with no joint to publish sends no joint_states.
-        """
-        stamp_ns = self.stamper.stamp_ns(t_sync)
-        if stamp_ns is None:
-            return
-        result = self.cycle_core.run(seq, t_sync)
-        for part in result.published:
-            assert part.output is not None
-            for ok, text in part.output.events:
-                self.handlers.log_event("encoder_status", part.joint.name, "frame check", ok,
-                                        text)
-        js = joint_state_msg(result, time_msg(stamp_ns), self.settings.frame_id)
-        # ~/status costs as much as the rest of the cycle: build it only for a listener
-        want_status = (self.recorder.capturing or self.status_pub.get_subscription_count() > 0
-                       or self.liveview.wants(self.status_pub))
-        if js.name:
-            if not self.publish_safe(self.joint_pub, js):
-                return
-            if self._span_probe is not None:  # bench/bench_node.py: the driver's own span
-                rx = getattr(self.client, "bus", None)  # listen-only: none
-                self._span_probe.published(getattr(rx, "rx_latest", 0.0), len(js.name))
-            self.recorder.record(self.joint_pub.topic_name, js, stamp_ns)
-        if want_status:
-            status = status_msg(result, js.header)
-            if status.channels and self.publish_safe(self.status_pub, status):
-                self.recorder.record(self.status_pub.topic_name, status, stamp_ns)
-        self._publish_on_change()
 
     def publish_safe(self, publisher: Any, msg: Any) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""

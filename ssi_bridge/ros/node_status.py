@@ -165,8 +165,9 @@ class NodeDiagnostics:
     """
 
     def __init__(self, node: Node, view: NodeView, bus: BusSide, joints: Mapping[str, Joint],
-                 rate: CycleRate, cycle_core: Cycle, stamper: Stamper, *, recorder: SessionRecorder, liveview: LiveView,
-                 services: BridgeServices, publish: Callable[[DiagnosticArray], bool],
+                 rate: CycleRate, cycle_core: Cycle, stamper: Stamper, *,
+                 recorder: SessionRecorder, liveview: LiveView, services: BridgeServices,
+                 publish: Callable[[DiagnosticArray], bool],
                  refresh_cams: Callable[[], None], bus_open: Callable[[], bool]) -> None:
         self._node = node
         self._view = view

@@ -16,6 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSPolicyKind
 from rclpy.qos_overriding_options import InvalidQosOverridesError, QoSOverridingOptions
 
@@ -35,7 +36,8 @@ ALLOWED = ("reliability: reliable | best_effort; durability: volatile | transien
            "history: keep_last | keep_all; depth: an integer")
 
 
-def overridable_publisher(node: Node, msg_type: Any, topic: str, depth: int = 10) -> Any:
+def overridable_publisher(node: Node, msg_type: type[Any], topic: str,
+                          depth: int = 10) -> Publisher:
     """``node.create_publisher(msg_type, topic, depth)`` whose :data:`POLICIES` a params file
     overrides with ``qos_overrides.<topic>.publisher.*``.
 

@@ -206,10 +206,10 @@ class SessionRecorder:
             f"bag {bag.directory} rebuilt after the write error: {summary.message_count} "
             f"messages readable")
 
-    def counters(self) -> dict[str, int]:
+    def counters(self) -> dict[str, object]:
         """Recording figures for the bus diagnostics."""
         bag, sniffer = self._bag, self._sniffer
-        out: dict[str, Any] = {
+        out: dict[str, object] = {
             "recording": int(bag is not None), "is_paused": bag is not None and self.paused,
             "recorded_messages": bag.message_count if bag is not None else 0,
             "recorded_files": len(bag.files) if bag is not None else 0,

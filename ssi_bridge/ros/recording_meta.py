@@ -1,5 +1,6 @@
 """What a bag of the node says about itself: each topic's message type and the session's
-metadata (package version, bus, stations, joints), and the bus a recording listens on.
+metadata (package version, bus, stations, joints); and the node's bus, which the recording's
+listeners open beside the master.
 
 Shared by the session recorder (``ros/recording.py``) and the fault snapshots
 (``ros/snapshot.py``): a snapshot is a bag like a session's.
@@ -47,7 +48,7 @@ def session_metadata(s: NodeSettings) -> dict[str, str]:
 
 
 def bus_config(s: NodeSettings) -> BusConfig:
-    """The node's bus, for a listener of its own (the CAN log, the snapshot's frames)."""
+    """The node's bus (its master's; a recording's listeners open one of their own)."""
     return BusConfig(interface=s.bus_interface, channel=s.bus_channel,
                      bitrate=s.bus_bitrate, node_id=s.node_id)
 

@@ -13,9 +13,12 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 from rclpy.callback_groups import CallbackGroup
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.service import Service
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssi_bridge.ros.rclpy_compat import (
@@ -32,14 +35,26 @@ SERVICE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
 MAX_QUEUED = 100
 #: the worker's and the taker's CPU time each at most this share of the wall time: after a
 #: request (a pass of the taker) that took c s of its CPU it rests c * (1 / share - 1) s.
-#: Every Python step of the node holds the GIL, so the process's CPU is one budget: unpaced,
-#: in a 1000-call burst at 1 kHz the worker ran 450 reads/s and took 0.145 s/s, as much as
-#: the cycle thread, whose CPU fell from 0.25 to 0.15 s/s (the process's stayed 0.5).
-#: Together the two threads now take at most 5 % of the time
+#: Every Python step of the node holds the GIL, so the process's CPU is one budget; together
+#: the two threads take at most 5 % of it (why this share: docs/node.md "Services")
 SERVICE_CPU_SHARE = 0.025
-#: requests the taker takes of one service per pass before it rests: a pass of a whole burst
-#: (~170 requests, 16-43 ms of CPU) took the GIL from the cycle in one piece
+#: requests the taker takes of one service per pass before it rests, so that one pass never
+#: holds the GIL for a whole burst (docs/node.md "Services")
 TAKE_PER_PASS = 16
+
+
+#: a service handler: fills and returns the response to a request (ROS's generated request
+#: and response classes carry no type hints)
+Handler = Callable[[Any, Any], Any]
+#: fills the busy answer to a request: (request, response, requests waiting)
+Refuse = Callable[[Any, Any, int], None]
+
+
+class Replier(Protocol):
+    """Where a served request's response goes: its service, or a waiting caller."""
+
+    def send_response(self, response: Any, header: Any) -> None:
+        """Send ``response`` to the client of the request ``header`` names."""
 
 
 class _Job:
@@ -47,7 +62,8 @@ class _Job:
 
     __slots__ = ("run", "service", "response", "header")
 
-    def __init__(self, run: Callable[[], Any], service: Any, response: Any, header: Any) -> None:
+    def __init__(self, run: Callable[[], object], service: Replier, response: Any,
+                 header: Any) -> None:
         self.run = run
         self.service = service
         self.response = response
@@ -70,28 +86,28 @@ class _Reply:
 class _Detached(CallbackGroup):
     """A callback group no executor runs: :class:`RequestQueue` takes these requests itself."""
 
-    def can_execute(self, entity: Any) -> bool:
+    def can_execute(self, entity: object) -> bool:
         return False
 
-    def beginning_execution(self, entity: Any) -> bool:
+    def beginning_execution(self, entity: object) -> bool:
         return False
 
-    def ending_execution(self, entity: Any) -> None:
+    def ending_execution(self, entity: object) -> None:
         pass
 
 
 class RequestQueue:
     """Takes the requests of its services from DDS at once, serves them in arrival order.
 
-    rclpy's executor takes one request per wait-set rebuild (~0.3 ms of Python each, which a
-    1 kHz cycle feels) and hands a callback no reply header, so a reply cannot wait in a
-    queue. Here a taker thread waits on the services alone and takes every waiting request
+    rclpy's executor takes one request per wait-set rebuild (a fraction of a millisecond of
+    Python each, which a 1 kHz cycle feels: docs/node.md "Services") and hands a callback no
+    reply header, so a reply cannot wait in a queue. Here a taker thread waits on the services alone and takes every waiting request
     per wake-up (the calls rclpy's executor makes, through ``ros/rclpy_compat.py``, and
     ``send_response``); a worker thread runs them one at a time and replies; beyond ``limit``
     waiting requests the taker refuses at once.
     """
 
-    def __init__(self, node: Any, limit: int = MAX_QUEUED, name: str = "ssi_services",
+    def __init__(self, node: Node, limit: int = MAX_QUEUED, name: str = "ssi_services",
                  cpu_share: float = SERVICE_CPU_SHARE) -> None:
         if not 0.0 < cpu_share <= 1.0:
             raise ValueError(f"cpu_share {cpu_share} outside (0, 1]")
@@ -101,7 +117,7 @@ class RequestQueue:
         #: seconds the worker and the taker rested to keep their CPU share (diagnostics)
         self.rested = 0.0
         self.group = _Detached()
-        self._services: list[tuple[Any, Callable[[Any, Any], Any], Callable[..., Any]]] = []
+        self._services: list[tuple[Service, Handler, Refuse]] = []
         self._jobs: deque[_Job] = deque()
         self._lock = threading.Condition()
         self._stopped = False
@@ -112,13 +128,12 @@ class RequestQueue:
     def __len__(self) -> int:
         return len(self._jobs)
 
-    def add(self, service: Any, handler: Callable[[Any, Any], Any],
-            refuse: Callable[[Any, Any, int], None]) -> None:
+    def add(self, service: Service, handler: Handler, refuse: Refuse) -> None:
         """Serve ``service`` (created in :attr:`group`); ``refuse`` fills a busy answer."""
         self._services.append((service, handler, refuse))
 
-    def call(self, handler: Callable[[Any, Any], Any], request: Any, response: Any,
-             refuse: Callable[[Any, Any, int], None], timeout: float) -> bool:
+    def call(self, handler: Handler, request: Any, response: Any, refuse: Refuse,
+             timeout: float) -> bool:
         """Serve a request that came another way (the live view) in the same order.
 
         It waits behind the requests taken from DDS and counts toward :attr:`limit` like
@@ -179,21 +194,21 @@ class RequestQueue:
                 logger.error("service requests not taken: %s: %s", type(err).__name__, err)
                 time.sleep(0.1)
 
-    def _wait(self, context: Any) -> list[int]:
+    def _wait(self, context: Context) -> list[int]:
         """Block until a request (or :meth:`stop`) arrives; the ready services' pointers."""
         # 0.2 s: also re-checks stop and the context
         return wait_for_requests([s for s, _h, _r in self._services], self._wake, context,
                                  200_000_000)
 
-    def _take_all(self, service: Any, handler: Callable[[Any, Any], Any],
-                  refuse: Callable[[Any, Any, int], None]) -> None:
+    def _take_all(self, service: Service, handler: Handler, refuse: Refuse) -> None:
         """Take up to TAKE_PER_PASS waiting requests (the rest stay in DDS for the next pass)."""
         for _ in range(TAKE_PER_PASS):
             taken = take_request(service)
             if taken is None:
                 return
             request, header = taken
-            response = service.srv_type.Response()
+            srv_type: Any = service.srv_type  # a generated class; rclpy types it a bare TypeVar
+            response = srv_type.Response()
             with self._lock:
                 waiting = len(self._jobs)
                 if waiting < self.limit and not self._stopped:
@@ -205,7 +220,7 @@ class RequestQueue:
             self._send(service, response, header)
 
     @staticmethod
-    def _send(service: Any, response: Any, header: Any) -> None:
+    def _send(service: Replier, response: Any, header: Any) -> None:
         try:
             service.send_response(response, header)
         except Exception as err:  # noqa: BLE001 - a client gone or shutdown

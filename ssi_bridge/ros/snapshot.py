@@ -163,7 +163,7 @@ class NodeSnapshots:
             self._frame_tap = None
             tap.close()
 
-    def counters(self) -> dict[str, Any]:
+    def counters(self) -> dict[str, int | str]:
         """The snapshots' figures for the bus diagnostics."""
         return self.keeper.counters()
 

@@ -24,7 +24,7 @@ import os
 import struct
 import threading
 import time
-from typing import Any
+from collections.abc import Mapping
 
 #: the environment variable naming the file (unset or empty: no probe)
 SPAN_LOG_ENV = "SSI_BRIDGE_SPAN_LOG"
@@ -71,7 +71,7 @@ class SpanProbe:
                 pass
 
 
-def probe_from_env(environ: Any = os.environ) -> SpanProbe | None:
+def probe_from_env(environ: Mapping[str, str] = os.environ) -> SpanProbe | None:
     """The probe the environment asks for, or None (the default)."""
     path = environ.get(SPAN_LOG_ENV, "")
     return SpanProbe(path) if path else None

@@ -10,16 +10,22 @@ clock stepped back, an NTP step) becomes last + 1 ns and is counted (bus diagnos
 
 from __future__ import annotations
 
-from typing import Any
+from rclpy.clock import Clock, ROSClock
 
 from ssi_bridge.base.timebase import to_ros_ns, wire_now
+from ssi_bridge.ros.rclpy_compat import RcutilsLogger
 
 
 class Stamper:
-    """Stamps of one node's cycles (``clock``: the node's rclpy clock; ``logger``: its log)."""
+    """Stamps of one node's cycles.
 
-    def __init__(self, clock: Any, logger: Any) -> None:
-        self._clock = clock
+    :param clock: the node's rclpy clock (a node's is a ``ROSClock``: with use_sim_time it
+        follows ``/clock``, and the stamps with it)
+    :param logger: the node's log (waiting for ``/clock``, and when it arrives)
+    """
+
+    def __init__(self, clock: Clock, logger: RcutilsLogger) -> None:
+        self._clock = clock if isinstance(clock, ROSClock) else None
         self._logger = logger
         self._last_ns = 0
         self._waiting_for_clock = False
@@ -30,7 +36,7 @@ class Stamper:
         """ROS time (ns) of wire time ``wire_t``: strictly after the last stamp; None = wait."""
         stamp = to_ros_ns(wire_t)
         clock = self._clock
-        if clock.ros_time_is_active:
+        if clock is not None and clock.ros_time_is_active:
             for _ in range(5):
                 before = wire_now()
                 sim_ns = clock.now().nanoseconds

@@ -6,8 +6,6 @@ one fails here, by name, on a real canopen ``Network`` on python-can's virtual b
 from __future__ import annotations
 
 import inspect
-import time
-from collections.abc import Callable
 from typing import Any
 
 import can
@@ -17,6 +15,7 @@ import pytest
 from ssi_bridge.base.canopen_compat import (
     OwnListenerNetwork, dispatch, drop_node, forget_receive_error, forget_values, subscribers,
 )
+from support.waiting import wait_for
 
 
 class _Heard(can.Listener):
@@ -27,13 +26,6 @@ class _Heard(can.Listener):
 
     def on_message_received(self, msg: can.Message) -> None:
         self.frames.append(msg)
-
-
-def _wait_for(done: Callable[[], bool], timeout: float = 2.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        time.sleep(0.005)
-    return done()
 
 
 def test_start_puts_the_owners_listener_in_place_of_canopens(request) -> None:
@@ -52,7 +44,9 @@ def test_start_puts_the_owners_listener_in_place_of_canopens(request) -> None:
         assert network.notifier.timeout == 0.05
         with can.Bus(interface="virtual", channel=channel) as peer:
             peer.send(can.Message(arbitration_id=0x701, data=b"\x05", is_extended_id=False))
-            assert _wait_for(lambda: len(mine.frames) == 1)
+            wait_for(lambda: len(mine.frames) == 1,
+                     "the owner's listener did not hear exactly the one frame within 2 s",
+                     timeout=2.0, poll=0.005)
     finally:
         network.disconnect()
     both = OwnListenerNetwork(can.Bus(interface="virtual", channel=channel))

@@ -13,6 +13,7 @@ import re
 import time
 from pathlib import Path
 
+import pytest
 from lifecycle_msgs.msg import State, Transition
 from sensor_msgs.msg import JointState
 
@@ -129,32 +130,30 @@ def test_failing_configure_stays_unconfigured(tmp_path, domain_id, child_preexec
     assert code == 0, node.log()[-3000:]
 
 
-def test_ssi_bridge_node_is_the_lifecycle_node_with_autostart(running, probe):
-    """One node class: ssi_bridge_node configured and activated itself at start (autostart);
-    a lifecycle manager can still deactivate and activate it."""
-    node = running({"publish_rate": RATE})
-    msgs = probe.subscribe(JointState, node.topic("joint_states"))
-    assert _state(probe, node) == State.PRIMARY_STATE_ACTIVE
-    assert "managed node: unconfigured" not in node.log()
-    assert _change(probe, node, Transition.TRANSITION_DEACTIVATE), node.log()
-    assert _state(probe, node) == State.PRIMARY_STATE_INACTIVE
-    time.sleep(0.3)  # messages already in flight when the cycle stopped
-    assert _quiet_for(msgs, 1.0) == 0, "inactive: no joint_states"
-    assert _change(probe, node, Transition.TRANSITION_ACTIVATE), node.log()
-    start = len(msgs)
-    probe.wait_for(lambda: len(msgs) >= start + 10, 20.0, "joint_states after activate", node)
-    assert node.stop() == 0, node.log()[-3000:]
-
-
-def test_the_managed_node_with_autostart_runs_at_once(tmp_path, domain_id, child_preexec,
-                                                      probe):
-    node = _start_managed(tmp_path, domain_id, child_preexec, {"autostart": True})
+@pytest.mark.parametrize("executable", ["ssi_bridge_node", "managed_autostart"])
+def test_an_autostarting_node_is_active_at_once_and_still_managed(
+        executable, running, tmp_path, domain_id, child_preexec, probe):
+    """One node class: ssi_bridge_node configures and activates itself at start (autostart),
+    and so does the managed node given ``autostart: true``; a lifecycle manager can still
+    deactivate and activate either. (Two tests before, one per executable.)"""
+    if executable == "ssi_bridge_node":
+        node = running({"publish_rate": RATE})
+    else:
+        node = _start_managed(tmp_path, domain_id, child_preexec, {"autostart": True})
     try:
         msgs = probe.subscribe(JointState, node.topic("joint_states"))
         probe.wait_for(lambda: len(msgs) >= 10, 30.0, "joint_states without a transition",
                        node)
         assert _state(probe, node) == State.PRIMARY_STATE_ACTIVE
         assert "managed node: unconfigured" not in node.log()
+        assert _change(probe, node, Transition.TRANSITION_DEACTIVATE), node.log()
+        assert _state(probe, node) == State.PRIMARY_STATE_INACTIVE
+        time.sleep(0.3)  # messages already in flight when the cycle stopped
+        assert _quiet_for(msgs, 1.0) == 0, "inactive: no joint_states"
+        assert _change(probe, node, Transition.TRANSITION_ACTIVATE), node.log()
+        start = len(msgs)
+        probe.wait_for(lambda: len(msgs) >= start + 10, 20.0, "joint_states after activate",
+                       node)
     finally:
         code = node.stop()
     assert code == 0, node.log()[-3000:]

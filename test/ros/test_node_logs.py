@@ -58,8 +58,20 @@ def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_no
     assert all(LINE.match(line) for line in log.splitlines() if line.strip()), log
 
 
-def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
-    node = start_node({"publish_rte": 50.0, "joint2.slot": 2, "bus.bitrte": 250000})
+#: QoS overrides of no publisher of the node: a misspelt topic, policy, and a topic it has no
+#: override for (from test_node_qos.py, merged here: one start with every kind of typo)
+MISSPELT_QOS = {"/joint_state": {"publisher": {"reliability": "best_effort"}},
+                "/joint_states": {"publisher": {"reliabilty": "best_effort"}},
+                "/ssi_bridge/events": {"publisher": {"depth": 3}}}
+
+
+def test_unknown_overrides_are_warned_with_the_closest_name(start_node, tmp_path: Path):
+    import yaml
+
+    pfile = tmp_path / "qos.yaml"
+    pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"qos_overrides": MISSPELT_QOS}}}))
+    node = start_node({"publish_rte": 50.0, "joint2.slot": 2, "bus.bitrte": 250000},
+                      params_file=pfile)
     node.wait_for_log("bridging")
     log = stop(node)
     warnings = [m for sev, _, m in lines(log) if sev == "WARN"]
@@ -67,7 +79,14 @@ def test_unknown_overrides_are_warned_with_the_closest_name(start_node):
     assert any("'bus.bitrte'" in w and "did you mean 'bus.bitrate'" in w for w in warnings), log
     assert any("'joint2.slot'" in w and "'joint2' is not in joints ['joint1']" in w
                for w in warnings), log
-    assert len(warnings) == 3, warnings
+    named = [w for w in warnings if "is no QoS override of this node" not in w]
+    assert len(named) == 3, warnings
+    for name in ("qos_overrides./joint_state.publisher.reliability",
+                 "qos_overrides./joint_states.publisher.reliabilty",
+                 "qos_overrides./ssi_bridge/events.publisher.depth"):
+        assert f"parameter '{name}' is no QoS override of this node" in log, log[-3000:]
+    assert "it takes qos_overrides.</joint_states | /ssi_bridge/status | /diagnostics>" \
+        ".publisher.<history | depth | reliability | durability>" in log
 
 
 def test_a_huge_joint_name_is_not_echoed_in_full(start_node):

@@ -76,18 +76,3 @@ def test_qos_overrides_from_a_params_file_reach_the_publishers_and_the_bag(start
                 for t in meta["topics_with_message_count"]}
     assert counts[js_topic] > 0 and counts[js_topic] == recorded[js_topic], (counts, recorded)
     assert counts[status_topic] == recorded[status_topic]
-
-
-def test_a_misspelt_override_is_named_not_silently_ignored(start_node, probe, tmp_path: Path):
-    pfile = _params_file(tmp_path, {
-        "/joint_state": {"publisher": {"reliability": "best_effort"}},
-        "/joint_states": {"publisher": {"reliabilty": "best_effort"}},
-        "/ssi_bridge/events": {"publisher": {"depth": 3}}})
-    node = start_node(params_file=pfile)
-    for name in ("qos_overrides./joint_state.publisher.reliability",
-                 "qos_overrides./joint_states.publisher.reliabilty",
-                 "qos_overrides./ssi_bridge/events.publisher.depth"):
-        probe.wait_for(lambda: f"parameter '{name}' is no QoS override of this node" in node.log(),
-                       30.0, f"the warning about {name}", node)
-    assert "it takes qos_overrides.</joint_states | /ssi_bridge/status | /diagnostics>" \
-        ".publisher.<history | depth | reliability | durability>" in node.log()

@@ -6,8 +6,11 @@ python-can ``virtual`` channel, the master (``client``: :class:`CanMaster`, one
 :class:`BridgeClient` per station), each joint's core (``core/joint.py``), each station's frame
 log fed by its slot table, the cycle core (``core/cycle.py``), the services' facade
 (``core/bridge.py``) with the fault injector the node gives it (``sim/supervisor/faults.py``,
-SDO 0x4000-0x4002 over the master's client). A cycle is what the node's cycle thread does:
-expire the faults, SYNC, wait for the TPDOs, decide every joint.
+SDO 0x4000-0x4002 over the master's client). A cycle, on the node's cycle loop
+(``ros/cycle.py`` ``CycleThread``): expire the faults, SYNC, wait for the TPDOs
+(``cycle_waits``), decide every joint and settle the SYNC before (``Cycle.run``). The node
+decides a complete cycle in the receive thread that handled its last TPDO instead
+(``ros/cycle_publish.py``), with the same core and rules; what differs is which thread.
 
 Tests of the driver's behaviour on the bus use this instead of a node process, as canopen's
 own tests drive a ``LocalNode`` against a ``RemoteNode``; what the node adds (topics, QoS,
@@ -272,7 +275,7 @@ class InProcessBridge:
         while not condition():
             if time.monotonic() > end:
                 raise AssertionError(f"no {what} within {timeout} s")
-            time.sleep(0.005)
+            time.sleep(0.02)  # the condition reads the joints: little GIL for it
 
     def status(self, joint: str) -> Any:
         """The joint's DiagnosticStatus as the node builds it (``ros/diagnostics.py``

@@ -1,0 +1,77 @@
+"""The cycle core's hot path alone, in-process: deciding one cycle of N joints and building its
+joint_states, without a node, a bus or another thread.
+
+``python bench/cycle_decide.py [joints] [cycles]``: one station's frame log fed like the
+simulated station answers (every slot's image and position once per SYNC, 60 us apart,
+positions moving; ``Cycle.prepare`` between the SYNC and its answers, as the cycle thread),
+and a ``core/cycle.Cycle`` of N joints (slots 1..N, GENERIC encoders with
+their frame checks) deciding each SYNC as the node does: the part before ``publish()``
+(``run(settle=False)`` and the JointState), then the health of the SYNC before
+(``settle``). Prints median / p99 (us) per cycle of each part after a warm-up of 500 cycles.
+In-process timing without the node's other threads: the figures to compare changes of the
+per-joint path by, not the node's latency (``bench_node.py``).
+"""
+
+from __future__ import annotations
+
+import gc
+import statistics
+import sys
+import time
+
+from ssi_bridge.core.cycle import Cycle
+from ssi_bridge.core.cycle_log import StationLog
+from ssi_bridge.core.joint import Joint
+from ssi_bridge.protocol.images import encode_input
+from ssi_bridge.protocol.registers import Reg
+from ssi_bridge.protocol.settings import JointSettings
+from ssi_bridge.ros.messages import joint_state_msg, time_msg
+
+PERIOD = 1 / 480
+WARM_UP = 500
+
+
+def _p99(values: list[float]) -> float:
+    return sorted(values)[int(0.99 * (len(values) - 1))]
+
+
+def main(argv: list[str]) -> int:
+    """Run the cycles and print the figures."""
+    n = int(argv[0]) if argv else 8
+    cycles = int(argv[1]) if len(argv) > 1 else 5000
+    log = StationLog(0.0008, slots=tuple(range(1, n + 1)))
+    joints = {f"j{s}": Joint(JointSettings(name=f"j{s}", slot=s), velocity_window=5,
+                             max_speed=-1.0, stale_cycles=10) for s in range(1, n + 1)}
+    core = Cycle(joints, {0: log})
+    front: list[float] = []
+    back: list[float] = []
+    clock = time.perf_counter_ns
+    gc.collect()
+    for k in range(1, cycles + WARM_UP + 1):
+        t = k * PERIOD
+        log.sync(k, t)
+        core.prepare(k)  # the cycle thread, while the answers are on the wire
+        for slot in range(1, n + 1):
+            pos = 37 * k * slot
+            log.image(slot, t + 0.0001 + 0.00006 * slot,
+                      encode_input(pos & 0xFFFFFF, int(Reg.REG_SSI_FRAME), False, False, False,
+                                   0, 0, 0), k)
+            log.position(slot, t + 0.0001 + 0.00006 * slot + 0.00003, pos)
+        t0 = clock()
+        result = core.run(k, t, settle=False)
+        joint_state_msg(result, time_msg(int(t * 1e9)), "base")
+        t1 = clock()
+        core.settle(result)
+        t2 = clock()
+        if k > WARM_UP:
+            front.append((t1 - t0) / 1e3)
+            back.append((t2 - t1) / 1e3)
+    print(f"{n} joint(s), {cycles} cycles, us median / p99: decide + joint_states "
+          f"{statistics.median(front):.1f} / {_p99(front):.1f}, settle "
+          f"{statistics.median(back):.1f} / {_p99(back):.1f}, "
+          f"left out {core.incomplete_cycles}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

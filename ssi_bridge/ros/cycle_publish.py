@@ -1,0 +1,227 @@
+"""The node's cycle: SYNC on the cycle thread, joint_states published where the cycle completes.
+
+:class:`CyclePublisher` is a part of :class:`~ssi_bridge.ros.node.SsiBridgeNode` (it uses the
+node's publishers, cycle core, stamper and settings). The cycle thread
+(``ros/cycle.CycleThread``) sends each SYNC and keeps the pace. A cycle is complete when its
+last expected TPDO arrives; the receive thread that handled that frame decides the cycle and
+publishes ``joint_states`` at once, at its own (real-time) priority
+(``client/cycle_gate.CycleGate``): no thread wakes up between the data and ``publish()``. The
+cycle thread is woken once that publish returned. A cycle that does not complete within its
+wait (``ros/cycle.cycle_waits``) is decided and published by the cycle thread at the timeout,
+as before. Either way the cycle core decides with the same rules (``core/cycle.py``), and the
+next SYNC goes out only after the cycle was published. The rest of a cycle (the health of the
+SYNC before, ``~/events``, ``~/status``, recording, diagnostics on a level change) is done by
+the cycle thread right after its next SYNC, while that SYNC's TPDOs are on the wire, and
+before it hands that cycle to the receive thread: each cycle's messages still go out in
+order, and the time from one SYNC to the next holds only the wire and joint_states. The last
+cycle is finished when the cycle thread ends. Listen-only, the observer thread publishes each
+observed cycle whole.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from sensor_msgs.msg import JointState
+
+from ssi_bridge.client.cycle_feed import sync_number
+from ssi_bridge.client.listener import ObservedCycle
+from ssi_bridge.core.cycle import CycleResult
+from ssi_bridge.ros.cycle import cycle_waits
+from ssi_bridge.ros.messages import joint_state_msg, status_msg, time_msg
+from ssi_bridge.ros.rclpy_compat import RCLError
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(slots=True)
+class PublishedCycle:
+    """A cycle whose ``joint_states`` is out: what the rest of the cycle needs."""
+
+    result: CycleResult
+    joint_state: JointState
+    stamp_ns: int
+
+
+class CyclePublisher:
+    """The cycle of the node (see the module docstring).
+
+    :param node: the ``SsiBridgeNode`` whose cycle this is (not imported: it imports this
+        module; its parts are read each cycle: the bus side
+        and the publishers are made again when the node is configured again)
+    """
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        #: (wire time, number) of the SYNC the cycle thread armed for the receive thread
+        self._armed = (0.0, 0)
+        #: the cycle the receive thread published, for the cycle thread to finish
+        self._handed: PublishedCycle | None = None
+        #: the cycle published last, finished after the next SYNC went out
+        self._pending: PublishedCycle | None = None
+
+    # -- the master's cycle (cycle thread, receive thread) ---------------------------------
+    def on_cycle(self) -> None:
+        """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
+        node = self.node
+        if not node.context.ok():
+            return
+        try:
+            self._cycle()
+        except RCLError:
+            if node.context.ok():
+                raise
+
+    def _cycle(self) -> None:
+        """SYNC; the rest of the cycle before (:meth:`_finish`) while this one's TPDOs are on
+        the wire; this cycle is published by the receive thread as its last TPDO arrives, or
+        here once the wait for it is over."""
+        node = self.node
+        faults = node.bridge.faults
+        if faults is not None and faults.active:
+            for done in faults.expire():
+                node.handlers.log_event("inject_fault", done.joint, f"expired {done.kind.name}",
+                                        True, "fault duration over, cleared")
+        client, master = node.client, node.master
+        t_sync = client.sync()  # the master's one SYNC: every station's cycle
+        self._finish_pending()  # nothing is armed yet: the receive thread decides nothing
+        # the TPDOs need their wire time (cycle.cycle_waits); a late cycle skips SYNC slots,
+        # counted in cycles_missed, instead of sending SYNCs nobody can answer. The master
+        # wakes once every station's cycle is complete and its publish (if handed) ended.
+        assert master is not None
+        gate = master.gate
+        seq = sync_number(client, t_sync)
+        self._armed = (t_sync, seq)
+        self._handed = None
+        node.cycle_core.prepare(seq)  # off the path from the last TPDO to publish()
+        armed = gate.arm(self._on_complete)  # False: complete already, published here
+        mine = not armed
+        try:
+            master.wait_cycle(*cycle_waits(1.0 / node.settings.publish_rate,
+                                           node.cycle_wire_s))
+        finally:
+            if armed:
+                mine = gate.claim()  # False: the receive thread took it (and has finished)
+        if mine:
+            node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
+            self._pending = self._publish(*self._armed)
+        else:
+            self._pending, self._handed = self._handed, None
+
+    def _finish_pending(self) -> None:
+        """Finish the cycle published last (:meth:`_finish`); an error is logged, and the
+        cycle goes on."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        try:
+            self._finish(pending)
+        except RCLError:
+            if self.node.context.ok():
+                logger.exception("finishing the cycle failed; continuing with the next one")
+        except Exception:  # noqa: BLE001 - the next cycle's SYNC is out: it must be armed
+            logger.exception("finishing the cycle failed; continuing with the next one")
+
+    def on_end(self) -> None:
+        """The cycle thread's last act (``CycleThread`` ``end``): finish the last cycle."""
+        self._finish_pending()
+
+    def _on_complete(self) -> None:
+        """The receive thread: the armed cycle's last TPDO arrived; publish it now.
+
+        An error is logged and the receive path goes on (it is no frame's fault); the cycle
+        thread then finishes nothing of this cycle."""
+        node = self.node
+        if not node.context.ok():
+            return
+        node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
+        try:
+            self._handed = self._publish(*self._armed)
+        except RCLError:
+            if node.context.ok():
+                logger.exception("publishing the cycle failed; continuing with the next one")
+        except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
+            logger.exception("publishing the cycle failed; continuing with the next one")
+
+    # -- listen-only (observer thread) -----------------------------------------------------
+    def on_observed(self, cycle: ObservedCycle) -> None:
+        """Publish the cycle of a SYNC another master (or the log) sent."""
+        node = self.node
+        if not node.context.ok():
+            return
+        node._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
+        try:
+            self.publish(cycle.sync_time, cycle.seq)
+        except RCLError:
+            if node.context.ok():
+                raise
+
+    # -- one cycle ---------------------------------------------------------------------------
+    def publish(self, t_sync: float, seq: int) -> None:
+        """Publish joint_states and ~/status of the cycle latched at ``t_sync`` (wire time),
+        SYNC number ``seq``, in one go."""
+        published = self._publish(t_sync, seq)
+        if published is not None:
+            self._finish(published)
+
+    def _publish(self, t_sync: float, seq: int) -> PublishedCycle | None:
+        """Decide the cycle and publish its joint_states (None: nothing more to do, the stamp
+        or the context is gone).
+
+        The cycle core decides every joint (core/cycle.py); a joint it sets aside is left out
+        of joint_states (and says why in ~/status), and a cycle with no joint to publish sends
+        no joint_states.
+        """
+        node = self.node
+        stamp_ns = node.stamper.stamp_ns(t_sync)
+        if stamp_ns is None:
+            return None
+        # the health of the SYNC before, which nothing published depends on: in _finish
+        core = node.cycle_core
+        result = core.run(seq, t_sync, settle=False)
+        handed = False
+        try:
+            js = joint_state_msg(result, time_msg(stamp_ns), node.settings.frame_id)
+            if js.name:
+                if not node.publish_safe(node.joint_pub, js):
+                    return None
+                probe = node._span_probe
+                if probe is not None:  # bench/bench_node.py: the driver's own span
+                    rx = getattr(node.client, "bus", None)  # listen-only: none
+                    probe.published(getattr(rx, "rx_latest", 0.0), len(js.name))
+            handed = True
+            return PublishedCycle(result, js, stamp_ns)
+        finally:
+            if not handed:  # no _finish for this cycle: its health is judged all the same
+                core.settle(result)
+
+    def _finish(self, cycle: PublishedCycle) -> None:
+        """The rest of a published cycle: the health of the SYNC before (``Cycle.settle``),
+        recording, ``~/events`` of the frame checks,
+        ``~/status`` (built only for a listener), diagnostics on a level change."""
+        node = self.node
+        result, js, stamp_ns = cycle.result, cycle.joint_state, cycle.stamp_ns
+        node.cycle_core.settle(result)
+        recorder = node.recorder
+        if js.name:
+            recorder.record(node.joint_pub.topic_name, js, stamp_ns)
+        for part in result.joints:
+            out = part.output
+            if out is not None and out.events:
+                for ok, text in out.events:
+                    node.handlers.log_event("encoder_status", part.joint.name, "frame check",
+                                            ok, text)
+        # ~/status costs as much as the rest of the cycle: build it only for a listener
+        status_pub = node.status_pub
+        if (recorder.capturing or status_pub.get_subscription_count() > 0
+                or node.liveview.wants(status_pub)):
+            status = status_msg(result, js.header)
+            if status.channels and node.publish_safe(status_pub, status):
+                recorder.record(status_pub.topic_name, status, stamp_ns)
+        node._publish_on_change()
+
+
+__all__ = ["CyclePublisher", "PublishedCycle"]
