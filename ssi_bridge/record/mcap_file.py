@@ -74,6 +74,9 @@ class McapFile:
         schema and channel, in the file's first chunk (the first message completes it), so
         each file of a bag stands alone.
 
+        Parameters ``path``, ``info``, ``chunks``, ``chunk_size`` and ``library`` as
+        :meth:`create`.
+
         :param config: the session configuration (none written when empty), named ``config_name``
         :param channels: the bag's topics so far, by name
         :param remove_on_failure: delete the file when writing its start fails

@@ -278,10 +278,10 @@ def test_the_check_sees_nested_and_aliased_any() -> None:
 #: modules other work is reshaping right now (the cycle path, the canopen integration point);
 #: their contracts are checked once that work has landed
 CONTRACT_PENDING = frozenset({
-    "ssi_bridge.core.cycle", "ssi_bridge.core.joint", "ssi_bridge.core.velocity",
-    "ssi_bridge.core.health", "ssi_bridge.client.samples", "ssi_bridge.client.receive",
-    "ssi_bridge.client.cycle_feed", "ssi_bridge.client.bus", "ssi_bridge.client.bus_master",
-    "ssi_bridge.client.sdo", "ssi_bridge.sim.gateway.gateway", "ssi_bridge.sim.gateway.bus",
+    "ssi_bridge.core.joint", "ssi_bridge.core.velocity", "ssi_bridge.core.health",
+    "ssi_bridge.client.samples", "ssi_bridge.client.receive", "ssi_bridge.client.bus",
+    "ssi_bridge.client.bus_master", "ssi_bridge.client.sdo", "ssi_bridge.sim.gateway.gateway",
+    "ssi_bridge.sim.gateway.bus",
 })
 #: layers whose seams must state their contracts (base/ and ros/ are being reworked)
 CONTRACT_LAYERS = frozenset({"protocol", "sim", "record", "commission", "tools", "core",
@@ -416,3 +416,14 @@ def test_every_public_name_of_the_wholly_documented_layers_states_its_contract()
             for name in mod.defs if not name.startswith("_")
             for g in _contract_gaps(mod, name)]
     assert not gaps, "docstrings that do not state their contract:\n  " + "\n  ".join(gaps)
+
+
+def test_the_pending_modules_still_owe_a_contract() -> None:
+    """CONTRACT_PENDING only shrinks: a module whose public names all state their contract
+    leaves it (and is then held like the rest)."""
+    modules = _load()
+    done = sorted(name for name in CONTRACT_PENDING
+                  if name not in modules or not any(
+                      _contract_gaps(modules[name], d) for d in modules[name].defs
+                      if not d.startswith("_")))
+    assert not done, f"contracts complete (remove them from CONTRACT_PENDING): {done}"
