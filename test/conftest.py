@@ -234,7 +234,7 @@ SLOW = {
         "stress: 20 starts, each stopped by two SIGINTs",
     "test/ros/test_node_stop.py::test_stop_signals_at_any_moment_of_start_up_and_shutdown":
         "stress: 15 starts, each hit by a burst of signals",
-    "test/ros/test_node_station_process.py::test_station_survives_a_storm_of_stop_signals":
+    "test/sim/supervisor/test_station_process.py::test_station_survives_a_storm_of_stop_signals":
         "stress: 6 stations, 400 signals each",
     "test/ros/test_node_services.py::"
     "test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
