@@ -248,7 +248,8 @@ SLOW = {
 #: the logic again: .ci/run's workspace step runs only these (``-m smoke``)
 SMOKE = {
     "test/ros/test_node_skeleton.py::test_register_services_over_the_handshake",
-    "test/ros/test_node_skeleton.py::test_diagnostics_ok_for_the_joint",
+    "test/ros/test_node_skeleton.py::"
+    "test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_joint",
     "test/ros/test_node_lifecycle.py::test_walk_through_the_lifecycle",
     "test/ros/test_node_station_process.py::"
     "test_node_with_simulation_false_drives_a_separately_started_station",
