@@ -10,6 +10,7 @@ import signal
 import subprocess
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -91,24 +92,28 @@ def claim_domain() -> tuple[int, int]:
     raise RuntimeError(f"every DDS domain id {DOMAIN_IDS} is held by a running test")
 
 
-@pytest.fixture
-def ros_domain() -> Iterator[int]:
-    """A test-unique ROS_DOMAIN_ID, held until the test ends."""
+@contextmanager
+def held_domain() -> Iterator[int]:
+    """A DDS domain id no other running test holds (:func:`claim_domain`), released on exit."""
     dom, fd = claim_domain()
     try:
         yield dom
     finally:
         os.close(fd)
+
+
+@pytest.fixture
+def ros_domain() -> Iterator[int]:
+    """A test-unique ROS_DOMAIN_ID, held until the test ends."""
+    with held_domain() as dom:
+        yield dom
 
 
 @pytest.fixture(scope="module")
 def module_domain() -> Iterator[int]:
     """A ROS_DOMAIN_ID held for a whole test module (the node and probe its tests share)."""
-    dom, fd = claim_domain()
-    try:
+    with held_domain() as dom:
         yield dom
-    finally:
-        os.close(fd)
 
 
 @pytest.fixture(scope="module")
