@@ -10,6 +10,7 @@ import signal
 import subprocess
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -91,24 +92,28 @@ def claim_domain() -> tuple[int, int]:
     raise RuntimeError(f"every DDS domain id {DOMAIN_IDS} is held by a running test")
 
 
-@pytest.fixture
-def ros_domain() -> Iterator[int]:
-    """A test-unique ROS_DOMAIN_ID, held until the test ends."""
+@contextmanager
+def held_domain() -> Iterator[int]:
+    """A DDS domain id no other running test holds (:func:`claim_domain`), released on exit."""
     dom, fd = claim_domain()
     try:
         yield dom
     finally:
         os.close(fd)
+
+
+@pytest.fixture
+def ros_domain() -> Iterator[int]:
+    """A test-unique ROS_DOMAIN_ID, held until the test ends."""
+    with held_domain() as dom:
+        yield dom
 
 
 @pytest.fixture(scope="module")
 def module_domain() -> Iterator[int]:
     """A ROS_DOMAIN_ID held for a whole test module (the node and probe its tests share)."""
-    dom, fd = claim_domain()
-    try:
+    with held_domain() as dom:
         yield dom
-    finally:
-        os.close(fd)
 
 
 @pytest.fixture(scope="module")
@@ -234,7 +239,7 @@ SLOW = {
         "stress: 20 starts, each stopped by two SIGINTs",
     "test/ros/test_node_stop.py::test_stop_signals_at_any_moment_of_start_up_and_shutdown":
         "stress: 15 starts, each hit by a burst of signals",
-    "test/ros/test_node_station_process.py::test_station_survives_a_storm_of_stop_signals":
+    "test/sim/supervisor/test_station_process.py::test_station_survives_a_storm_of_stop_signals":
         "stress: 6 stations, 400 signals each",
     "test/ros/test_node_services.py::"
     "test_a_burst_of_1000_calls_from_4_clients_is_answered_in_full":
@@ -248,7 +253,8 @@ SLOW = {
 #: the logic again: .ci/run's workspace step runs only these (``-m smoke``)
 SMOKE = {
     "test/ros/test_node_skeleton.py::test_register_services_over_the_handshake",
-    "test/ros/test_node_skeleton.py::test_diagnostics_ok_for_the_joint",
+    "test/ros/test_node_skeleton.py::"
+    "test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_joint",
     "test/ros/test_node_lifecycle.py::test_walk_through_the_lifecycle",
     "test/ros/test_node_station_process.py::"
     "test_node_with_simulation_false_drives_a_separately_started_station",

@@ -6,12 +6,10 @@ virtual bus open on its channel.
 
 from __future__ import annotations
 
-import itertools
 import os
 import time
 from collections.abc import Callable, Iterator
 
-import can.interfaces.virtual as virtual
 import pytest
 
 from ssi_bridge.base.udp_bus import derive_channel
@@ -21,22 +19,8 @@ from ssi_bridge.sim.gateway.bus import LossyBus
 from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.gateway.station import Station
-from ssi_bridge.protocol.readout import LineReadout
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
-
-_channels = itertools.count()
-
-
-class ScriptedReader:
-    """An SsiReader whose encoder value the test sets; a healthy line otherwise."""
-
-    def __init__(self, value: int = 1234) -> None:
-        self.value = value
-
-    def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
-        data = self.value & ((1 << n_bits) - 1)
-        return LineReadout(latch_time=t, n_bits=n_bits, data=data,
-                           end_time=t + (n_bits + 1) / bit_rate_hz)
+from support.virtual_bus import ScriptedReader, private_channel
 
 
 def run_cycles(client: BridgeClient, n: int, timeout: float = 0.5) -> int:
@@ -52,11 +36,7 @@ def run_cycles(client: BridgeClient, n: int, timeout: float = 0.5) -> int:
 @pytest.fixture
 def channel(request: pytest.FixtureRequest) -> Iterator[str]:
     """A virtual channel private to this test; fails the test if a bus is left open on it."""
-    name = f"client-{next(_channels)}-{request.node.name}"
-    yield name
-    with virtual.channels_lock:
-        leaked = len(virtual.channels.get(name, []))
-    assert leaked == 0, f"{leaked} virtual bus(es) left open on {name!r}"
+    yield from private_channel("client", request.node.name)
 
 
 def lossy_wire(config: BusConfig) -> LossyBus:

@@ -15,7 +15,9 @@ from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 from ssi_bridge.protocol.registers import MAGIC_NO, Reg
 
-from .conftest import ScriptedReader, lossy_wire
+from support.virtual_bus import ScriptedReader
+
+from .conftest import lossy_wire
 
 
 def wait_for(condition, message: str, timeout: float = 3.0) -> None:

@@ -28,7 +28,9 @@ from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader, run_cycles
+from support.virtual_bus import ScriptedReader
+
+from .conftest import run_cycles
 
 NODE = 1
 #: a datagram that is no msgpack at all, and one that is msgpack but no CAN frame

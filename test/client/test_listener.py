@@ -22,7 +22,7 @@ from ssi_bridge.sim.gateway.bus import open_bus as wire_bus
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader
+from support.virtual_bus import ScriptedReader
 
 
 @pytest.fixture

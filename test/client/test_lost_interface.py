@@ -23,7 +23,9 @@ from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader, run_cycles
+from support.virtual_bus import ScriptedReader
+
+from .conftest import run_cycles
 
 NODE = 5
 ENETDOWN = can.CanOperationError("Failed to transmit: Network is down", errno.ENETDOWN)

@@ -26,7 +26,9 @@ from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader, run_cycles, lossy_wire
+from support.virtual_bus import ScriptedReader
+
+from .conftest import run_cycles, lossy_wire
 
 NODE = 5
 #: a state byte outside CiA 301 (0x35 = 53), as a CAN tool sent it

@@ -19,7 +19,7 @@ from ssi_bridge.sim.gateway.gateway import XnGateway
 from ssi_bridge.protocol.registers import Reg
 from ssi_bridge.sim.module.xn1ssi import Xn1Ssi
 
-from .conftest import ScriptedReader
+from support.virtual_bus import ScriptedReader
 
 NODE = 5
 

@@ -87,13 +87,19 @@ class Probe:
         The time is the DDS source timestamp the writer puts on each sample, not this
         process's receive time: a probe starved on a busy machine takes a burst of samples at
         once, and the replay's pace is what the tests check.
+
+        Each call starts a new list (one subscription per topic, kept): a test that runs the
+        replay twice counts each run's messages apart.
         """
-        rx = self.got.setdefault(topic, [])
+        rx: list[tuple[float, JointState]] = []
+        fresh = topic not in self.got
+        self.got[topic] = rx
 
         def take(msg: JointState, info: dict[str, int]) -> None:
-            rx.append((info["source_timestamp"] / 1e9, msg))
+            self.got[topic].append((info["source_timestamp"] / 1e9, msg))
 
-        self.node.create_subscription(JointState, topic, take, RELIABLE)
+        if fresh:
+            self.node.create_subscription(JointState, topic, take, RELIABLE)
         return rx
 
     def call(self, srv_type: Any, name: str, request: Any, timeout: float = 20.0) -> Any:
@@ -154,44 +160,51 @@ def settle(rx: list, quiet: float = 0.5, timeout: float = 10.0) -> None:
 
 # -- options ---------------------------------------------------------------------------------
 
-@pytest.mark.parametrize(("args", "last"), [
-    (["--playback-duration", "0.5"], 50),
-    (["--start-offset", "0.2", "--playback-duration", "0.3"], 50),
-    (["--playback-until", "0.305"], 30),
-    (["--playback-until", f"{T0 // 10**9}.{(T0 + 255 * MS) % 10**9:09d}"], 25),
-    (["--playback-until-nsec", str(T0 + 700 * MS)], 70),
-])
-def test_playback_ends_at_the_message_at_or_before_the_end_time(one_s: Path, probe: Probe,
-                                                                  args: list[str],
-                                                                  last: int) -> None:
-    rx = probe.subscribe("/joint_states")
-    run(one_s, "--wait-for-subscribers", "20", "--quiet", *args)
-    settle(rx)
-    got = [index(m) for _, m in rx]
-    first = 20 if "--start-offset" in args else 0
-    assert got == list(range(first, last + 1)), got
-    span = rx[-1][0] - rx[0][0]
+def _played(first: int, last: int) -> tuple[dict[str, list[int]], tuple[float, float]]:
+    """One topic, /joint_states, played from message ``first`` to ``last``; its span bounds."""
     expected = (last - first) * PERIOD_NS / 1e9
-    assert 0.6 * expected < span < expected + 0.5, (span, expected)
+    return {"/joint_states": list(range(first, last + 1))}, (0.6 * expected, expected + 0.5)
 
 
-@pytest.mark.parametrize(("args", "arm", "base"), [
-    (["--exclude-topics", BASE], 30, 0),
-    (["--exclude-topics", BASE, "/not_in_the_bag"], 30, 0),
-    (["--exclude-topics", "/not_in_the_bag"], 30, 30),
-    (["--regex", "^/base/"], 0, 30),
-    (["--topics-regex", "joint_states$", "--exclude-regex", "arm"], 0, 30),
-    (["--topics", ARM, "--exclude-regex", "base"], 30, 0),
-])
-def test_topic_selection(two_topics: Path, probe: Probe, args: list[str], arm: int,
-                         base: int) -> None:
-    got_arm, got_base = probe.subscribe(ARM), probe.subscribe(BASE)
-    run(two_topics, "--wait-for-subscribers", "20", "--quiet", *args)
-    settle(got_arm if arm else got_base)
-    assert (len(got_arm), len(got_base)) == (arm, base)
-    played = got_arm or got_base
-    assert [index(m) for _, m in played] == list(range(30))
-    assert 0.15 < played[-1][0] - played[0][0] < 1.0, "29 periods of 10 ms"
+#: two topics: which of them played (all 30 messages each); 29 periods of 10 ms
+_BOTH = (0.15, 1.0)
+
+
+@pytest.mark.parametrize(("bag", "args", "played", "span"), [
+    ("one_s", ["--playback-duration", "0.5"], *_played(0, 50)),
+    ("one_s", ["--start-offset", "0.2", "--playback-duration", "0.3"], *_played(20, 50)),
+    ("one_s", ["--playback-until", "0.305"], *_played(0, 30)),
+    ("one_s", ["--playback-until", f"{T0 // 10**9}.{(T0 + 255 * MS) % 10**9:09d}"],
+     *_played(0, 25)),
+    ("one_s", ["--playback-until-nsec", str(T0 + 700 * MS)], *_played(0, 70)),
+    ("two_topics", ["--exclude-topics", BASE], {ARM: list(range(30)), BASE: []}, _BOTH),
+    ("two_topics", ["--exclude-topics", BASE, "/not_in_the_bag"],
+     {ARM: list(range(30)), BASE: []}, _BOTH),
+    ("two_topics", ["--exclude-topics", "/not_in_the_bag"],
+     {ARM: list(range(30)), BASE: list(range(30))}, _BOTH),
+    ("two_topics", ["--regex", "^/base/"], {ARM: [], BASE: list(range(30))}, _BOTH),
+    ("two_topics", ["--topics-regex", "joint_states$", "--exclude-regex", "arm"],
+     {ARM: [], BASE: list(range(30))}, _BOTH),
+    ("two_topics", ["--topics", ARM, "--exclude-regex", "base"],
+     {ARM: list(range(30)), BASE: []}, _BOTH),
+], ids=["duration", "offset_duration", "until_seconds", "until_sec_nsec", "until_nsec",
+        "exclude_topic", "exclude_topic_and_unknown", "exclude_unknown_only", "regex",
+        "regex_and_exclude_regex", "topics_and_exclude_regex"])
+def test_the_selection_options_play_exactly_the_selected_messages(
+        request: pytest.FixtureRequest, probe: Probe, bag: str, args: list[str],
+        played: dict[str, list[int]], span: tuple[float, float]) -> None:
+    """The end time (--playback-duration, --playback-until[-nsec]: the message at or before
+    it is the last) and the topic selection (--exclude-topics, --regex, --exclude-regex):
+    which messages each topic gets, in order, at the bag's pace. (Two functions before, the
+    end-time cases and the topic cases.)"""
+    rx = {topic: probe.subscribe(topic) for topic in played}
+    run(request.getfixturevalue(bag), "--wait-for-subscribers", "20", "--quiet", *args)
+    settle(next(rx[t] for t, want in played.items() if want))
+    assert {t: len(got) for t, got in rx.items()} == {t: len(w) for t, w in played.items()}
+    assert {t: [index(m) for _, m in got] for t, got in rx.items()} == played
+    some = next(got for got in rx.values() if got)
+    lo, hi = span
+    assert lo < some[-1][0] - some[0][0] < hi, (some[-1][0] - some[0][0], span)
 
 
 def test_a_selection_of_nothing_or_an_unknown_topic_is_refused(two_topics: Path) -> None:
@@ -204,17 +217,11 @@ def test_a_selection_of_nothing_or_an_unknown_topic_is_refused(two_topics: Path)
         assert out.returncode == 2 and match in out.stderr, (args, out.stderr)
 
 
-def test_a_running_subscriber_gets_the_first_message_without_asking(one_s: Path,
-                                                                    probe: Probe) -> None:
-    """#24 item 7: replay waits for subscribers by default (5 s), so none loses the start."""
-    rx = probe.subscribe("/joint_states")
-    out = run(one_s, "--quiet")
-    settle(rx)
-    assert [index(m) for _, m in rx] == list(range(100)), out.stderr
-    assert "playing anyway" not in out.stderr
-
-
-def test_the_default_wait_ends_after_5_s_and_0_turns_it_off(one_s: Path, probe: Probe) -> None:
+def test_the_wait_for_subscribers_5_s_by_default_0_off_and_a_subscriber_gets_the_first(
+        one_s: Path, probe: Probe) -> None:
+    """#24 item 7: replay waits for subscribers by default (5 s), so none loses the start;
+    without one it plays anyway after 5 s; 0 turns the wait off. (Two functions before: the
+    runs without a subscriber first, then with the probe's.)"""
     began = time.monotonic()
     waited = run(one_s, "--quiet", "--playback-duration", "0.05")
     assert "no subscriber on /joint_states after 5.0 s; playing anyway" in waited.stderr
@@ -223,8 +230,14 @@ def test_the_default_wait_ends_after_5_s_and_0_turns_it_off(one_s: Path, probe: 
     assert "playing anyway" not in off.stderr and "replayed 6 messages" in off.stdout
     assert "[R]" not in off.stderr and "\r" not in off.stderr, "no progress line off a terminal"
 
+    rx = probe.subscribe("/joint_states")
+    out = run(one_s, "--quiet")
+    settle(rx)
+    assert [index(m) for _, m in rx] == list(range(100)), out.stderr
+    assert "playing anyway" not in out.stderr
 
-def test_foxglove_view_and_ros_publishing_together(one_s: Path, probe: Probe) -> None:
+
+def _foxglove_view_and_ros_publishing_together(one_s: Path, probe: Probe) -> None:
     import socket
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -365,7 +378,7 @@ def in_a_terminal(args: list[str]) -> Iterator[tuple[subprocess.Popen, Screen, i
         os.close(master)
 
 
-def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe) -> None:
+def _the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe) -> None:
     rx = probe.subscribe("/joint_states")
     args = command(four_s, "--start-paused", "--wait-for-subscribers", "20")
     with in_a_terminal(args) as (proc, screen, master, slave, settings):
@@ -400,8 +413,7 @@ def test_the_keys_in_a_terminal_and_the_progress_line(four_s: Path, probe: Probe
     assert "[E]" in screen.text and "replayed 400 messages" in screen.text, screen.text[-500:]
 
 
-def test_ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four_s: Path,
-                                                                            probe: Probe) -> None:
+def _ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four_s: Path) -> None:
     args = command(four_s, "--wait-for-subscribers", "0")
     with in_a_terminal(args) as (proc, screen, master, slave, settings):
         wait_for(screen.shows(r"^\[R\]"), 30, "the progress line, running")
@@ -411,8 +423,8 @@ def test_ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four
     assert "Traceback" not in screen.text, screen.text[-2000:]
 
 
-def test_sigint_stops_the_replay_with_exit_0_like_ros2_bag_play(four_s: Path,
-                                                                probe: Probe) -> None:
+def _sigint_stops_the_replay_with_exit_0_like_ros2_bag_play(four_s: Path,
+                                                            probe: Probe) -> None:
     """kill -INT (what ``ros2 run`` and ``ros2 launch`` forward): exit 0, no traceback, and
     what was published before reaches the subscriber. The child gets SIGINT's default back
     (test/conftest.py's preexec_fn): a background job starts with it ignored."""
@@ -434,7 +446,7 @@ def test_sigint_stops_the_replay_with_exit_0_like_ros2_bag_play(four_s: Path,
     assert 50 <= len(rx) < 400 and indices(rx) == list(range(len(rx))), indices(rx)[-5:]
 
 
-def test_loop_plays_the_selection_again_from_the_start_offset(one_s: Path, probe: Probe) -> None:
+def _loop_plays_the_selection_again_from_the_start_offset(one_s: Path, probe: Probe) -> None:
     rx = probe.subscribe("/joint_states")
     proc = subprocess.Popen(command(one_s, "--quiet", "--loop", "--start-offset", "0.5",
                                     "--playback-duration", "0.2", "--wait-for-subscribers", "20"),
@@ -448,7 +460,7 @@ def test_loop_plays_the_selection_again_from_the_start_offset(one_s: Path, probe
     assert proc.returncode == 0 and "stopped after" in err, err
 
 
-def test_disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None:
+def _disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None:
     rx = probe.subscribe("/joint_states")
     args = command(four_s, "--start-paused", "--disable-keyboard-controls",
                    "--wait-for-subscribers", "20")
@@ -459,3 +471,30 @@ def test_disabled_keys_leave_the_input_alone(four_s: Path, probe: Probe) -> None
         assert not rx and screen.shows(r"^\[P\] .* 0 msgs")(), screen.last_line()
         assert "keys:" not in screen.text
         assert termios.tcgetattr(slave)[3] & termios.ICANON, "the terminal stays line-buffered"
+
+
+# -- the test functions of the parts above that run one after the other on one probe ----------
+# (each part was a test function of its own; merged so that one DDS domain and probe serve
+# both, every assertion kept: docs/testing.md)
+
+def test_a_replay_that_waits_at_the_end_or_loops_stops_on_sigterm_with_exit_0(
+        one_s: Path, probe: Probe) -> None:
+    """--foxglove-port keeps the replay waiting at the end, --loop plays the selection again
+    from the start offset; SIGTERM ends either with exit 0, as ``ros2 bag play``."""
+    _foxglove_view_and_ros_publishing_together(one_s, probe)
+    _loop_plays_the_selection_again_from_the_start_offset(one_s, probe)
+
+
+def test_sigint_or_ctrl_c_in_a_terminal_stops_the_replay_with_exit_0(four_s: Path,
+                                                                     probe: Probe) -> None:
+    """kill -INT and the terminal's Ctrl-C: exit 0 and no traceback, as ``ros2 bag play``."""
+    _sigint_stops_the_replay_with_exit_0_like_ros2_bag_play(four_s, probe)
+    _ctrl_c_in_the_terminal_ends_the_replay_and_gives_the_terminal_back(four_s)
+
+
+def test_the_keys_in_a_terminal_and_the_progress_line_or_none_when_disabled(
+        four_s: Path, probe: Probe) -> None:
+    """The keys (space, →, ↑, ↓) and the progress line; --disable-keyboard-controls leaves the
+    input alone and the terminal line-buffered."""
+    _the_keys_in_a_terminal_and_the_progress_line(four_s, probe)
+    _disabled_keys_leave_the_input_alone(four_s, probe)

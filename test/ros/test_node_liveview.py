@@ -115,10 +115,42 @@ def stamp_ns(header: Any) -> int:
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
-def test_joint_states_decode_with_the_advertised_schema_at_the_published_rate(running, probe):
+def test_every_topic_is_streamed_and_joint_states_decode_with_the_advertised_schema(running,
+                                                                                    probe):
+    """One node with the live view on: every topic streamed with its schema and the
+    subscriptions counted in the bus diagnostics, then joint_states of two joints decoded at
+    the published rate, the same messages as over DDS. (Two tests before, each on a node of
+    its own: the default one and ``lift``/``tilt`` at 100 Hz; one node of the latter now,
+    so the ~/status channels are ``lift``/``tilt`` instead of ``joint1``; every check kept.)"""
     port = free_port()
     node = running({"publish_rate": 100.0, "foxglove.port": port, "joints": ["lift", "tilt"]})
     over_dds = probe.subscribe(JointState, node.topic("joint_states"), qos=500)
+    topics = ["/joint_states", node.topic("~/status"), "/diagnostics", node.topic("~/events")]
+
+    def trigger_event() -> None:
+        reply = probe.call(ReadRegister, node.topic("~/read_register"),
+                           ReadRegister.Request(address=34))
+        assert reply.success, reply.message
+
+    def one_of_each(rx: list[Received]) -> bool:
+        return {r.topic for r in rx} == set(topics) and any(
+            kv.key == "liveview_subscriptions" and int(kv.value) == 4
+            for r in rx if r.topic == "/diagnostics" for s in r.msg.status for kv in s.values)
+
+    client, rx = stream(port, topics, one_of_each, on_subscribed=trigger_event)
+
+    assert {t: client.channels[t]["schemaName"] for t in topics} == {
+        "/joint_states": "sensor_msgs/msg/JointState",
+        node.topic("~/status"): "ssi_bridge_msgs/msg/Status",
+        "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+        node.topic("~/events"): "ssi_bridge_msgs/msg/Event"}
+    status = next(r.msg for r in rx if r.topic == node.topic("~/status"))
+    assert [c.joint for c in status.channels] == ["lift", "tilt"]
+    event = next(r.msg for r in rx if r.topic == node.topic("~/events"))
+    assert event.kind == "read_register" and event.success
+    bus = next(s for r in rx if r.topic == "/diagnostics" for s in r.msg.status
+               if s.name == "/ssi_bridge: bus")
+    assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == str(port)
 
     def one_second_after_first(rx: list[Received]) -> bool:
         return bool(rx) and rx[-1].at - rx[0].at >= 1.0
@@ -148,37 +180,6 @@ def test_joint_states_decode_with_the_advertised_schema_at_the_published_rate(ru
         assert list(r.msg.position) == list(dds.position)
         assert [v if math.isfinite(v) else None for v in r.msg.velocity] == \
                [v if math.isfinite(v) else None for v in dds.velocity]
-
-
-def test_every_topic_is_streamed_and_diagnostics_count_the_subscriptions(running, probe):
-    port = free_port()
-    node = running({"foxglove.port": port})
-    topics = ["/joint_states", node.topic("~/status"), "/diagnostics", node.topic("~/events")]
-
-    def trigger_event() -> None:
-        reply = probe.call(ReadRegister, node.topic("~/read_register"),
-                           ReadRegister.Request(address=34))
-        assert reply.success, reply.message
-
-    def one_of_each(rx: list[Received]) -> bool:
-        return {r.topic for r in rx} == set(topics) and any(
-            kv.key == "liveview_subscriptions" and int(kv.value) == 4
-            for r in rx if r.topic == "/diagnostics" for s in r.msg.status for kv in s.values)
-
-    client, rx = stream(port, topics, one_of_each, on_subscribed=trigger_event)
-
-    assert {t: client.channels[t]["schemaName"] for t in topics} == {
-        "/joint_states": "sensor_msgs/msg/JointState",
-        node.topic("~/status"): "ssi_bridge_msgs/msg/Status",
-        "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-        node.topic("~/events"): "ssi_bridge_msgs/msg/Event"}
-    status = next(r.msg for r in rx if r.topic == node.topic("~/status"))
-    assert [c.joint for c in status.channels] == ["joint1"]
-    event = next(r.msg for r in rx if r.topic == node.topic("~/events"))
-    assert event.kind == "read_register" and event.success
-    bus = next(s for r in rx if r.topic == "/diagnostics" for s in r.msg.status
-               if s.name == "/ssi_bridge: bus")
-    assert dict((kv.key, kv.value) for kv in bus.values)["liveview_port"] == str(port)
 
 
 def test_default_address_refuses_clients_of_other_hosts(start_node, probe):

@@ -51,6 +51,8 @@ def test_a_default_start_and_stop_print_no_warning_and_no_doubled_names(start_no
     parsed = lines(log)
     assert parsed, log
     assert [p for p in parsed if p[0] != "INFO"] == [], log
+    # one joint at 100 Hz fits 500 kbit/s (from test_node_time.py's wire-rate test, merged)
+    assert "does not fit the CAN wire" not in log
     # logger names: the module is the logger, never repeated in brackets inside the message
     assert not [p for p in parsed if p[2].startswith("[")], log
     assert any(name == "ssi_bridge.client.master" for _, name, _ in parsed), log

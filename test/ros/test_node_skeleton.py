@@ -20,8 +20,33 @@ RATE = 50.0
 SPEED_REV_S = 0.25  # default motion.velocity of the simulated joint
 
 
-def test_joint_states_rate_name_stamps_and_speed(running, probe):
-    node = running({"publish_rate": RATE, "joints": ["wrist"]})
+def test_register_services_over_the_handshake(running, probe):
+    node = running()
+    magic = probe.call(ReadRegister, node.topic("~/read_register"),
+                       ReadRegister.Request(address=1))
+    assert magic.success, magic.message
+    assert magic.value == 0xAA55CC33, f"REG_MAGIC_NO read 0x{magic.value:08X}"
+
+    wrote = probe.call(WriteRegister, node.topic("~/write_register"),
+                       WriteRegister.Request(address=34, value=0x12345678))
+    assert wrote.success, wrote.message
+    back = probe.call(ReadRegister, node.topic("~/read_register"),
+                      ReadRegister.Request(address=34))
+    assert back.success and back.value == 0x12345678, back.message
+
+    refused = probe.call(WriteRegister, node.topic("~/write_register"),
+                         WriteRegister.Request(address=0, value=5))
+    assert not refused.success
+    assert "read-only" in refused.message and "REG_SSI_POS" in refused.message, refused.message
+
+
+def test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_joint(running,
+                                                                                  probe):
+    """One joint's ~joint_states and its /diagnostics status. (Two tests before, each on a
+    node of its own with one joint: ``wrist`` at 50 Hz, ``elbow`` with diagnostics_period
+    0.5; one node with both settings now, every check kept.)"""
+    node = running({"publish_rate": RATE, "joints": ["wrist"], "diagnostics_period": 0.5})
+    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(msgs) >= 5, 10.0, "joint_states", node)
     start = len(msgs)
@@ -43,35 +68,10 @@ def test_joint_states_rate_name_stamps_and_speed(running, probe):
     assert moved / dt == pytest.approx(expected, rel=0.05), "position must follow the sim speed"
     assert last.velocity[0] == pytest.approx(expected, rel=0.05)
 
-
-def test_register_services_over_the_handshake(running, probe):
-    node = running()
-    magic = probe.call(ReadRegister, node.topic("~/read_register"),
-                       ReadRegister.Request(address=1))
-    assert magic.success, magic.message
-    assert magic.value == 0xAA55CC33, f"REG_MAGIC_NO read 0x{magic.value:08X}"
-
-    wrote = probe.call(WriteRegister, node.topic("~/write_register"),
-                       WriteRegister.Request(address=34, value=0x12345678))
-    assert wrote.success, wrote.message
-    back = probe.call(ReadRegister, node.topic("~/read_register"),
-                      ReadRegister.Request(address=34))
-    assert back.success and back.value == 0x12345678, back.message
-
-    refused = probe.call(WriteRegister, node.topic("~/write_register"),
-                         WriteRegister.Request(address=0, value=5))
-    assert not refused.success
-    assert "read-only" in refused.message and "REG_SSI_POS" in refused.message, refused.message
-
-
-def test_diagnostics_ok_for_the_joint(running, probe):
-    node = running({"joints": ["elbow"], "diagnostics_period": 0.5})
-    diags = probe.subscribe(DiagnosticArray, "/diagnostics")
-
     def joint_status():
         for _, arr in reversed(diags):
             for st in arr.status:
-                if st.name == "/ssi_bridge: elbow":
+                if st.name == "/ssi_bridge: wrist":
                     return st
         return None
 

@@ -87,7 +87,7 @@ def metadata(bag: Path) -> dict[str, Any]:
     return yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
 
 
-def test_twenty_seconds_split_every_five_give_four_or_five_files(session) -> None:  # type: ignore[no-untyped-def]
+def _twenty_seconds_split_every_five_give_four_or_five_files(session: dict[str, Any]) -> None:
     bag: Path = session["bag"]
     info = metadata(bag)
     files = info["relative_file_paths"]
@@ -102,7 +102,7 @@ def test_twenty_seconds_split_every_five_give_four_or_five_files(session) -> Non
     assert not log_time_disorder(bag), "every file of the session in log-time order"
 
 
-def test_rosbags_and_mcap_ros2_counts_equal_metadata_and_the_subscriber(session) -> None:  # type: ignore[no-untyped-def]
+def _rosbags_and_mcap_ros2_counts_equal_metadata_and_the_subscriber(session: dict[str, Any]) -> None:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
@@ -128,7 +128,7 @@ def test_rosbags_and_mcap_ros2_counts_equal_metadata_and_the_subscriber(session)
     assert recorded == window, "same stamps, same order, across every split"
 
 
-def test_replay_of_the_split_bag_delivers_every_message_in_order(session) -> None:  # type: ignore[no-untyped-def]
+def _replay_of_the_split_bag_delivers_every_message_in_order(session: dict[str, Any]) -> None:
     node: NodeProcess = session["node"]
     probe: RosProbe = session["probe"]
     topic = node.topic("joint_states")
@@ -150,6 +150,15 @@ def test_replay_of_the_split_bag_delivers_every_message_in_order(session) -> Non
     assert f"replayed {len(recorded)} messages" in out, out
     probe.wait_for(lambda: len(got) >= len(recorded), 10.0, "every replayed message")
     assert [stamp_ns(m) for _, m in got] == recorded
+
+
+def test_a_session_split_every_five_seconds_reads_back_whole(session) -> None:  # type: ignore[no-untyped-def]
+    """The one recorded session: its files and metadata.yaml, the same counts in rosbags,
+    mcap-ros2-support and the live subscriber, and a replay of it in order. (Three test
+    functions of the one session before, merged: each check kept, in the same order.)"""
+    _twenty_seconds_split_every_five_give_four_or_five_files(session)
+    _rosbags_and_mcap_ros2_counts_equal_metadata_and_the_subscriber(session)
+    _replay_of_the_split_bag_delivers_every_message_in_order(session)
 
 
 def digest(path: Path) -> str:

@@ -50,22 +50,13 @@ def test_use_sim_time_without_clock_publishes_nothing_then_follows_clock(start_n
     assert node.log().count("waiting for /clock") == 1
 
 
-def test_a_rate_the_wire_cannot_carry_is_warned_with_the_rate_that_fits(running, probe):
-    from ssi_bridge.protocol import wire
-
-    joints = [f"axis{i}" for i in range(1, 5)]
-    node = running({"joints": joints, "publish_rate": 1000.0, "bus.bitrate": 500_000})
-    best = wire.max_cycle_rate(4, 500_000)
-    assert f"the highest rate that fits is {best:g} Hz" in node.log(), node.log()[-2000:]
-    assert "publish_rate 1000 Hz does not fit the CAN wire" in node.log()
-    quiet = running({"joints": ["a"], "publish_rate": 100.0, "bus.bitrate": 500_000})
-    assert "does not fit the CAN wire" not in quiet.log()
-
-
 @pytest.mark.parametrize("transport", ["virtual", "udp_multicast"])
-def test_a_rate_the_wire_cannot_carry_runs_complete_cycles_at_the_rate_that_does(
+def test_a_rate_the_wire_cannot_carry_is_warned_and_runs_complete_cycles_at_the_rate_that_does(
         running, probe, transport, tmp_path):
     """8 slots at 1 kHz on 500 kbit/s: one cycle takes ~3 ms of wire (docs/canopen.md).
+
+    The start warns with the highest rate that fits (the default start, one joint at 100 Hz,
+    warns nothing: test_node_logs.py). (Merged: a test of its own before, on 4 slots.)
 
     The master does not send a SYNC while the cycle's TPDOs are still on the wire, so the
     cycles it runs are complete and published, and the measured bus load stays physical.
@@ -82,6 +73,9 @@ def test_a_rate_the_wire_cannot_carry_runs_complete_cycles_at_the_rate_that_does
                     "diagnostics_period": 0.5, "record.enabled": True,
                     "record.root": str(tmp_path / "rec"), "record.path": "cycles"})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics", qos=100)
+    best = wire.max_cycle_rate(8, 500_000)
+    assert f"the highest rate that fits is {best:g} Hz" in node.log(), node.log()[-2000:]
+    assert "publish_rate 1000 Hz does not fit the CAN wire" in node.log()
     time.sleep(2.0)  # start-up and the load meter's first second
     window = time.time_ns()  # header.stamp is the SYNC's wire time: ROS (system) time
     time.sleep(4.0)

@@ -45,12 +45,20 @@ def wire(channel: str, domain_id: int) -> str:
     return station_channel(channel, domain_id)
 
 
-@pytest.mark.parametrize("seconds", [0.5, 2.0])
-def test_a_stalled_station_never_publishes_an_old_latch(running, probe, channel, seconds):
+@pytest.mark.parametrize("seconds, queueing", [(0.5, False), (2.0, False), (1.0, True)],
+                         ids=["stall_0.5s", "stall_2s", "queue_backlog_stall_1s"])
+def test_a_stalled_station_never_publishes_an_old_latch(running, probe, channel, seconds,
+                                                        queueing):
     """The station process is paused (SIGSTOP) and resumed: its controller kept a few frames,
     it handles them late and answers; no answer is published under a stamp it was not
-    latched at, the stall shows, and the joint is published again."""
+    latched at, the stall shows, and the joint is published again.
+
+    ``queueing``: a device that queues every SYNC (fault QUEUE_BACKLOG) answers a 1 s stall's
+    backlog in a burst, each answer latched at its own SYNC: a surplus in the windows, set
+    aside until it is in step. (A test function of its own before, on the same node.)"""
     run = Run(running, probe, params(channel))
+    if queueing:
+        inject(probe, run.node, kind=K.QUEUE_BACKLOG)
     time.sleep(0.5)
     station = station_pid(run.node)
     t0, w0 = time.monotonic(), time.time()
@@ -62,33 +70,16 @@ def test_a_stalled_station_never_publishes_an_old_latch(running, probe, channel,
     t1, w1 = time.monotonic(), time.time()
     run.published_again(t1 + 0.5)
     time.sleep(1.0)
-    run.check(f"stall_{seconds:g}s", t0)
-    assert run.set_aside_during(w0, w1) & {"no answer"}, "~/status says why during the stall"
-    after = run.diagnostics_after(t0)
-    assert after is not None and after <= 0.2, f"/diagnostics said so {after} s after the cycle"
-    assert run.worst_level_during(t0, t1 + 0.5) > DiagnosticStatus.OK
-
-
-def test_a_queueing_station_answering_its_backlog_never_publishes_an_old_latch(
-        running, probe, channel):
-    """A device that queues every SYNC answers a 1 s stall's backlog in a burst, each answer
-    latched at its own SYNC: a surplus in the windows, set aside until it is in step."""
-    run = Run(running, probe, params(channel))
-    inject(probe, run.node, kind=K.QUEUE_BACKLOG)
-    time.sleep(0.5)
-    station = station_pid(run.node)
-    t0 = time.monotonic()
-    os.kill(station, signal.SIGSTOP)
-    try:
-        time.sleep(1.0)
-    finally:
-        os.kill(station, signal.SIGCONT)
-    t1, w1 = time.monotonic(), time.time()
-    run.published_again(t1 + 0.5)
-    time.sleep(1.0)
-    run.check("queue_backlog_stall_1s", t0)
-    reasons = run.set_aside_during(w1 - 1.0, w1 + 1.0)
-    assert reasons, "the backlog's cycles are set aside"
+    run.check(f"queue_backlog_stall_{seconds:g}s" if queueing else f"stall_{seconds:g}s", t0)
+    if queueing:
+        reasons = run.set_aside_during(w1 - 1.0, w1 + 1.0)
+        assert reasons, "the backlog's cycles are set aside"
+    else:
+        assert run.set_aside_during(w0, w1) & {"no answer"}, "~/status says why during the stall"
+        after = run.diagnostics_after(t0)
+        assert after is not None and after <= 0.2, \
+            f"/diagnostics said so {after} s after the cycle"
+        assert run.worst_level_during(t0, t1 + 0.5) > DiagnosticStatus.OK
 
 
 # 10 Hz: test/core/test_inprocess_truth.py; 1000 Hz here, for /diagnostics within 0.2 s
