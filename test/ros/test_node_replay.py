@@ -76,11 +76,17 @@ def test_replayed_log_publishes_the_recorded_positions(recorded_log, start_node,
 
     replayed = [m for _, m in msgs]
     counts = [_counts(m.position[0]) for m in replayed]
-    # every replayed position was published by the simulated node (same REG_SSI_POS, scale)
-    inside = [c for c in counts if min(simulated) <= c <= max(simulated)]
-    missing = [c for c in inside if c not in simulated]
+    # every position the simulated node published while the log plays is replayed (same
+    # REG_SSI_POS, same scale). Not the other way round: on a busy machine the live node
+    # leaves out a cycle whose frames its cycle thread did not see within the cycle's wait,
+    # while the replay, deciding from the logged frames alone, may vouch for it
     assert len(replayed) >= 150, f"only {len(replayed)} replayed cycles"
+    replayed_counts = set(counts)
+    inside = [c for c in simulated if min(counts) <= c <= max(counts)]
+    missing = sorted(c for c in inside if c not in replayed_counts)
     assert len(inside) >= 50 and len(missing) <= 2, (len(inside), missing[:10])
+    # the shaft turns one way at constant speed: each replayed sample is ahead of the last
+    assert all(b > a for a, b in zip(counts, counts[1:])), "replayed positions out of order"
     # at the logged rate (100 Hz), stamped with the logged SYNC spacing
     stamps = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in replayed]
     spacing = statistics.median(b - a for a, b in zip(stamps, stamps[1:]))
