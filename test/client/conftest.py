@@ -69,8 +69,11 @@ def udp_station(request: pytest.FixtureRequest):
                                         "bus.interface": "udp_multicast",
                                         "bus.channel": channel}))
     station.start()
+    # the station runs in this process: beside four test workers and two CPU burners its SDO
+    # server can take longer than the driver's 0.5 s default to answer the configuration
+    # (these tests are about hostile frames, not about the SDO bound)
     client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1,
-                          opener=wire_bus)
+                          opener=wire_bus, sdo_timeout=2.0)
     try:
         client.connect()
         yield channel, station, client
