@@ -46,9 +46,13 @@ from canopen.sdo.client import SdoClient
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 
-def subscribers(network: canopen.Network, can_id: int) -> list[Callable[..., Any]]:
+#: a callback canopen's network calls for a frame: (COB-ID, data, timestamp)
+Subscriber = Callable[[int, bytearray, float], None]
+
+
+def subscribers(network: canopen.Network, can_id: int) -> list[Subscriber]:
     """The callbacks subscribed to ``can_id`` (the network's own list: do not change it)."""
-    found: list[Callable[..., Any]] = network.subscribers.get(can_id, [])
+    found: list[Subscriber] = network.subscribers.get(can_id, [])
     return found
 
 
@@ -57,9 +61,9 @@ def set_eds_default(var: ODVariable, text: str) -> None:
     var.default_raw = text  # type: ignore[attr-defined]  # undeclared in canopen
 
 
-def pdo_handler(node: canopen.RemoteNode, tpdo: int) -> Callable[..., Any]:
+def pdo_handler(node: canopen.RemoteNode, tpdo: int) -> Subscriber:
     """The handler TPDO ``tpdo`` of ``node`` subscribes to its COB-ID when saved."""
-    handler: Callable[..., Any] = node.tpdo[tpdo].on_message
+    handler: Subscriber = node.tpdo[tpdo].on_message
     return handler
 
 

@@ -19,8 +19,10 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.context import Context
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from sensor_msgs.msg import JointState
 from ssi_bridge_msgs.msg import Status
 
@@ -61,7 +63,9 @@ class SsiBridgeNode(LifecycleNode):
     open); off, it returns unconfigured with nothing open.
 
     :param stop: ends the process's spin cleanly (default: shuts the context down)
-    :param kwargs: rclpy ``Node``'s (``parameter_overrides``, ``context`` ...)
+    :param autostart: the default of the ``autostart`` parameter
+    :param parameter_overrides: parameters given in code, as rclpy ``Node`` takes them
+    :param context: the rclpy context (default: the global one)
     :raises ConfigError: a parameter is invalid; with autostart also what configure or
         activate failed on (SsiBridgeError, OSError)
 
@@ -72,8 +76,10 @@ class SsiBridgeNode(LifecycleNode):
     """
 
     def __init__(self, stop: Callable[[], None] | None = None, autostart: bool = True,
-                 **kwargs: Any) -> None:
-        super().__init__("ssi_bridge", **kwargs)
+                 parameter_overrides: list[Parameter] | None = None,
+                 context: Context | None = None) -> None:
+        super().__init__("ssi_bridge", parameter_overrides=parameter_overrides,
+                         context=context)
         self._request_stop = stop or self.context.try_shutdown
         logbridge.install(self.get_logger())
         autostart = declare_autostart(self, autostart)
@@ -319,7 +325,7 @@ class SsiBridgeNode(LifecycleNode):
         if self.settings.replay_exit_at_end:
             self._request_stop()
 
-    def publish_safe(self, publisher: Any, msg: Any) -> bool:
+    def publish_safe(self, publisher: Publisher, msg: object) -> bool:
         """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
         try:
             publisher.publish(msg)

@@ -25,6 +25,8 @@ from contextlib import ExitStack
 from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.executors import Executor
+from rclpy.task import Task
 from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
@@ -68,10 +70,11 @@ def parameter_overrides(node: Any) -> dict[str, Any]:
     return given
 
 
-def executor_tasks(executor: Any) -> list[Any]:
+def executor_tasks(executor: Executor) -> list[Task]:
     """The tasks (callbacks) ``executor`` has started and not yet dropped (AttributeError on
     an rclpy that keeps them elsewhere)."""
-    return list(executor._futures)
+    tasks: list[Task] = list(executor._futures)  # type: ignore[attr-defined]  # private
+    return tasks
 
 
 __all__ = ["RCLError", "RcutilsLogger", "executor_tasks", "parameter_overrides",

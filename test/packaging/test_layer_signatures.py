@@ -28,20 +28,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / "ssi_bridge"
 
-#: what tools/ calls of ros/ that still carries ``Any`` (ros/ was recomposed by other work;
-#: these are its last). The list only shrinks: a name that no longer carries ``Any`` must
-#: leave it (test_the_exemptions_are_still_needed).
-ROS_EXEMPT: frozenset[str] = frozenset({
-    "ssi_bridge.ros.node.SsiBridgeNode",  # **kwargs, publish_safe(publisher, msg)
-    "ssi_bridge.ros.rclpy_compat.executor_tasks",  # rclpy's executor and its tasks
-})
-#: base/canopen_compat.py is being reworked into base/'s one canopen integration point (not
-#: edited here); canopen's subscriber callbacks are ``Callable[..., Any]`` there until then.
-CANOPEN_SEAM_EXEMPT: frozenset[str] = frozenset({
-    "ssi_bridge.base.canopen_compat.pdo_handler",
-    "ssi_bridge.base.canopen_compat.subscribers",
-})
-EXEMPT = ROS_EXEMPT | CANOPEN_SEAM_EXEMPT
+#: names allowed to carry ``Any`` across a layer: none (the last, in ros/ and in
+#: base/canopen_compat.py, were typed). Kept so that an exemption is a visible decision here.
+EXEMPT: frozenset[str] = frozenset()
 
 
 @dataclass
@@ -239,9 +228,6 @@ def test_no_any_in_cross_layer_signatures() -> None:
 
 def test_the_exemptions_are_still_needed() -> None:
     """The exemption lists name only their own folder and only names that still carry Any."""
-    assert all(name.startswith("ssi_bridge.ros.") for name in ROS_EXEMPT), ROS_EXEMPT
-    assert all(name.startswith("ssi_bridge.base.canopen_compat.")
-               for name in CANOPEN_SEAM_EXEMPT), CANOPEN_SEAM_EXEMPT
     stale = sorted(EXEMPT - set(_violations()))
     assert not stale, f"no longer carry Any (remove them from the exemptions): {stale}"
 
