@@ -92,6 +92,7 @@ def test_a_second_sync_producer_never_publishes_a_foreign_latch(running, probe, 
     run = Run(running, probe, params(channel))
     stop = threading.Event()
     t0 = time.monotonic()
+    run.phase(f"foreign SYNC {rate:g} Hz")
     try:
         sent = foreign_syncs(wire, rate, seconds, stop)
     finally:

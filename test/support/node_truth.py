@@ -169,6 +169,9 @@ class Run:
         self.phases.append((time.time(), name))
 
     def _phases_of(self, report: Any) -> str:
+        if not self.phases:  # a case that named no phase: nothing to say where they fell
+            return ""
+
         def of(stamp: float) -> str:
             return next((f"{name} +{stamp - t:.3f} s" for t, name in reversed(self.phases)
                          if t <= stamp), "before any disturbance")

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -304,6 +305,16 @@ class XnGateway:
         """
         return self.clock.at(timestamp) if timestamp else self.clock()
 
+    def _await_readout(self, end: float) -> None:
+        """Wait until model time ``end``, the end of this cycle's SSI reads: the TPDOs carry
+        their result, so a firmware sends them after it, never before. A latch is later than
+        its SYNC's handling time when SYNCs come faster than the reads (handled back to back:
+        ``_next_latch``); answering such a SYNC at once would put on the wire, ahead of its
+        own instant, a position the shaft reaches only later."""
+        wait = end - self.clock()
+        if wait > 0:
+            time.sleep(wait)
+
     def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._lock:
             state = self.node.nmt.state
@@ -322,6 +333,8 @@ class XnGateway:
             self._next_latch = max((r.end_time for m in self.modules
                                     if (r := m.last_readout) is not None), default=t) + SSI_REST_S
             self.cycles += 1
+            if operational:
+                self._await_readout(self._next_latch - SSI_REST_S)
             emergencies = self.emergencies
             if emergencies.overrun_active:
                 emergencies.overrun_over(may_send=True)  # the FIFO took this SYNC

@@ -187,3 +187,47 @@ def test_an_answer_goes_on_the_wire_when_it_is_ready_never_before() -> None:
     # a newer SYNC on the wire: no answer to the older one (CiA 301 synchronous window)
     wire.observe(ready + 0.5, sync=True)
     assert not wire.claim_all([tpdo], ready + 0.6, answering=sync_end)
+
+
+def test_syncs_faster_than_the_ssi_reads_are_answered_after_their_reads_never_before(
+        channel: str) -> None:
+    # Another producer's SYNCs in a burst (a starved sender catching up on its rate): the
+    # gateway handles them back to back, each latch after the previous cycle's SSI reads and
+    # their rest (gateway.SSI_REST_S), so the latches fall behind the SYNCs. An answer carries
+    # its cycle's REG_SSI_POS: it goes on the wire after that read, so no position on the wire
+    # is the shaft's at an instant after the frame's own wire time (a master holds a sample
+    # to the window between its SYNC and its first frame, docs/node.md "Which cycle a TPDO
+    # answers"). Before the fix a burst of 40 put positions 3-7 ms ahead on the wire.
+    from ssi_bridge.client.master import BridgeClient
+    from support.truth import TruthOracle
+
+    values = {"joints": ["j"], "j.slot": 1, "j.motion.velocity": VELOCITY,
+              "bus.interface": "udp_multicast", "bus.channel": channel}
+    station = Station(station_settings(values))
+    station.start()
+    client = BridgeClient(BusConfig(interface="udp_multicast", channel=channel), 1, 1,
+                          opener=wire_bus)
+    master = open_udp_bus(channel)
+    try:
+        client.connect()  # OPERATIONAL, TPDO1 (image) and TPDO9 (positions) on SYNC
+        client.close()
+        oracle = TruthOracle.from_params(values, station.model_clock.epoch)
+        for _ in range(40):  # unstamped: on the wire when received, back to back
+            master.send(can.Message(arbitration_id=0x080, is_extended_id=False))
+        positions = []
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            msg = master.recv(0.1)
+            if msg is not None and msg.arbitration_id == 0x1E1:
+                positions.append((frame_wire_time(msg), int.from_bytes(msg.data[:4], "little",
+                                                                        signed=True)))
+        assert positions, "the burst was answered"
+        scale = oracle.joints["j"].scale
+        ahead = [(t, oracle.residual("j", t, scale.position(counts)))
+                 for t, counts in positions]
+        # residual > 0: the position the shaft reaches after the frame's wire time
+        assert max(r for _, r in ahead) <= 1.0, [f"{r:+.0f}" for _, r in ahead]
+    finally:
+        master.shutdown()
+        client.close()
+        station.stop()
