@@ -52,7 +52,15 @@ def take_bus(source: BusConfig | can.BusABC | None, owner: str,
              opener: Callable[[BusConfig], can.BusABC] = open_python_can) -> can.BusABC:
     """The bus a master, listener or gateway runs on: ``opener``'s for a config, or the one
     handed over. A handed-over bus belongs to its taker, which shuts it down when it stops;
-    so it can be taken once. ``owner`` ("this master", ...) names the taker in the error."""
+    so it can be taken once. ``owner`` ("this master", ...) names the taker in the error.
+
+    :param source: a bus configuration, a bus handed over, or None once the handed-over bus
+        was taken
+    :param opener: opens the bus of a configuration
+    :returns: the open bus
+    :raises BusError: ``source`` is None (the handed-over bus was taken and shut down), or
+        what ``opener`` raises for a bus it cannot open
+    """
     if isinstance(source, BusConfig):
         return opener(source)
     if source is None:

@@ -46,7 +46,11 @@ def recv_step(bus: can.BusABC, timeout: float | None) -> can.Message | None:
 
 
 def recv_step_unfiltered(bus: can.BusABC, timeout: float | None) -> can.Message | None:
-    """One receive step of ``bus`` that neither bus filters (the caller checked)."""
+    """One receive step of ``bus`` that neither bus filters (the caller checked).
+
+    :param timeout: at most this long (s; None: until a frame comes)
+    :returns: the frame received, None when ``timeout`` passed
+    """
     return bus._recv_internal(timeout)[0]
 
 

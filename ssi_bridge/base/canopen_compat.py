@@ -147,6 +147,9 @@ class CheckedRemoteNode(canopen.RemoteNode):
     ``add_sdo`` before its PDO maps bind their communication and mapping records to that
     client, so every SDO transfer of the node, the PDO set-up's too, is checked.
 
+    :param node_id: the remote node's id (1-127)
+    :param dictionary: its object dictionary
+    :param timeout: the SDO response timeout (s) of each channel
     :param judge: makes the judge of one channel (called once per channel)
     :param on_stale: told of every frame set aside, on the thread that waited for an answer
     """
@@ -249,7 +252,12 @@ class OwnListenerNetwork(canopen.Network):
         every receive error and keeps receiving, so none is left to raise."""
 
     def make_frame(self, can_id: int, data: bytes, remote: bool) -> can.Message:
-        """The frame :meth:`send_message` sends: a ``can.Message`` as canopen makes it."""
+        """The frame :meth:`send_message` sends: a ``can.Message`` as canopen makes it.
+
+        :param can_id: the CAN identifier (above 0x7FF: an extended one)
+        :param data: the payload (0-8 bytes)
+        :param remote: a remote transmission request
+        """
         return can.Message(arbitration_id=can_id, is_extended_id=can_id > 0x7FF, data=data,
                            is_remote_frame=remote)
 
@@ -258,7 +266,13 @@ class OwnListenerNetwork(canopen.Network):
     def send_message(  # type: ignore[override]
             self, can_id: int, data: bytes, remote: bool = False) -> can.Message:
         """Send one frame and return it (raises ``can.CanError``, RuntimeError when not
-        connected)."""
+        connected).
+
+        :param can_id: the CAN identifier
+        :param data: the payload (0-8 bytes)
+        :param remote: a remote transmission request
+        :returns: the frame sent (on a simulated wire its timestamp is its end on the wire)
+        """
         if not self.bus:
             raise RuntimeError("Not connected to CAN bus")
         frame = self.make_frame(can_id, data, remote)

@@ -109,7 +109,10 @@ def _simulation_objects(d: od.ObjectDictionary) -> None:
 
 
 def build_dictionary(node_id: int, slots: int) -> od.ObjectDictionary:
-    """Return the dictionary of a station with ``slots`` XN-1SSI modules at ``node_id``."""
+    """Return the dictionary of a station with ``slots`` XN-1SSI modules at ``node_id``.
+
+    :raises ValueError: ``slots`` outside 1-MAX_SLOTS
+    """
     if not 1 <= slots <= MAX_SLOTS:
         raise ValueError(f"a station holds 1-{MAX_SLOTS} XN-1SSI modules, not {slots}")
     d = od.ObjectDictionary()

@@ -36,6 +36,8 @@ class RateLimitedLog:
 
         Returns True when the line was written. A line after suppressed events ends with
         "(N more since the last line)".
+
+        :param exc_info: the exception whose traceback to add (None: none)
         """
         now = time.monotonic()
         with self._lock:
@@ -50,12 +52,24 @@ class RateLimitedLog:
         return True
 
     def warning(self, kind: str, msg: str, *args: object) -> bool:
-        """:meth:`log` at WARNING."""
+        """:meth:`log` at WARNING.
+
+        :param kind: the kind of event (rate-limited per kind)
+        :param msg: the %-format of the line
+        :param args: its arguments
+        :returns: True when the line was written
+        """
         return self.log(logging.WARNING, kind, msg, *args)
 
     def error(self, kind: str, msg: str, *args: object,
               exc_info: BaseException | None = None) -> bool:
-        """:meth:`log` at ERROR (``exc_info``: the exception whose traceback to add)."""
+        """:meth:`log` at ERROR (``exc_info``: the exception whose traceback to add).
+
+        :param kind: the kind of event (rate-limited per kind)
+        :param msg: the %-format of the line
+        :param args: its arguments
+        :returns: True when the line was written
+        """
         return self.log(logging.ERROR, kind, msg, *args, exc_info=exc_info)
 
 

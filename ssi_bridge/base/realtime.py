@@ -74,8 +74,12 @@ def thread_policies(pid: int) -> set[tuple[int, int]]:
 
 
 def run_this_thread_at(name: str, priority: int) -> tuple[str, bool]:
-    """Name the calling thread and put it on SCHED_FIFO ``priority`` (0: normal scheduling):
-    (its scheduling as :func:`scheduling_of_this_thread` says it, whether the request held)."""
+    """Name the calling thread and put it on SCHED_FIFO ``priority`` (0: normal scheduling).
+
+    :param name: the thread's kernel name (what ``top -H`` shows)
+    :returns: (its scheduling as :func:`scheduling_of_this_thread` says it, whether the
+        request held)
+    """
     name_this_thread(name)
     granted = fifo_this_thread(priority)
     return scheduling_of_this_thread(), granted

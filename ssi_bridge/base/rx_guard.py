@@ -57,7 +57,8 @@ ERROR_PAUSE = 0.005
 
 
 def receive_error_kind(exc: BaseException) -> str:
-    """:data:`UNDECODABLE` for a datagram that is no CAN frame, else :data:`RECEIVE_ERROR`."""
+    """The fault kind a receive error ``exc`` counts as: :data:`UNDECODABLE` for a datagram
+    that is no CAN frame, else :data:`RECEIVE_ERROR`."""
     return UNDECODABLE if isinstance(exc, UndecodableFrame) else RECEIVE_ERROR
 
 
@@ -121,7 +122,12 @@ class GuardedListener(WireTimeListener):
 
     def malformed(self, can_id: int, data: bytes | bytearray, why: str) -> None:
         """A frame its service does not allow (receive thread): counted as :data:`MALFORMED`
-        and logged (at most once per second), never decoded."""
+        and logged (at most once per second), never decoded.
+
+        :param can_id: the frame's CAN identifier
+        :param data: its payload
+        :param why: what is wrong with it (ends the log line)
+        """
         self.count(MALFORMED)
         self._log.warning(MALFORMED, "%s: frame 0x%03X [%s] with %d byte(s) is %s: dropped "
                           "(%d malformed so far)", self.name, can_id, bytes(data).hex(" "),
@@ -135,7 +141,7 @@ class GuardedListener(WireTimeListener):
         return wire_t
 
     def on_error(self, exc: Exception) -> None:
-        """A receive error (receive thread): counted and logged; receiving goes on."""
+        """A receive error ``exc`` (receive thread): counted and logged; receiving goes on."""
         forget_receive_error(self.network, exc)  # handled: canopen's check() must not raise it
         if receive_error_kind(exc) == UNDECODABLE:
             self.count(UNDECODABLE)

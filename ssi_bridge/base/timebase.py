@@ -39,8 +39,8 @@ wire_now = time.time
 
 
 def frame_wire_time(msg: can.Message) -> float:
-    """The wire time (s) of a received frame: its sender's end of frame when the frame carries
-    one (``wire_time``, udp_multicast), else its timestamp (0.0: none)."""
+    """The wire time (s) of a received frame ``msg``: its sender's end of frame when the frame
+    carries one (``wire_time``, udp_multicast), else its timestamp (0.0: none)."""
     wire = getattr(msg, "wire_time", 0.0)
     return wire if wire else msg.timestamp
 

@@ -189,6 +189,10 @@ def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     A hash of the name picks 239.74.x.y and a port in 61000-65535 (above Linux's ephemeral
     ports) that no DDS domain's unicast port takes (:data:`_PORTS`), so nodes (and test runs)
     with different channel names never share a group and port.
+
+    :param interface: the local interface address the group is joined on
+    :returns: the channel text, ``group:port@interface``
+    :raises ConfigError: ``interface`` is no IPv4 address
     """
     digest = hashlib.sha256(str(name).encode()).digest()
     x, y = digest[0], max(1, digest[1])

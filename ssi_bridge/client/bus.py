@@ -48,6 +48,8 @@ class ReceiveWatch(can.BusABC):
     Where the wrapped bus is a simulated wire shared with a station in this process (it has a
     ``wire`` with ``undelivered_since()``), a frame of this process still on its way to the
     receivers holds the view back: its sender's thread may be the one stalled.
+
+    :param inner: the bus to wrap (the opener's, a ReopeningBus or a handed-over bus)
     """
 
     def __init__(self, inner: can.BusABC) -> None:
@@ -70,7 +72,8 @@ class ReceiveWatch(can.BusABC):
         return inner
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Send ``msg`` on the wrapped bus."""
+        """Send ``msg`` on the wrapped bus, waiting at most ``timeout`` s (None: its default)
+        for room to send; raises what the wrapped bus raises (``can.CanError``)."""
         self._inner.send(msg, timeout)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:

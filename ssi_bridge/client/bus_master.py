@@ -114,7 +114,11 @@ class CanMaster:
         return self._listener.scheduling if self._listener is not None else ""
 
     def attach(self, client: Attached) -> None:
-        """Register a station's client: its slot table takes part in every SYNC."""
+        """Register a station's client: its slot table takes part in every SYNC.
+
+        :param client: the station's client (attaching it again changes nothing)
+        :raises ValueError: another client with its node id is attached already
+        """
         if any(c.node_id == client.node_id for c in self.clients if c is not client):
             raise ValueError(f"node id {client.node_id} already attached to this master")
         if client not in self.clients:
@@ -176,6 +180,10 @@ class CanMaster:
 
         On a simulated wire that is the SYNC frame's end-of-frame timestamp, where the modules
         of every station latch; on a real interface the instant it was handed to the driver.
+
+        :returns: the SYNC's wire time (s)
+        :raises BusError: the master is not connected, or the SYNC could not be sent while
+            the link is not known lost (a cycle with the link lost returns without a SYNC)
         """
         if self.network is None:
             raise BusError("master not connected")
@@ -231,7 +239,13 @@ class CanMaster:
         return left > 0 and self.gate.wait(left)
 
     def send(self, cob_id: int, data: bytes) -> None:
-        """Send one frame under the send lock (raises can.CanError)."""
+        """Send one frame under the send lock.
+
+        :param cob_id: the frame's CAN identifier (11 bit)
+        :param data: its payload (0-8 bytes)
+        :raises BusError: the master is not connected
+        :raises can.CanError: the bus refused the frame
+        """
         if self.network is None:
             raise BusError("master not connected")
         with self.send_lock:

@@ -60,6 +60,11 @@ class FrameListener(GuardedListener):
     each listener for each frame of the bus. With ``priority`` the notifier's thread, which
     hands every TPDO to its cycle, puts itself on SCHED_FIFO at its first frame and takes the
     kernel name ``ssi_can_rx`` (base/realtime.py); :attr:`scheduling` says what it got.
+
+    :param network: the canopen network the frames are dispatched to
+    :param counters: the master's counters
+    :param load: the bus-load meter every received frame is added to (None: none)
+    :param priority: SCHED_FIFO priority of the receive thread (0: normal scheduling)
     """
 
     def __init__(self, network: canopen.Network, counters: ClientCounters,
@@ -159,12 +164,13 @@ class TpdoRoutes:
         self.pdo_numbers[cob_id] = pdo_no
 
     def attach(self, network: canopen.Network) -> None:
-        """Subscribe every route (once, before the PDOs are configured)."""
+        """Subscribe every route on ``network`` (once, before the PDOs are configured)."""
         for cob_id, handler in self.routes.items():
             network.subscribe(cob_id, handler)
 
     def release_maps(self, node: canopen.RemoteNode) -> None:
-        """Take canopen's PdoMap handlers off the routed COB-IDs (after ``PdoMap.save``)."""
+        """Take canopen's PdoMap handlers of ``node`` (the station's RemoteNode) off the
+        routed COB-IDs (after ``PdoMap.save``)."""
         network = node.network
         for cob_id, pdo_no in self.pdo_numbers.items():
             handler = pdo_handler(node, pdo_no)

@@ -123,6 +123,10 @@ class SlotTable:
     it completes the cycle or a handshake waits in :meth:`next_input`. A frame completing a
     cycle the cycle thread armed on the gate (``client/cycle_gate.py``) runs that cycle on its
     own thread, out of the lock, and the waiters are woken once it ended.
+
+    :param slots: modules in the station (slots 1..slots)
+    :param gate: the master's cycle gate shared with the other stations' tables (None: a
+        condition of this table's own)
     """
 
     def __init__(self, slots: int, gate: CycleGate | None = None) -> None:
@@ -179,6 +183,9 @@ class SlotTable:
 
         A TPDO handled meanwhile that ended on the wire before this SYNC answered the one
         before: it no longer counts for this cycle.
+
+        :param at: the SYNC's end-of-frame wire time (s)
+        :returns: the SYNC time the table now holds (``at``)
         """
         with self.cond:
             self.sync_time = at
@@ -230,6 +237,10 @@ class SlotTable:
 
         A SYNC's TPDOs follow it on the wire, so an image that ended before the current
         SYNC belongs to an older cycle: kept as the newest image, not counted for this one.
+
+        :param slot: the module's slot (1-based; TPDO ``slot`` carries it)
+        :param data: the 8-byte process input image
+        :returns: the slot's state after storing it
         """
         job: Callable[[], None] | None = None
         with self.cond:
@@ -257,7 +268,12 @@ class SlotTable:
 
     def on_positions(self, slots: list[int], data: bytes | bytearray, timestamp: float = 0.0
                      ) -> None:
-        """Store the positions of an encoder default PDO (wire time ``timestamp``)."""
+        """Store the positions of an encoder default PDO (wire time ``timestamp``).
+
+        :param slots: the slots the PDO carries, in the order of its positions
+        :param data: the PDO payload: REG_SSI_POS of each slot carried, 4 bytes little-endian
+            each (a short payload is zero-padded)
+        """
         if len(data) == POSITION_PAIR.size:
             values = POSITION_PAIR.unpack(data)
         else:
@@ -348,7 +364,12 @@ class SlotTable:
             return self.cond.wait_for(self.cycle_complete, timeout)
 
     def next_input(self, slot: int, timeout: float) -> ProcessInput | None:
-        """Wait for an image newer than the slot's last output edit."""
+        """Wait for an image newer than the slot's last output edit.
+
+        :param slot: the module's slot (1-based)
+        :param timeout: at most this long (s)
+        :returns: the new image, decoded; None when none came within ``timeout``
+        """
         with self.cond:
             st = self._slots[slot]
             self._input_waiters += 1

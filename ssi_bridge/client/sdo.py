@@ -72,6 +72,11 @@ def pdo_plan(slots: int, node_id: int, *, images: bool = True) -> list[PdoPlan]:
     (0x2000:s / 0x2100:s); the encoder default PDOs 9.. carry 0x6820 of slot pairs.
     TPDOs are synchronous (type 1), the image RPDOs event driven (type 255, applied on
     reception, so the handshake does not wait an extra cycle).
+
+    :param slots: modules in the station (1-8)
+    :param node_id: the gateway's node id (the PDOs' COB-IDs are its defaults)
+    :param images: also the image PDOs of each slot, not only the encoder default PDOs
+    :returns: one entry per PDO, in the order it is configured
     """
     plan = [PdoPlan(True, pdo, tpdo_cob_base(pdo) + node_id, TRANS_SYNC_EVERY,
                     tuple((POSITION, s) for s in carried))
@@ -142,7 +147,13 @@ class SdoAccess:
             f"STOPPED?")
 
     def read(self, index: int, subindex: int = 0) -> int | float | bytes | str:
-        """Upload one object (raises SdoAbortError / GatewayUnavailable)."""
+        """Upload one object, decoded by the dictionary (raises SdoAbortError,
+        GatewayUnavailable or BusError).
+
+        :param index: the object's index
+        :param subindex: its sub-index
+        :returns: its value
+        """
         with self.lock:
             try:
                 var = self.node.sdo[index]
@@ -154,14 +165,26 @@ class SdoAccess:
     def read_image(self, index: int, subindex: int) -> bytes:
         """Upload a process image (0x2000 / 0x2100, UNSIGNED64 in ``base/od.py``) as its 8
         bytes, little endian (raises SdoAbortError / GatewayUnavailable, BusError for a value
-        that is no image)."""
+        that is no image).
+
+        :param index: the object's index
+        :param subindex: its sub-index
+        :returns: the image's 8 bytes
+        :raises BusError: the value read is no process image (a float or text)
+        """
         raw = self.read(index, subindex)
         if isinstance(raw, float | str):
             raise BusError(f"0x{index:04X}:{subindex:02X} read as {raw!r}, not a process image")
         return int(raw).to_bytes(8, "little") if isinstance(raw, int) else bytes(raw)
 
     def write(self, index: int, subindex: int, value: int | float | bytes) -> None:
-        """Download one object (raises SdoAbortError / GatewayUnavailable)."""
+        """Download one object, encoded by the dictionary (raises SdoAbortError,
+        GatewayUnavailable or BusError).
+
+        :param index: the object's index
+        :param subindex: its sub-index
+        :param value: the value to write
+        """
         with self.lock:
             try:
                 var = self.node.sdo[index]
@@ -173,7 +196,12 @@ class SdoAccess:
     def upload(self, index: int, subindex: int) -> bytes:
         """Upload the raw bytes of one object, whether or not the dictionary knows it (so a
         station's own abort, e.g. 0x06020000, reaches the caller); raises SdoAbortError,
-        GatewayUnavailable or BusError (the interface refused the request)."""
+        GatewayUnavailable or BusError (the interface refused the request).
+
+        :param index: the object's index
+        :param subindex: its sub-index
+        :returns: the object's bytes as the station sent them
+        """
         with self.lock:
             try:
                 return bytes(self.node.sdo.upload(index, subindex))
@@ -182,7 +210,12 @@ class SdoAccess:
 
     def download(self, index: int, subindex: int, data: bytes) -> None:
         """Download raw bytes to one object (raises SdoAbortError, GatewayUnavailable or
-        BusError)."""
+        BusError).
+
+        :param index: the object's index
+        :param subindex: its sub-index
+        :param data: the bytes to write
+        """
         with self.lock:
             try:
                 self.node.sdo.download(index, subindex, data)
@@ -191,7 +224,11 @@ class SdoAccess:
 
     def configure_pdos(self, slots: int, *, images: bool = True) -> None:
         """Map and enable what the bridge consumes (:func:`pdo_plan`); every PDO is invalid
-        by default."""
+        by default. Raises SdoAbortError, GatewayUnavailable or BusError.
+
+        :param slots: modules in the station (1-8)
+        :param images: also the image PDOs, as for :func:`pdo_plan`
+        """
         with self.lock:
             try:
                 for pdo in pdo_plan(slots, self.node_id, images=images):
@@ -205,6 +242,10 @@ class SdoAccess:
 
         One upload of sub-index 1 (COB-ID) of each communication parameter. Raises
         GatewayUnavailable / SdoAbortError.
+
+        :param slots: modules in the station (1-8)
+        :param images: whether the image PDOs were configured too, as for :func:`pdo_plan`
+        :returns: False as soon as one PDO is invalid or on another COB-ID
         """
         for pdo in pdo_plan(slots, self.node_id, images=images):
             found = int.from_bytes(self.upload(pdo.com_index, 1)[:4], "little")

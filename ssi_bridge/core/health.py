@@ -99,6 +99,11 @@ def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
     """Level and one-line message of a joint channel from byte 7 of its process input.
 
     Plain int tests: this runs every cycle for every joint.
+
+    :param sts: byte 7 (status) of the latest process input image; None before any sample
+    :param consecutive_stale: SYNC cycles in a row without a fresh sample
+    :param stale_limit: from this many such cycles on the channel is STALE
+    :returns: the level (OK, WARN, ERROR or STALE) and its one-line message
     """
     if sts is None:
         return STALE, "no sample received yet"
@@ -145,6 +150,10 @@ class ChannelHealth:
 
     :meth:`observe` runs every cycle (cheap: a deque of the window's SYNCs and a short list of
     level changes); :attr:`level` / :attr:`message` are what the diagnostics publish.
+
+    :param window_s: length (s of wire time) of the window the stale ratio and jumps count over
+    :param raise_after_s: how long a worse level must hold before it is published
+    :param clear_after_s: how long a better level must hold before the published one falls
     """
 
     def __init__(self, window_s: float = RATIO_WINDOW_S, raise_after_s: float = RAISE_AFTER_S,
@@ -192,11 +201,17 @@ class ChannelHealth:
 
         :param now: wire time of the SYNC (the window's clock)
         :param stale: no complete fresh sample of this SYNC
+        :param implausible: this SYNC's sample was an implausible jump (counted in the window)
+        :param sts: byte 7 of the latest process input image (None before any), as
+            :func:`channel_level` takes it
+        :param consecutive_stale: SYNC cycles in a row without a fresh sample
+        :param stale_limit: from this many such cycles on the raw level is STALE
         :param seq: the SYNC's sequence number; SYNCs skipped since the last one count lost
         :param lost: the share of the joint's data of this SYNC that is missing (default:
             all of it when ``stale``)
         :param silent: nothing at all of the joint came for ``stale_limit`` cycles in a row
             (STALE is then published without the rise debounce)
+        :returns: the debounced level, also in :attr:`level` (its text in :attr:`message`)
         """
         self._silent = silent
         share = (1.0 if stale else 0.0) if lost is None else min(max(lost, 0.0), 1.0)

@@ -67,6 +67,11 @@ def joint_scale(joint: JointSettings, cfg: EncoderConfig | None, para1: int) -> 
     ``revolutions`` / ``measuring_step``) and REG_PARA1's frame length and invalid LSB bits
     (:func:`count_factor`, 000 Table 19). Without a usable layout, ``steps_per_rev`` /
     ``revolutions`` or ``measuring_step`` are taken as the resolution of REG_SSI_POS itself.
+
+    :param joint: the joint's parameters (direction, and the fallback resolution)
+    :param cfg: the encoder layout (:func:`encoder_layout`), None when there is no usable one
+    :param para1: the module's REG_PARA1 value (frame length, invalid LSB bits)
+    :returns: the scale from REG_SSI_POS counts to joint units
     """
     if cfg is not None:
         factor = count_factor(cfg, para1)
@@ -190,7 +195,13 @@ class Joint:
 
     def observe(self, now: float, *, stale: bool, implausible: bool, seq: int | None = None,
                 lost: float | None = None) -> None:
-        """One SYNC (wire time ``now``, number ``seq``) for the joint's windowed health."""
+        """One SYNC (wire time ``now``, number ``seq``) for the joint's windowed health.
+
+        :param stale: no complete fresh sample of this SYNC
+        :param implausible: the SYNC's sample was an implausible jump
+        :param lost: the share of the joint's data of this SYNC that is missing (default: all
+            of it when ``stale``), as :meth:`ChannelHealth.observe` takes it
+        """
         counters = self.counters
         self.health.observe(now, stale=stale, implausible=implausible, sts=counters.last_sts,
                             consecutive_stale=counters.consecutive_stale,
@@ -198,7 +209,7 @@ class Joint:
                             silent=counters.consecutive_silent >= self.stale_cycles)
 
     def quiet(self, now: float) -> None:
-        """A period without SYNC (listen-only): a stale cycle."""
+        """A period without SYNC (listen-only) ending at ``now`` (s): a stale cycle."""
         self.counters.stale_cycles += 1
         self.counters.consecutive_stale += 1
         self.counters.consecutive_silent += 1
@@ -216,7 +227,10 @@ class Joint:
     def settle(self, seq: int, settled: tuple[float, float] | None) -> None:
         """The health of the SYNC before ``seq`` (:meth:`_settle`), after :meth:`output` or
         :meth:`leave_out` of SYNC ``seq``: what :meth:`update` and :meth:`set_aside` do last,
-        for a caller that publishes the cycle first."""
+        for a caller that publishes the cycle first.
+
+        :param settled: (wire time, share not vouched) of the SYNC before, None for the first
+        """
         self._settle(settled, seq, self._implausible)
 
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
@@ -226,13 +240,18 @@ class Joint:
 
         ``image``/``position``: what did arrive (kept for the status bits and diagnostics, not
         published). After ``stale_cycles`` of them the velocity estimate restarts, so a gap
-        never becomes a speed. ``settled`` as for :meth:`update`.
+        never becomes a speed. ``settled`` as for :meth:`update`; ``seq``: this SYNC's number.
         """
         self.leave_out(reason, image, position)
         self.settle(seq, settled)
 
     def leave_out(self, reason: str, image: bytes = b"", position: int | None = None) -> None:
-        """:meth:`set_aside` but the health of the SYNC before (:meth:`settle`, due next)."""
+        """:meth:`set_aside` but the health of the SYNC before (:meth:`settle`, due next).
+
+        :param reason: why no sample is vouched for (kept in the counters for diagnostics)
+        :param image: the process input image that did arrive, if any
+        :param position: the REG_SSI_POS that did arrive, if any
+        """
         self._implausible = False
         counters = self.counters
         counters.stale_cycles += 1
@@ -251,8 +270,12 @@ class Joint:
             self.velocity.reset()
 
     def count(self, sample_time: float, image: bytes, reg_ssi_pos: int, t_sync: float) -> bool:
-        """Count the newest sample (latched at ``sample_time``) for the SYNC at ``t_sync``;
-        True when it is fresh (latched at this SYNC)."""
+        """Count the newest sample (latched at ``sample_time``) for the SYNC at ``t_sync``.
+
+        :param image: its 8-byte process input image (byte 7: status)
+        :param reg_ssi_pos: its REG_SSI_POS (raw counts)
+        :returns: True when it is fresh (latched at this SYNC)
+        """
         counters = self.counters
         fresh = sample_time >= t_sync
         if fresh:
@@ -273,14 +296,27 @@ class Joint:
                seq: int, settled: tuple[float, float] | None) -> JointOutput:
         """What the joint publishes for the sample it has at the SYNC ``t_sync`` (number
         ``seq``). Call :meth:`count` first; ``settled``: (wire time, share not vouched) of the
-        SYNC before, judged once its window is over (None for the first SYNC)."""
+        SYNC before, judged once its window is over (None for the first SYNC).
+
+        :param sample_time: latch time of the sample (s, the SYNC's clock)
+        :param image: its 8-byte process input image
+        :param reg_ssi_pos: its REG_SSI_POS (raw counts)
+        :returns: the position, velocity and events to publish
+        """
         out = self.output(sample_time, image, reg_ssi_pos, t_sync)
         self.settle(seq, settled)
         return out
 
     def output(self, sample_time: float, image: bytes, reg_ssi_pos: int,
                t_sync: float) -> JointOutput:
-        """:meth:`update` but the health of the SYNC before (:meth:`settle`, due next)."""
+        """:meth:`update` but the health of the SYNC before (:meth:`settle`, due next).
+
+        :param sample_time: latch time of the sample (s, the SYNC's clock)
+        :param image: its 8-byte process input image
+        :param reg_ssi_pos: its REG_SSI_POS (raw counts)
+        :param t_sync: wire time of this SYNC (a sample latched at or after it is fresh)
+        :returns: the position, velocity and events to publish
+        """
         counters = self.counters
         fresh = sample_time >= t_sync
         estimator = self.velocity

@@ -24,6 +24,11 @@ class VelocityEstimator:
     Unknown is NaN: before two samples, after :meth:`reset`, and for a sample whose step
     from the previous one is faster than ``max_speed`` (joint units/s; 0 = no check), which
     is counted in :attr:`implausible` and restarts the estimate from that sample.
+
+    :param scale: the joint's counts -> units scale (its modulus unwraps the differences)
+    :param window: samples the difference spans (>= 2)
+    :param max_speed: the plausible speed limit in joint units/s (>= 0; 0: no check)
+    :raises ConfigError: ``window`` below 2 or ``max_speed`` negative or NaN
     """
 
     def __init__(self, scale: JointScale, window: int = 5, max_speed: float = 0.0) -> None:
@@ -70,7 +75,12 @@ class VelocityEstimator:
         self._held = held
 
     def update(self, t: float, counts: int) -> float:
-        """Add a sample (latch time in s, raw REG_SSI_POS) and return the velocity estimate."""
+        """Add a sample and return the velocity estimate.
+
+        :param t: the sample's latch time (s)
+        :param counts: its raw REG_SSI_POS (unsigned 32-bit counts)
+        :returns: the estimate in joint units/s; NaN while unknown (see the class)
+        """
         self.last_implausible = False
         if self._ignore_until is not None and t <= self._ignore_until:
             return self.velocity

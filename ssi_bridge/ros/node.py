@@ -251,19 +251,35 @@ class SsiBridgeNode(LifecycleNode):
 
     # -- the lifecycle (ros/lifecycle.py: rclpy calls these on the node) --------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Open the bus side; the first configure also creates publishers, services, timers."""
+        """Open the bus side; the first configure also creates publishers, services, timers.
+
+        :param state: the state the transition starts from (rclpy's; not needed here)
+        :returns: SUCCESS, FAILURE or ERROR, as rclpy's lifecycle takes it
+        """
         return self.lifecycle.configure()
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Start SYNC/the cycle, publishing and (record.enabled) recording."""
+        """Start SYNC/the cycle, publishing and (record.enabled) recording.
+
+        :param state: the state the transition starts from (rclpy's; not needed here)
+        :returns: SUCCESS, FAILURE or ERROR, as rclpy's lifecycle takes it
+        """
         return self.lifecycle.activate()
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Stop the cycle and the recording; the bus stays open and configured."""
+        """Stop the cycle and the recording; the bus stays open and configured.
+
+        :param state: the state the transition starts from (rclpy's; not needed here)
+        :returns: SUCCESS, FAILURE or ERROR, as rclpy's lifecycle takes it
+        """
         return self.lifecycle.deactivate()
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Close the bus (and stop the simulated station)."""
+        """Close the bus (and stop the simulated station).
+
+        :param state: the state the transition starts from (rclpy's; not needed here)
+        :returns: SUCCESS, FAILURE or ERROR, as rclpy's lifecycle takes it
+        """
         return self.lifecycle.cleanup()
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -271,7 +287,11 @@ class SsiBridgeNode(LifecycleNode):
         return self.lifecycle.lifecycle_shutdown()
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """An error in a transition: close everything, back to unconfigured."""
+        """An error in a transition: close everything, back to unconfigured.
+
+        :param state: the state the transition starts from (rclpy's; not needed here)
+        :returns: SUCCESS, FAILURE or ERROR, as rclpy's lifecycle takes it
+        """
         return self.lifecycle.error()
 
     def shutdown(self) -> None:
@@ -295,11 +315,19 @@ class SsiBridgeNode(LifecycleNode):
         return cycle
 
     def set_parameters(self, parameter_list: list[Parameter]) -> list[SetParametersResult]:
-        """rclpy's, plus an ~/events record of each change or refusal (node_params.py)."""
+        """rclpy's, plus an ~/events record of each change or refusal (node_params.py).
+
+        :param parameter_list: the parameters to set, each on its own
+        :returns: one result per parameter, in order
+        """
         return self.parameters.set_each(parameter_list, super().set_parameters)
 
     def set_parameters_atomically(self, parameter_list: list[Parameter]) -> SetParametersResult:
-        """rclpy's, plus an ~/events record of the change or the refusal."""
+        """rclpy's, plus an ~/events record of the change or the refusal.
+
+        :param parameter_list: the parameters to set, all or none
+        :returns: the one result
+        """
         return self.parameters.set_atomically(parameter_list, super().set_parameters_atomically)
 
     def _publish_on_change(self) -> None:
@@ -326,7 +354,13 @@ class SsiBridgeNode(LifecycleNode):
             self._request_stop()
 
     def publish_safe(self, publisher: Publisher, msg: object) -> bool:
-        """Publish; False instead of an error when shutdown invalidated the context meanwhile."""
+        """Publish; False instead of an error when shutdown invalidated the context meanwhile.
+
+        :param publisher: where to publish
+        :param msg: the message (of the publisher's type)
+        :returns: True when published (and passed to the live view)
+        :raises RCLError: rclpy's, re-raised while the context is still valid
+        """
         try:
             publisher.publish(msg)
         except RCLError:

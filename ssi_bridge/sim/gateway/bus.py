@@ -35,6 +35,11 @@ class LossyBus(can.BusABC):
     Drops apply to sent and, if ``drop_received`` is set, to received frames. ``muted``
     swallows every frame this side sends (the "gateway silent" fault). Both can be changed
     at run time from any thread. Shutting the wrapper down shuts the wrapped bus down.
+
+    :param inner: the bus wrapped (a simulated wire's bus or a real interface)
+    :param loss_rate: share of frames dropped, 0-1
+    :param seed: seed of the drop choice (None: unseeded)
+    :param drop_received: drop received frames at ``loss_rate`` too
     """
 
     def __init__(self, inner: can.BusABC, loss_rate: float = 0.0, *, seed: int | None = 0,
@@ -82,7 +87,8 @@ class LossyBus(can.BusABC):
         return hit
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """Send ``msg`` unless muted or chosen for dropping."""
+        """Send ``msg`` unless muted or chosen for dropping, waiting at most ``timeout`` s
+        (None: the wrapped bus's default); raises what the wrapped bus raises."""
         if self.muted or (self._loss_rate > 0.0 and self._drop()):
             return
         self._inner.send(msg, timeout)
@@ -106,14 +112,20 @@ class LossyBus(can.BusABC):
         return DuePeriodicTask(self, wire, single, period, autostart=autostart)
 
     def send_batch(self, msgs: Sequence[can.Message], answering: float | None = None) -> bool:
-        """Send frames ready together (the wire orders them) minus those muted or dropped."""
+        """Send frames ready together (the wire orders them) minus those muted or dropped.
+
+        :param msgs: the frames
+        :param answering: wire time of the SYNC they answer (None: none); on a simulated wire
+            they are not sent once a newer SYNC is on it
+        :returns: False when the wire refused them for a newer SYNC, else True
+        """
         if self.muted:
             return True
         if self._loss_rate > 0.0:
             msgs = [m for m in msgs if not self._drop()]
         batch = getattr(self._inner, "send_batch", None)
         if batch is not None:
-            return batch(msgs, answering)
+            return bool(batch(msgs, answering))
         for msg in msgs:
             self._inner.send(msg)
         return True
@@ -223,7 +235,12 @@ class BridgeNetwork(OwnListenerNetwork):
 
     def make_frame(self, can_id: int, data: bytes, remote: bool) -> WireMessage:
         """The frame sent: a :class:`WireMessage` (on a simulated wire its ``timestamp`` is
-        then its end on the wire)."""
+        then its end on the wire).
+
+        :param can_id: the CAN identifier
+        :param data: the payload (0-8 bytes)
+        :param remote: a remote transmission request
+        """
         return WireMessage.frame(can_id, data, remote)
 
     def send_messages(self, frames: Sequence[tuple[int, bytes]], answering: float | None = None
@@ -234,6 +251,11 @@ class BridgeNetwork(OwnListenerNetwork):
         thread between them (a station's TPDOs after one SYNC); the lock is taken once. A
         frame the bus refuses (``can.CanError``) does not stop the others: it is returned with
         its error. RuntimeError when not connected.
+
+        :param frames: (CAN identifier, payload) of each frame, in order
+        :param answering: wire time of the SYNC they answer (None: none); on a simulated wire
+            they are not sent, and :attr:`window_missed` counts it, once a newer SYNC is on it
+        :returns: (CAN identifier, error) of each frame the bus refused
         """
         bus = self.bus
         if not bus:

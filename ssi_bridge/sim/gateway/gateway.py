@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING
 
 import can
 import canopen
-from canopen.objectdictionary import ODArray
-from canopen.sdo import SdoAbortedError
+from canopen import SdoAbortedError
+from canopen.objectdictionary import ODArray, ODVariable
 
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.aborts import SdoAbort
@@ -70,6 +70,9 @@ SSI_REST_S = 200e-6
 class _StationNode(canopen.LocalNode):
     """A LocalNode that reports every completed SDO/PDO write (to re-read PDO parameters)."""
 
+    #: the station's SDO server (canopen's ``SdoServer`` with the refused-frame report)
+    sdo: StationSdo
+
     def __init__(self, node_id: int, od: canopen.ObjectDictionary,
                  after_write: Callable[[int, int], None], lock: threading.RLock) -> None:
         super().__init__(node_id, od)
@@ -92,13 +95,14 @@ class XnGateway:
     :param modules: the XN-1SSI modules in slots 1..n (1-8)
     :param clock: the station's model clock (wire time minus its start, ``base/timebase``):
         a SYNC latches the modules at ``clock.at(frame timestamp)``
+    :raises ValueError: ``node_id`` outside 1-127
     """
 
     def __init__(self, bus: BusConfig | can.BusABC, node_id: int, modules: Sequence[Xn1Ssi],
                  *, clock: ModelClock | None = None) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} outside 1-127")
-        self._source = bus
+        self._source: BusConfig | can.BusABC | None = bus
         self.node_id = node_id
         self.modules = list(modules)
         self.clock = clock if clock is not None else ModelClock()
@@ -237,7 +241,11 @@ class XnGateway:
 
     def _subscribe_sync(self) -> None:
         assert self.network is not None
-        cob = self.od[SYNC_COB_OBJECT].decode_raw(self.node.get_data(SYNC_COB_OBJECT, 0)) & 0x7FF
+        entry = self.od[SYNC_COB_OBJECT]
+        assert isinstance(entry, ODVariable)  # COB-ID SYNC: a VAR, UNSIGNED32 (CiA 301)
+        raw = entry.decode_raw(self.node.get_data(SYNC_COB_OBJECT, 0))
+        assert isinstance(raw, int)
+        cob = raw & 0x7FF
         if cob != self._sync_cob:
             if self._sync_cob is not None:
                 self.network.unsubscribe(self._sync_cob, self._on_sync)
@@ -246,7 +254,8 @@ class XnGateway:
 
     def _check_subindex(self, index: int, subindex: int, od: object, **_: object) -> None:
         # canopen's ODArray invents any subindex 1-255 on lookup; the station has one per slot
-        if isinstance(self.od[index], ODArray) and subindex not in self.od[index].subindices:
+        entry = self.od[index]
+        if isinstance(entry, ODArray) and subindex not in entry.subindices:
             raise SdoAbortedError(SdoAbort.NO_SUCH_SUBINDEX)
 
     def _check_write(self, index: int, subindex: int, od: object, data: bytes) -> None:
