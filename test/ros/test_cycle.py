@@ -23,12 +23,16 @@ def test_runs_on_an_absolute_schedule_and_stops():
     time.sleep(0.3)
     loop.stop()
     # the window is what the sleep really took (a loaded machine wakes this thread late):
-    # at most one cycle per 10 ms of it, plus the one at the start and one being stopped
+    # at most one cycle per 10 ms of it, plus the one at the start and one being stopped.
+    # A slot the thread woke too late for is skipped and counted (``missed``), never made up:
+    # ran + missed covers the window, whatever the load
     window = time.monotonic() - started
     n = len(stamps)
-    assert 20 <= n <= int(window * 100 + 1e-6) + 2, f"{n} cycles in {window:.3f} s at 100 Hz"
-    span = stamps[-1] - stamps[0]
-    assert span / (n - 1) == pytest.approx(0.01, rel=0.15), "mean period drifts"
+    assert 2 <= n <= int(window * 100 + 1e-6) + 2, f"{n} cycles in {window:.3f} s at 100 Hz"
+    assert n + loop.missed >= int(window * 100) - 2, (n, loop.missed, window)
+    if loop.missed == 0:
+        span = stamps[-1] - stamps[0]
+        assert span / (n - 1) == pytest.approx(0.01, rel=0.15), "mean period drifts"
     time.sleep(0.05)
     assert len(stamps) == n, "no cycle may run after stop()"
 
