@@ -121,8 +121,13 @@ def read_register(port: SdoImagePort, slot: int, addr: int) -> int:
 
 @dataclass
 class Sample:
-    """One module cycle of one slot."""
+    """One module cycle of one slot.
 
+    The module latched the frame after the SYNC was sent and before its image answered, so
+    ``(t, t_read)`` bounds the latch time however late the threads ran (a busy host).
+    """
+
+    #: monotonic time (s) the round's SYNC had been sent
     t: float
     #: REG_SSI_FRAME (None when the image did not show it)
     frame: int | None
@@ -130,6 +135,13 @@ class Sample:
     position: int | None
     sts: ModuleStatus
     ssi_sts: int
+    #: monotonic time (s) the image had been read (``t`` when not measured)
+    t_read: float | None = None
+
+    @property
+    def latch(self) -> tuple[float, float]:
+        """Earliest and latest time (s) the module can have latched this cycle."""
+        return self.t, self.t if self.t_read is None else self.t_read
 
 
 @dataclass
@@ -144,6 +156,11 @@ class SlotSamples:
     def frames(self) -> list[int]:
         """The frames of the cycles that showed one and had no ERR_SSI."""
         return [s.frame for s in self.samples
+                if s.frame is not None and not s.sts & ModuleStatus.ERR_SSI]
+
+    def latches(self) -> list[tuple[float, float]]:
+        """The latch bounds (:attr:`Sample.latch`) of the samples :meth:`frames` returns."""
+        return [s.latch for s in self.samples
                 if s.frame is not None and not s.sts & ModuleStatus.ERR_SSI]
 
     def share(self, flag: ModuleStatus) -> float:
@@ -183,12 +200,12 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
     try:
         while any(live) and ((now := time.monotonic()) - start < seconds or (
                 now - start < 2 * seconds and _short(results, live))):
+            t = time.monotonic()  # before the SYNC: no module cycle of this round is earlier
             try:
                 send_sync()
             except BusError as err:
                 results[0].errors.append(f"SYNC not sent: {err}")
                 break
-            t = time.monotonic()
             for i, (port, node, slot) in enumerate(targets):
                 if live[i]:
                     live[i] = _one(port, slot, t, results[i])
@@ -215,6 +232,7 @@ def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:
     """One image and position of ``slot``; False when its gateway stopped answering."""
     try:
         image = port.read_input(slot)
+        t_read = time.monotonic()
         position = int.from_bytes(port.sdo.upload(POSITION, slot)[:4].ljust(4, b"\0"),
                                   "little")
     except SdoAbortError as err:
@@ -225,7 +243,8 @@ def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:
         return False
     frame = (image.reg_rd_data if image.reg_rd_adr == Reg.REG_SSI_FRAME
              and not image.reg_rd_abort else None)
-    into.samples.append(Sample(t, frame, position, image.sts, image.ssi_sts))
+    into.samples.append(Sample(t, frame, position, image.sts, image.ssi_sts,
+                               t_read=t_read))
     return True
 
 
