@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from ssi_bridge.commission.infer import BitStats, Motion, MotionState, read_motion
+from ssi_bridge.commission.infer import (MIN_PARITY_FRAMES, BitStats, Motion, MotionState,
+                                         read_motion)
 from ssi_bridge.commission.rank import Fit, describe_bits, rank_families
 from ssi_bridge.commission.sample import SlotSamples
 from ssi_bridge.protocol.images import ModuleStatus
@@ -20,6 +21,9 @@ from ssi_bridge.protocol.para1 import Para1
 
 #: share of cycles with ERR_SSI above which no encoder counts as answering
 NO_ENCODER_SHARE = 0.9
+#: frames (cycles without ERR_SSI) below which nothing is inferred: a parity bit is only
+#: told with this many distinct frames, so fewer could rule out a family wrongly
+MIN_FRAMES = MIN_PARITY_FRAMES
 
 
 @dataclass
@@ -115,6 +119,11 @@ def analyze(found: SlotSamples, para1: int | None, para1_object: int | None) -> 
         res.problem = (f"every frame is all ones: data line stuck at 1 or an encoder "
                        "error (004 §3.3 'all bits 1')")
         return res
+    if len(frames) < MIN_FRAMES:
+        res.problem = (f"not enough evidence: {len(frames)} frames, {MIN_FRAMES} needed to "
+                       "tell the bits (a busy host, a slow gateway or an intermittent line; "
+                       "run again with a longer --seconds)")
+        return res
     motion = read_motion(frames, n, found.latches())
     res.motion = motion
     res.bits = describe_bits(stats, motion)
@@ -144,4 +153,4 @@ def analyze(found: SlotSamples, para1: int | None, para1_object: int | None) -> 
     return res
 
 
-__all__ = ["NO_ENCODER_SHARE", "SlotResult", "analyze"]
+__all__ = ["MIN_FRAMES", "NO_ENCODER_SHARE", "SlotResult", "analyze"]

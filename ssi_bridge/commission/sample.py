@@ -24,9 +24,11 @@ from ssi_bridge.protocol.registers import Reg
 
 logger = logging.getLogger(__name__)
 
-#: samples per slot the sampling waits for beyond ``seconds`` (up to twice as long): fewer
-#: tell a code or a direction poorly (a busy host, many slots)
+#: samples per slot the sampling waits for beyond ``seconds``: fewer tell a code or a
+#: direction poorly (a busy host, many slots)
 MIN_SAMPLES = 30
+#: how many times ``seconds`` the sampling may last while a slot lacks MIN_SAMPLES
+MAX_SECONDS_FACTOR = 10
 #: one handshake step (s): a few SDO round trips and a module cycle
 STEP_TIMEOUT = 0.5
 
@@ -176,8 +178,9 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
            progress: Callable[[str], None] | None = None) -> list[SlotSamples]:
     """Sample every (port, node id, slot) for ``seconds``: one SYNC per round for all.
 
-    Past ``seconds`` sampling goes on, up to twice as long, until every slot has
-    :data:`MIN_SAMPLES` samples.
+    Past ``seconds`` sampling goes on, up to :data:`MAX_SECONDS_FACTOR` times as long,
+    until every slot has :data:`MIN_SAMPLES` samples: a busy host or a slow gateway takes
+    fewer rounds a second, not fewer samples.
 
     REG_RD_ADR of each slot is set to REG_SSI_FRAME first and set back at the end (also
     when sampling fails). A slot whose gateway stops answering is noted, not fatal.
@@ -199,7 +202,7 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
     last_note = 0.0
     try:
         while any(live) and ((now := time.monotonic()) - start < seconds or (
-                now - start < 2 * seconds and _short(results, live))):
+                now - start < MAX_SECONDS_FACTOR * seconds and _short(results, live))):
             t = time.monotonic()  # before the SYNC: no module cycle of this round is earlier
             try:
                 send_sync()
@@ -248,4 +251,4 @@ def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:
     return True
 
 
-__all__ = ["Sample", "SdoImagePort", "SlotSamples", "read_register", "sample"]
+__all__ = ["MAX_SECONDS_FACTOR", "MIN_SAMPLES", "Sample", "SdoImagePort", "SlotSamples", "read_register", "sample"]
