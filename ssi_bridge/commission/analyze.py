@@ -4,14 +4,16 @@ The module's own status comes first (000 "Process input", byte 7): ERR_PARA (REG
 rejected: the module acquires nothing), ERR_SSI (the SSI error check failed: wire break,
 no encoder, 000 Table 19 DIS_ERR_SSI). Then the frames (``infer.py``) and the families that
 fit them (``rank.py``). A joint is made only for a slot whose encoder answers with frames
-that carry information; everything else is a finding with its reason.
+that carry information and that a family of the manuals fits: a joint always comes with
+its candidate families and their evidence; everything else is a finding with its reason.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-from ssi_bridge.commission.infer import BitStats, Motion, MotionState, read_motion
+from ssi_bridge.commission.infer import (MIN_PARITY_FRAMES, BitStats, Motion, MotionState,
+                                         read_motion)
 from ssi_bridge.commission.rank import Fit, describe_bits, rank_families
 from ssi_bridge.commission.sample import SlotSamples
 from ssi_bridge.protocol.images import ModuleStatus
@@ -19,6 +21,9 @@ from ssi_bridge.protocol.para1 import Para1
 
 #: share of cycles with ERR_SSI above which no encoder counts as answering
 NO_ENCODER_SHARE = 0.9
+#: frames (cycles without ERR_SSI) below which nothing is inferred: a parity bit is only
+#: told with this many distinct frames, so fewer could rule out a family wrongly
+MIN_FRAMES = MIN_PARITY_FRAMES
 
 
 @dataclass
@@ -114,10 +119,25 @@ def analyze(found: SlotSamples, para1: int | None, para1_object: int | None) -> 
         res.problem = (f"every frame is all ones: data line stuck at 1 or an encoder "
                        "error (004 §3.3 'all bits 1')")
         return res
-    motion = read_motion(frames, n)
+    if len(frames) < MIN_FRAMES:
+        res.problem = (f"not enough evidence: {len(frames)} frames, {MIN_FRAMES} needed to "
+                       "tell the bits (a busy host, a slow gateway or an intermittent line; "
+                       "run again with a longer --seconds)")
+        return res
+    motion = read_motion(frames, n, found.latches())
     res.motion = motion
     res.bits = describe_bits(stats, motion)
+    if motion.state is MotionState.ERRATIC:
+        res.problem = (f"not enough evidence: {'; '.join(motion.evidence)} in {len(frames)} "
+                       "frames (a noisy line, an encoder moving faster than the sampling can "
+                       "follow, or a host too busy to sample; run again, the encoder slower)")
+        return res
     res.groups = rank_families(frames, n, motion, stats)
+    if not res.groups:
+        res.problem = (f"no encoder family of the manuals sends this frame ({res.bits}): "
+                       "check SSI_FRAME_LEN and the encoder; a GENERIC joint must be written "
+                       "by hand")
+        return res
     res.para1_joint = p.encode()
     if motion.state is MotionState.STILL:
         res.warnings.append("the encoder stood still: the frame length alone tells the "
@@ -130,10 +150,7 @@ def analyze(found: SlotSamples, para1: int | None, para1_object: int | None) -> 
         res.warnings.append(f"the frames are {motion.code} but SSI_CODE_G/D says "
                             f"{'Gray' if p.ssi_code_gray else 'binary'}: REG_SSI_POS is wrong; "
                             f"the params file sets 0x{res.para1_joint:08X}")
-    if not res.groups:
-        res.warnings.append("no encoder family of the manuals sends this frame; the joint "
-                            "is GENERIC, check the frame length and the resolution")
     return res
 
 
-__all__ = ["NO_ENCODER_SHARE", "SlotResult", "analyze"]
+__all__ = ["MIN_FRAMES", "NO_ENCODER_SHARE", "SlotResult", "analyze"]

@@ -128,19 +128,37 @@ class Continuity:
         return sum(1 for d in self.steps if d)
 
 
-def continuity(values: list[int], width: int) -> Continuity:
-    """Score a position sequence: 1.0 = every step the same sign and similar size.
+Latch = tuple[float, float]
+"""Earliest and latest time (s) a frame can have been latched (the SYNC sent, its image read)."""
+
+
+def continuity(values: list[int], width: int, latches: list[Latch] | None = None) -> Continuity:
+    """Score a position sequence: 1.0 = every step the same sign and similar speed.
+
+    Without ``latches`` the frames are taken as evenly spaced. With them a step is a jump
+    only when it is larger than :data:`JUMP_FACTOR` times the typical speed (the median of
+    step / time between the SYNCs) could travel in the longest time the two latches can be
+    apart: a host that sampled late or lost cycles makes longer, not discontinuous steps.
 
     :param values: the positions in latch order
     :param width: their bits (a wrap-around is a small step)
+    :param latches: each frame's latch bounds (:data:`Latch`), as many as ``values``
+    :raises ValueError: ``latches`` and ``values`` differ in length
     """
+    if latches is not None and len(latches) != len(values):
+        raise ValueError(f"{len(latches)} latch times for {len(values)} positions")
     steps = [_signed(b - a, width) for a, b in zip(values, values[1:])]
-    moved = [d for d in steps if d]
+    if latches is None:
+        least = most = [1.0] * len(steps)
+    else:
+        least = [max(b[0] - a[0], 1e-6) for a, b in zip(latches, latches[1:])]
+        most = [max(b[1] - a[0], lo) for a, b, lo in zip(latches, latches[1:], least)]
+    moved = [(d, lo, hi) for d, lo, hi in zip(steps, least, most) if d]
     if len(moved) < 2:
         return Continuity(0.0, steps)
-    typical = median(abs(d) for d in moved)
-    jumps = sum(1 for d in moved if abs(d) > JUMP_FACTOR * typical + 2)
-    reversals = sum(1 for a, b in zip(moved, moved[1:]) if (a > 0) != (b > 0))
+    speed = median(abs(d) / lo for d, lo, _ in moved)
+    jumps = sum(1 for d, _, hi in moved if abs(d) > JUMP_FACTOR * speed * hi + 2)
+    reversals = sum(1 for (a, _, _), (b, _, _) in zip(moved, moved[1:]) if (a > 0) != (b > 0))
     bad = jumps + reversals
     return Continuity(max(0.0, 1.0 - bad / len(moved)), steps)
 
@@ -197,11 +215,17 @@ def _direction(steps: list[int]) -> tuple[int, str]:
     return sign, f"counts {'increasing' if sign > 0 else 'decreasing'} in {share:.0%} of the steps"
 
 
-def read_motion(frames: list[int], frame_len: int) -> Motion:
+def read_motion(frames: list[int], frame_len: int,
+                latches: list[Latch] | None = None) -> Motion:
     """What ``frames`` (in latch order) say about the position bits, code and direction.
+
+    Only the lowest run of moving bits may be "too slow": a higher run is tried as the LSB
+    only after the lower one failed to decode, and then it must decode outright.
 
     :param frames: the sampled frames, in latch order
     :param frame_len: their length in bits
+    :param latches: when each frame was latched (:func:`continuity`); None: evenly spaced
+    :raises ValueError: ``latches`` and ``frames`` differ in length
     """
     stats = BitStats.of(frames, frame_len)
     parity = parity_bits(frames, stats) if stats.moving else 0
@@ -217,7 +241,7 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
         fits = {}
         for name, gray in (("binary", False), ("gray", True)):
             values = decode_window(frames, lsb, width, gray)
-            fits[name] = (continuity(values, width), values)
+            fits[name] = (continuity(values, width, latches), values)
         if not contiguous(moving >> lsb):  # a binary count moves every bit under its top
             fits["binary"] = (Continuity(0.0, fits["binary"][0].steps), fits["binary"][1])
         best = max(fits, key=lambda n: fits[n][0].score)
@@ -226,6 +250,9 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
         distinct = len(set(values))
         travel = sum(abs(d) for d in cont.steps)
         check = moving & ((1 << lsb) - 1)
+        if distinct < MIN_DISTINCT and lsb != lowest:
+            tried.append(f"LSB {lsb}: only {distinct} distinct positions")
+            continue
         if distinct < MIN_DISTINCT:
             return Motion(MotionState.TOO_SLOW, lsb, None, 0, parity, check, values, width,
                           travel, (f"only {distinct} distinct positions: too slow to tell the "
@@ -241,7 +268,7 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
                           width, travel, tuple(ev))
         tried.append(f"LSB {lsb}: binary {fits['binary'][0].score:.0%}, "
                      f"gray {fits['gray'][0].score:.0%}")
-        if cont.score >= MIN_CONSISTENT:  # both continuous: too few steps to tell them apart
+        if cont.score >= MIN_CONSISTENT and lsb == lowest:  # both continuous: steps too small
             return Motion(MotionState.TOO_SLOW, lsb, None, 0, parity, check, values, width,
                           travel, ("both binary and Gray decode continuously: the steps are "
                                    "too small to tell the code",))
@@ -251,4 +278,4 @@ def read_motion(frames: list[int], frame_len: int) -> Motion:
 
 
 __all__ = ["BitStats", "Continuity", "Motion", "MotionState", "bit_list", "continuity",
-           "decode_window", "parity_bits", "read_motion"]
+           "Latch", "decode_window", "parity_bits", "read_motion"]

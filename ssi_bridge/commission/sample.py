@@ -24,9 +24,11 @@ from ssi_bridge.protocol.registers import Reg
 
 logger = logging.getLogger(__name__)
 
-#: samples per slot the sampling waits for beyond ``seconds`` (up to twice as long): fewer
-#: tell a code or a direction poorly (a busy host, many slots)
+#: samples per slot the sampling waits for beyond ``seconds``: fewer tell a code or a
+#: direction poorly (a busy host, many slots)
 MIN_SAMPLES = 30
+#: how many times ``seconds`` the sampling may last while a slot lacks MIN_SAMPLES
+MAX_SECONDS_FACTOR = 10
 #: one handshake step (s): a few SDO round trips and a module cycle
 STEP_TIMEOUT = 0.5
 
@@ -121,8 +123,13 @@ def read_register(port: SdoImagePort, slot: int, addr: int) -> int:
 
 @dataclass
 class Sample:
-    """One module cycle of one slot."""
+    """One module cycle of one slot.
 
+    The module latched the frame after the SYNC was sent and before its image answered, so
+    ``(t, t_read)`` bounds the latch time however late the threads ran (a busy host).
+    """
+
+    #: monotonic time (s) the round's SYNC had been sent
     t: float
     #: REG_SSI_FRAME (None when the image did not show it)
     frame: int | None
@@ -130,6 +137,13 @@ class Sample:
     position: int | None
     sts: ModuleStatus
     ssi_sts: int
+    #: monotonic time (s) the image had been read (``t`` when not measured)
+    t_read: float | None = None
+
+    @property
+    def latch(self) -> tuple[float, float]:
+        """Earliest and latest time (s) the module can have latched this cycle."""
+        return self.t, self.t if self.t_read is None else self.t_read
 
 
 @dataclass
@@ -146,6 +160,11 @@ class SlotSamples:
         return [s.frame for s in self.samples
                 if s.frame is not None and not s.sts & ModuleStatus.ERR_SSI]
 
+    def latches(self) -> list[tuple[float, float]]:
+        """The latch bounds (:attr:`Sample.latch`) of the samples :meth:`frames` returns."""
+        return [s.latch for s in self.samples
+                if s.frame is not None and not s.sts & ModuleStatus.ERR_SSI]
+
     def share(self, flag: ModuleStatus) -> float:
         """Share of the samples with ``flag`` set in process input byte 7."""
         return (sum(1 for s in self.samples if s.sts & flag) / len(self.samples)
@@ -159,8 +178,9 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
            progress: Callable[[str], None] | None = None) -> list[SlotSamples]:
     """Sample every (port, node id, slot) for ``seconds``: one SYNC per round for all.
 
-    Past ``seconds`` sampling goes on, up to twice as long, until every slot has
-    :data:`MIN_SAMPLES` samples.
+    Past ``seconds`` sampling goes on, up to :data:`MAX_SECONDS_FACTOR` times as long,
+    until every slot has :data:`MIN_SAMPLES` samples: a busy host or a slow gateway takes
+    fewer rounds a second, not fewer samples.
 
     REG_RD_ADR of each slot is set to REG_SSI_FRAME first and set back at the end (also
     when sampling fails). A slot whose gateway stops answering is noted, not fatal.
@@ -182,13 +202,13 @@ def sample(targets: list[Target], send_sync: Callable[[], None], seconds: float,
     last_note = 0.0
     try:
         while any(live) and ((now := time.monotonic()) - start < seconds or (
-                now - start < 2 * seconds and _short(results, live))):
+                now - start < MAX_SECONDS_FACTOR * seconds and _short(results, live))):
+            t = time.monotonic()  # before the SYNC: no module cycle of this round is earlier
             try:
                 send_sync()
             except BusError as err:
                 results[0].errors.append(f"SYNC not sent: {err}")
                 break
-            t = time.monotonic()
             for i, (port, node, slot) in enumerate(targets):
                 if live[i]:
                     live[i] = _one(port, slot, t, results[i])
@@ -215,6 +235,7 @@ def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:
     """One image and position of ``slot``; False when its gateway stopped answering."""
     try:
         image = port.read_input(slot)
+        t_read = time.monotonic()
         position = int.from_bytes(port.sdo.upload(POSITION, slot)[:4].ljust(4, b"\0"),
                                   "little")
     except SdoAbortError as err:
@@ -225,8 +246,9 @@ def _one(port: SdoImagePort, slot: int, t: float, into: SlotSamples) -> bool:
         return False
     frame = (image.reg_rd_data if image.reg_rd_adr == Reg.REG_SSI_FRAME
              and not image.reg_rd_abort else None)
-    into.samples.append(Sample(t, frame, position, image.sts, image.ssi_sts))
+    into.samples.append(Sample(t, frame, position, image.sts, image.ssi_sts,
+                               t_read=t_read))
     return True
 
 
-__all__ = ["Sample", "SdoImagePort", "SlotSamples", "read_register", "sample"]
+__all__ = ["MAX_SECONDS_FACTOR", "MIN_SAMPLES", "Sample", "SdoImagePort", "SlotSamples", "read_register", "sample"]

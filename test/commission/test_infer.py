@@ -7,17 +7,23 @@ whose position, code and direction are known.
 
 from __future__ import annotations
 
+import random
+
 import pytest
 
+from ssi_bridge.commission.analyze import analyze
 from ssi_bridge.commission.infer import MotionState, read_motion
 from ssi_bridge.commission.rank import layout_of, rank_families
+from ssi_bridge.commission.sample import Sample, SlotSamples
 from ssi_bridge.protocol.checksum import code_word
 from ssi_bridge.protocol.codes import Code
 from ssi_bridge.protocol.decode import XN_MAX_FRAME_BITS
 from ssi_bridge.protocol.encoder_config import EncoderConfig, FrameFormat, SpecialBit
 from ssi_bridge.protocol.families import FAMILIES, family_config
 from ssi_bridge.protocol.family_rules import FAMILY_CODES
+from ssi_bridge.protocol.images import ModuleStatus
 from ssi_bridge.protocol.layout import assemble, encode_area
+from ssi_bridge.protocol.para1 import Para1
 
 
 def frames_of(cfg: EncoderConfig, values: list[int]) -> tuple[list[int], int]:
@@ -100,3 +106,45 @@ def test_a_lower_resolution_moves_the_lsb_and_is_found():
     fit = next(f for f in rank_families(frames, n, motion)[0] if f.family == "AHS36")
     assert motion.lsb == 3 and fit.config.steps_per_rev == 4096
     assert not fit.default_resolution
+
+
+def starved_latches(n: int) -> list[tuple[float, float]]:
+    """Latch bounds of ``n`` SYNC rounds 30 ms apart where every third round came 0.25-0.55 s
+    late (a sampling thread starved on a busy host) and the gateway latched up to 20 ms after
+    the SYNC; (SYNC sent, image read) as ``sample.Sample.latch`` gives them."""
+    out, t = [], 0.0
+    for i in range(n):
+        out.append((t, t + 0.002 + 0.018 * (i % 2)))
+        t += 0.25 + 0.1 * (i % 4) if i % 3 == 2 else 0.03
+    return out
+
+
+@pytest.mark.parametrize("family, code", CASES, ids=[f"{f}-{c.value}" for f, c in CASES])
+def test_a_sampling_with_gaps_is_read_by_when_the_frames_were_latched(family, code):
+    """A starved sampler takes the frames at irregular times: a long gap makes a long step,
+    not a jump of the code (004 §2.4), once each step is judged against the time it took."""
+    cfg = family_config(family, code=code)
+    latches = starved_latches(40)
+    speed = 1234.5  # counts per second: 37 per regular round, up to 680 across a gap
+    late = [hi for _, hi in latches]
+    start = cfg.range_steps // 3
+    frames, n = frames_of(cfg, [int(start - speed * t) % cfg.range_steps for t in late])
+    motion = read_motion(frames, n, latches)
+    assert motion.state is MotionState.MOVING, motion.evidence
+    assert motion.code == code.value and motion.direction == -1
+    top = rank_families(frames, n, motion)[0]
+    assert family in [f.family for f in top]
+    assert {layout_of(f.config, n).lsb for f in top} == {layout_of(cfg, n).lsb}
+
+
+def test_frames_no_code_decodes_are_no_joint_but_a_problem():
+    """Bits that move at random (a noisy line, or an encoder faster than the sampling) give
+    no family ranked on a guess: the slot is reported with "not enough evidence"."""
+    rng = random.Random(7)
+    para1 = Para1(ssi_frame_len=25)
+    found = SlotSamples(5, 1, [Sample(0.03 * i, rng.getrandbits(25), 0, ModuleStatus(0), 0,
+                                      t_read=0.03 * i + 0.01) for i in range(40)])
+    res = analyze(found, para1.encode(), para1.encode())
+    assert res.motion is not None and res.motion.state is MotionState.ERRATIC
+    assert not res.joint and not res.groups
+    assert res.problem is not None and res.problem.startswith("not enough evidence")

@@ -28,8 +28,8 @@ from ssi_bridge.protocol.settings import (JOINT_DEFAULTS, BusConfig, JointSettin
 
 from .conftest import VARIANTS, Truth, leave_outputs, random_layout, read_addresses
 
-#: sampling time of a run (s); the tool samples on, up to twice as long, until each slot has
-#: 30 samples (sample.MIN_SAMPLES)
+#: sampling time of a run (s); the tool samples on, up to ten times as long, until each slot
+#: has 30 samples (sample.MIN_SAMPLES, MAX_SECONDS_FACTOR)
 SECONDS = 1.0
 #: REG_RD_ADR a previous master left in the output images (REG_SW_VER)
 READ_ADDRESS = 3
