@@ -21,7 +21,8 @@ for N slots). Each step of publishing a cycle is wrapped in a timer on the node 
   frame completing a cycle includes its publishing): per frame, not per cycle; ``frame_cpu``
   its thread's CPU time, ``recv_cpu`` the CPU time of the bus's ``recv`` that returned it
   (the receive thread's wait for the datagram included: python-can's Notifier calls it with
-  a timeout). ``--frames`` prints the top functions (own time) of the frames' handling.
+  a timeout). ``--frames`` prints the top functions (own time) of the frames' handling,
+  ``--sync`` those (cumulative) of sending the SYNC.
 
 Prints median / p99 (us) of each per cycle after a 2 s warm-up, then Python's garbage
 collections in the window (per generation, and the threads they ran on) and the cycle
@@ -189,15 +190,21 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
     publisher._finish = _timed(per_cycle, "finish", publisher._finish)  # type: ignore
     sync = node.client.sync
 
+    sync_profile = cProfile.Profile() if "--sync" in argv else None
+
     def timed_sync() -> float:
         if not measuring.is_set():
             return sync()
+        if sync_profile is not None:
+            sync_profile.enable()
         t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
         try:
             return sync()
         finally:
             per_cycle["sync"].append(time.perf_counter_ns() - t0)
             per_cycle["sync_cpu"].append(time.thread_time_ns() - c0)
+            if sync_profile is not None:
+                sync_profile.disable()
 
     node.client.sync = timed_sync  # type: ignore[method-assign]
     listener = node.master._listener
@@ -282,6 +289,10 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
         node.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+    if sync_profile is not None:
+        out = io.StringIO()
+        pstats.Stats(sync_profile, stream=out).sort_stats("cumulative").print_stats(30)
+        print(out.getvalue())
     if frame_profile is not None:
         out = io.StringIO()
         pstats.Stats(frame_profile, stream=out).sort_stats("tottime").print_stats(30)
