@@ -239,18 +239,30 @@ class OwnListenerNetwork(canopen.Network):
             self.NOTIFIER_CYCLE = notifier_cycle
         #: COB-ID -> the one handler its owner routes it to (:meth:`route`)
         self.routes: dict[int, Subscriber] = {}
+        #: started with canopen's ``MessageListener`` too: routes become subscriptions
+        self._canopens_listener = False
 
     def route(self, can_id: int, handler: Subscriber) -> None:
         """Hand every frame of ``can_id`` to ``handler`` straight from the listener
         (``base/rx_guard.GuardedListener``), before the subscribers canopen keeps for it
         (normally none): a TPDO the owner decodes itself skips canopen's subscriber walk.
-        A later route of the same COB-ID replaces this one."""
-        self.routes[can_id] = handler
+        A later route of the same COB-ID replaces this one. On a network started with
+        canopen's own listener too (``start(canopens_too=True)``), which knows no routes, the
+        handler is subscribed instead."""
+        if self._canopens_listener:
+            self.subscribe(can_id, handler)
+        else:
+            self.routes[can_id] = handler
 
     def start(self, *listeners: can.Listener, canopens_too: bool = False) -> None:
         """Connect with ``listeners`` as the network's listeners, after canopen's own
         ``MessageListener`` when ``canopens_too`` (raises what ``Network.connect`` raises)."""
         own: list[can.Listener] = list(self.listeners[:1]) if canopens_too else []
+        self._canopens_listener = canopens_too
+        if canopens_too:  # canopen's listener calls subscribers only
+            for can_id, handler in self.routes.items():
+                self.subscribe(can_id, handler)
+            self.routes.clear()
         self.listeners[:] = [*own, *listeners]  # type: ignore[list-item]  # canopen: its own
         self.connect()
 
