@@ -18,7 +18,11 @@ for N slots). Each step of publishing a cycle is wrapped in a timer on the node 
 * ``sync``: sending the SYNC (``client.sync``, the cycle thread), ``sync_cpu`` the CPU time
   of its thread meanwhile (the simulated wire sleeps until the frame's end); ``frame``: one received
   frame through the master's listener (counting, dispatch, slot table, frame log; the
-  frame completing a cycle includes its publishing): per frame, not per cycle.
+  frame completing a cycle includes its publishing): per frame, not per cycle; ``frame_cpu``
+  its thread's CPU time, ``recv_cpu`` the CPU time of the bus's ``recv`` that returned it
+  (the receive thread's wait for the datagram included: python-can's Notifier calls it with
+  a timeout). ``--frames`` prints the top functions (own time) of the frames' handling,
+  ``--sync`` those (cumulative) of sending the SYNC.
 
 Prints median / p99 (us) of each per cycle after a 2 s warm-up, then Python's garbage
 collections in the window (per generation, and the threads they ran on) and the cycle
@@ -30,20 +34,23 @@ and hands to DDS, nothing is sent. Numbers go to docs/node.md, "Performance".
 
 from __future__ import annotations
 
+import contextlib
 import cProfile
 import io
+import os
 import pstats
 import sys
 import threading
 import time
 from collections import defaultdict
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, __import__("os").path.dirname(__file__))
+sys.path.insert(0, os.path.dirname(__file__))
 from bench_node import case_rate  # noqa: E402
 
-STEPS = ("sync", "sync_cpu", "frame", "cycle", "decide", "verdict", "joint", "settle", "build",
+STEPS = ("sync", "sync_cpu", "recv_cpu", "frame", "frame_cpu", "cycle", "decide", "verdict", "joint", "settle", "build",
          "publish", "finish", "levels")
 
 
@@ -105,11 +112,8 @@ def _sample(seconds: float, interval: float = 0.0005, top: int = 45) -> list[str
 
 
 def main(argv: list[str]) -> int:
-    import numpy as np
-    import rclpy
     from rclpy.parameter import Parameter
 
-    from ssi_bridge.ros.node import SsiBridgeNode
 
     args = [a for a in argv if not a.startswith("--")]
     joints = int(args[0]) if args else 8
@@ -118,9 +122,35 @@ def main(argv: list[str]) -> int:
     names = [f"j{i + 1}" for i in range(joints)]
     params = [Parameter("joints", value=names), Parameter("publish_rate", value=rate),
               Parameter("bus.bitrate", value=1_000_000),
-              Parameter("bus.channel", value=f"cycle_profile_{__import__('os').getpid()}"),
+              Parameter("bus.channel", value=f"cycle_profile_{os.getpid()}"),
               Parameter("storage_path", value=f"/tmp/cycle_profile_{joints}/retentive.json")]
     params += [Parameter(f"{n}.slot", value=i + 1) for i, n in enumerate(names)]
+    station = contextlib.nullcontext()
+    if "--real" in argv:  # the node as a real deployment runs it, its station apart
+        import yaml
+
+        from real_station import real_params, station_process
+
+        extra = real_params(f"cycle_profile_{os.getpid()}")
+        params += [Parameter(k, value=v) for k, v in extra.items()]
+        pfile = Path(f"/tmp/cycle_profile_{os.getpid()}.yaml")
+        pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+            "joints": names, "bus.bitrate": 1_000_000,
+            **{f"{n}.slot": i + 1 for i, n in enumerate(names)}}}}))
+        station = station_process(Path(__file__).resolve().parent.parent, pfile,
+                                  extra["bus.channel"], dict(os.environ),
+                                  pfile.with_suffix(".log"))
+    with station:
+        return _profile(argv, joints, seconds, rate, params)
+
+
+def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: list) -> int:
+    """Run and time the node on ``params`` (see the module docstring)."""
+    import numpy as np
+    import rclpy
+
+    from ssi_bridge.ros.node import SsiBridgeNode
+
     rclpy.init(args=None)
     node = SsiBridgeNode(parameter_overrides=params)
     per_cycle: dict[str, list[int]] = defaultdict(list)
@@ -160,30 +190,54 @@ def main(argv: list[str]) -> int:
     publisher._finish = _timed(per_cycle, "finish", publisher._finish)  # type: ignore
     sync = node.client.sync
 
+    sync_profile = cProfile.Profile() if "--sync" in argv else None
+
     def timed_sync() -> float:
         if not measuring.is_set():
             return sync()
+        if sync_profile is not None:
+            sync_profile.enable()
         t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
         try:
             return sync()
         finally:
             per_cycle["sync"].append(time.perf_counter_ns() - t0)
             per_cycle["sync_cpu"].append(time.thread_time_ns() - c0)
+            if sync_profile is not None:
+                sync_profile.disable()
 
     node.client.sync = timed_sync  # type: ignore[method-assign]
     listener = node.master._listener
     on_frame = listener.on_message_received
 
+    frame_profile = cProfile.Profile() if "--frames" in argv else None
+
     def timed_frame(msg: Any) -> None:
         if not measuring.is_set():
             return on_frame(msg)
-        t0 = time.perf_counter_ns()
+        if frame_profile is not None:
+            frame_profile.enable()
+        t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
         try:
             return on_frame(msg)
         finally:
             per_cycle["frame"].append(time.perf_counter_ns() - t0)
+            per_cycle["frame_cpu"].append(time.thread_time_ns() - c0)
+            if frame_profile is not None:
+                frame_profile.disable()
 
     listener.on_message_received = timed_frame  # type: ignore[method-assign]
+    bus = node.master.network.bus
+    recv = bus.recv
+
+    def timed_recv(timeout: float | None = None) -> Any:
+        c0 = time.thread_time_ns()
+        msg = recv(timeout)
+        if msg is not None and measuring.is_set():
+            per_cycle["recv_cpu"].append(time.thread_time_ns() - c0)
+        return msg
+
+    bus.recv = timed_recv  # type: ignore[method-assign]
     node.cycle_core.run = _timed(per_cycle, "decide", node.cycle_core.run)  # type: ignore
     from ssi_bridge.ros import cycle_publish
 
@@ -235,6 +289,14 @@ def main(argv: list[str]) -> int:
         node.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
+    if sync_profile is not None:
+        out = io.StringIO()
+        pstats.Stats(sync_profile, stream=out).sort_stats("cumulative").print_stats(30)
+        print(out.getvalue())
+    if frame_profile is not None:
+        out = io.StringIO()
+        pstats.Stats(frame_profile, stream=out).sort_stats("tottime").print_stats(30)
+        print(out.getvalue())
     if profile is not None:
         out = io.StringIO()
         pstats.Stats(profile, stream=out).sort_stats("cumulative").print_stats(35)

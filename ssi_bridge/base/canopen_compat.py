@@ -177,11 +177,12 @@ OnRaise = Callable[[Callable[..., Any], int, bytearray, Exception], None]
 
 
 def dispatch(network: canopen.Network, can_id: int, data: bytearray, timestamp: float,
-             on_raise: OnRaise) -> None:
+             on_raise: OnRaise, subscribed: list[Subscriber] | tuple[()] = ()) -> None:
     """canopen's ``Network.notify`` for one frame, each subscriber on its own: one that raises
     goes to ``on_raise`` (with the frame and its exception) and the others still get the
-    frame; then the network's node scanner notes ``can_id``."""
-    for callback in network.subscribers.get(can_id, ()):  # as canopen's notify (no copy)
+    frame; then the network's node scanner notes ``can_id``. ``subscribed``: the subscribers
+    of ``can_id`` when the caller has just looked them up (:func:`subscribers`)."""
+    for callback in subscribed or network.subscribers.get(can_id, ()):  # as canopen's notify
         try:
             callback(can_id, data, timestamp)
         except Exception as err:  # noqa: BLE001 - one subscriber must not stop the others
@@ -239,11 +240,32 @@ class OwnListenerNetwork(canopen.Network):
         super().__init__(bus)
         if notifier_cycle is not None:
             self.NOTIFIER_CYCLE = notifier_cycle
+        #: COB-ID -> the one handler its owner routes it to (:meth:`route`)
+        self.routes: dict[int, Subscriber] = {}
+        #: started with canopen's ``MessageListener`` too: routes become subscriptions
+        self._canopens_listener = False
+
+    def route(self, can_id: int, handler: Subscriber) -> None:
+        """Hand every frame of ``can_id`` to ``handler`` straight from the listener
+        (``base/rx_guard.GuardedListener``), before the subscribers canopen keeps for it
+        (normally none): a TPDO the owner decodes itself skips canopen's subscriber walk.
+        A later route of the same COB-ID replaces this one. On a network started with
+        canopen's own listener too (``start(canopens_too=True)``), which knows no routes, the
+        handler is subscribed instead."""
+        if self._canopens_listener:
+            self.subscribe(can_id, handler)
+        else:
+            self.routes[can_id] = handler
 
     def start(self, *listeners: can.Listener, canopens_too: bool = False) -> None:
         """Connect with ``listeners`` as the network's listeners, after canopen's own
         ``MessageListener`` when ``canopens_too`` (raises what ``Network.connect`` raises)."""
         own: list[can.Listener] = list(self.listeners[:1]) if canopens_too else []
+        self._canopens_listener = canopens_too
+        if canopens_too:  # canopen's listener calls subscribers only
+            for can_id, handler in self.routes.items():
+                self.subscribe(can_id, handler)
+            self.routes.clear()
         self.listeners[:] = [*own, *listeners]  # type: ignore[list-item]  # canopen: its own
         self.connect()
 

@@ -36,7 +36,7 @@ from typing import Any
 import can
 import canopen
 
-from ssi_bridge.base.canopen_compat import dispatch, forget_receive_error, subscribers
+from ssi_bridge.base.canopen_compat import Subscriber, dispatch, forget_receive_error, subscribers
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
 from ssi_bridge.base.udp_bus import UndecodableFrame
@@ -87,6 +87,10 @@ class GuardedListener(WireTimeListener):
         #: COB-ID -> the length its service's frames have (``protocol/frame_rules.py``); the
         #: owner fills it with the COB-IDs it consumes
         self.rules: dict[int, FrameRule] = {}
+        #: COB-ID -> the handler the network's owner routes it to (``OwnListenerNetwork.route``)
+        self._routes: dict[int, Subscriber] = getattr(network, "routes", {})
+        #: True when :meth:`handling_time` is this class's (the wire time itself)
+        self._plain_time = type(self).handling_time is GuardedListener.handling_time
         self._log = RateLimitedLog(logger)
 
     def count(self, kind: str) -> None:
@@ -103,13 +107,22 @@ class GuardedListener(WireTimeListener):
         if rule is not None and len(msg.data) != rule.length:
             self.malformed(can_id, msg.data, rule.problem(len(msg.data)) or "")
             return
+        route = self._routes.get(can_id)
+        subscribed = subscribers(network, can_id)
         wire_t = 0.0
-        if subscribers(network, can_id):
-            handled_at = self.handling_time(msg, frame_wire_time(msg))
-            if handled_at is None:
-                return  # not handled (a receiver that models its controller lost it)
-            wire_t = handled_at
-        dispatch(network, can_id, msg.data, wire_t, self._raised)
+        if route is not None or subscribed:
+            wire_t = frame_wire_time(msg)
+            if not self._plain_time:
+                handled_at = self.handling_time(msg, wire_t)
+                if handled_at is None:
+                    return  # not handled (a receiver that models its controller lost it)
+                wire_t = handled_at
+        if route is not None:
+            try:
+                route(can_id, msg.data, wire_t)
+            except Exception as err:  # noqa: BLE001 - as dispatch: counted, receiving goes on
+                self._raised(route, can_id, msg.data, err)
+        dispatch(network, can_id, msg.data, wire_t, self._raised, subscribed)
 
     def _raised(self, callback: Callable[..., Any], can_id: int, data: bytearray,
                 err: Exception) -> None:

@@ -25,7 +25,7 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.base.canopen_compat import pdo_handler, subscribers
+from ssi_bridge.base.canopen_compat import OwnListenerNetwork, pdo_handler, subscribers
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.base.timebase import frame_wire_time
 from ssi_bridge.client.error_frames import ErrorFrameWatch
@@ -164,9 +164,17 @@ class TpdoRoutes:
         self.pdo_numbers[cob_id] = pdo_no
 
     def attach(self, network: canopen.Network) -> None:
-        """Subscribe every route on ``network`` (once, before the PDOs are configured)."""
+        """Route every COB-ID to its handler (once, before the PDOs are configured): straight
+        from the listener on the master's network (``OwnListenerNetwork.route``), else as a
+        canopen subscriber.
+
+        :param network: the master's canopen network
+        """
         for cob_id, handler in self.routes.items():
-            network.subscribe(cob_id, handler)
+            if isinstance(network, OwnListenerNetwork):
+                network.route(cob_id, handler)
+            else:
+                network.subscribe(cob_id, handler)
 
     def release_maps(self, node: canopen.RemoteNode) -> None:
         """Take canopen's PdoMap handlers of ``node`` (the station's RemoteNode) off the

@@ -80,11 +80,18 @@ def _crc15_of_int(value: int, width: int) -> int:
 _CRC_TABLE = [_crc15_of_int(byte, 8) for byte in range(256)]
 
 
+@functools.lru_cache(maxsize=4096)
+def _head_crc(head: int) -> int:
+    """:func:`_crc15_of_int` of the 19 header bits (a COB-ID's few heads repeat)."""
+    return _crc15_of_int(head, 19)
+
+
 def _fast_crc(head: int, payload: bytes) -> int:
     """CRC-15 of the 19 header bits then the payload bytes (byte-wise table, same result)."""
-    crc = _crc15_of_int(head, 19)
+    crc = _head_crc(head)
+    table = _CRC_TABLE
     for byte in payload:
-        crc = ((crc << 8) & 0x7FFF) ^ _CRC_TABLE[((crc >> 7) & 0xFF) ^ byte]
+        crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) & 0xFF) ^ byte]
     return crc
 
 
@@ -113,6 +120,10 @@ def _stuff_table() -> dict[tuple[int, int], list[tuple[int, int, int]]]:
 
 
 _STUFF = _stuff_table()
+#: the stuffing states (last level, run) as row numbers of :data:`_STUFF_ROWS`
+_STATES = {state: i for i, state in enumerate(_STUFF)}
+#: per state number and byte: (stuff bits, the state number after it)
+_STUFF_ROWS = [[(n, _STATES[(lv, rn)]) for n, lv, rn in row] for row in _STUFF.values()]
 
 
 def _fast_stuff(value: int, width: int) -> int:
@@ -122,8 +133,9 @@ def _fast_stuff(value: int, width: int) -> int:
     for i in range(lead - 1, -1, -1):
         k, last, run = _step(last, run, (value >> (width - lead + i)) & 1)
         count += k
+    state, rows = _STATES[(last, run)], _STUFF_ROWS
     for shift in range(width - lead - 8, -1, -8):
-        k, last, run = _STUFF[(last, run)][(value >> shift) & 0xFF]
+        k, state = rows[state][(value >> shift) & 0xFF]
         count += k
     return count
 

@@ -170,3 +170,51 @@ def test_forgotten_values_read_their_defaults_again() -> None:
     forget_values(node)
     assert node.data_store == {}
     assert node.get_data(0x1800, 5, check_readable=False) == default != b"\x64\x00"
+
+
+def test_a_routed_frame_goes_straight_to_its_handler_and_a_raising_route_is_counted() -> None:
+    """``OwnListenerNetwork.route`` with the guarded listener: the routed COB-ID's handler
+    gets the frame with its wire time, a canopen subscriber of the same COB-ID still gets
+    it, a route that raises is a counted callback error (receiving goes on), the node
+    scanner notes the frame, and a frame of the wrong length for its rule reaches nobody."""
+    from ssi_bridge.base.rx_guard import CALLBACK_ERROR, MALFORMED, GuardedListener
+    from ssi_bridge.protocol.frame_rules import FrameRule
+
+    network = OwnListenerNetwork(None)
+    listener = GuardedListener(network)
+    routed: list[tuple[int, bytes, float]] = []
+    subscribed: list[int] = []
+    network.route(0x185, lambda can_id, data, t: routed.append((can_id, bytes(data), t)))
+    network.subscribe(0x185, lambda can_id, data, t: subscribed.append(can_id))
+
+    def breaks(can_id: int, data: bytearray, t: float) -> None:
+        raise ValueError("cannot parse")
+
+    network.route(0x186, breaks)
+    frame = can.Message(arbitration_id=0x185, data=b"\x01\x02", is_extended_id=False,
+                        timestamp=12.5)
+    listener.on_message_received(frame)
+    assert routed == [(0x185, b"\x01\x02", 12.5)] and subscribed == [0x185]
+    assert network.scanner.nodes == [5]
+    listener.on_message_received(can.Message(arbitration_id=0x186, data=b"\x03",
+                                             is_extended_id=False, timestamp=13.0))
+    assert listener.faults[CALLBACK_ERROR] == 1 and network.scanner.nodes == [5, 6]
+    listener.rules[0x185] = FrameRule("TPDO1 of node 5", 8)
+    listener.on_message_received(frame)
+    assert len(routed) == 1 and listener.faults[MALFORMED] == 1
+
+
+def test_routes_become_subscriptions_where_canopens_listener_dispatches(request) -> None:
+    """A network started with canopen's own ``MessageListener`` (``canopens_too``) knows no
+    routes: a route given before or after the start is subscribed instead."""
+    network = OwnListenerNetwork(can.Bus(interface="virtual", channel=f"net_{request.node.name}"))
+    before, after = (lambda *a: None), (lambda *a: None)
+    network.route(0x181, before)
+    network.start(canopens_too=True)
+    try:
+        network.route(0x182, after)
+        assert network.routes == {}
+        assert subscribers(network, 0x181) == [before]
+        assert subscribers(network, 0x182) == [after]
+    finally:
+        network.disconnect()
