@@ -48,6 +48,18 @@ class StopRequests:
         if watch:
             self.watch()
 
+    def ignore_further(self) -> None:
+        """From now on the kernel discards stop signals: for a program that is ending (main
+        thread only).
+
+        The interpreter's finalization puts every signal with a Python handler back to its
+        default action, so one signal of a storm landing in the last moments of an ending
+        program would kill it by that signal instead of letting it exit 0. An ignored signal
+        stays ignored through finalization.
+        """
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+
     def watch(self) -> None:
         """Start the watcher thread (once)."""
         threading.Thread(target=self._watch, name="stop-signals", daemon=True).start()

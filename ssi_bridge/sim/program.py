@@ -129,6 +129,14 @@ def main(argv: list[str] | None = None) -> int:
     # (the node's stop, PR_SET_PDEATHSIG, a terminal's Ctrl-C) landed inside the first one
     stop = StopRequests()
     stop.install(watch=False)  # its thread starts after the priority is set (it inherits it)
+    try:
+        return _run(stop, argv)
+    finally:
+        stop.ignore_further()  # no signal of a storm may end the exit with its default action
+
+
+def _run(stop: StopRequests, argv: list[str] | None) -> int:
+    """The station program after its stop signals are routed (see :func:`main`)."""
     args = _parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr,
                         format="[%(levelname)s] %(name)s: %(message)s")

@@ -190,6 +190,7 @@ def main(args: list[str] | None = None, managed: bool = False) -> int:
             node.shutdown()
             node.destroy_node()
         rclpy.try_shutdown()
+        stops.ignore_further()  # no signal of a storm may end the exit with its default action
     return 0
 
 
