@@ -282,8 +282,11 @@ def test_the_masters_counter_reaches_the_bus_diagnostics(station, channel: str) 
         other.shutdown()
     time.sleep(0.1)
     assert client.read_object(0x1000) == DEVICE_TYPE_OBJECT
-    assert client.counters.stale_sdo_answers == 1
+    # the planted answer, and on a busy machine also the read's own first answer when it came
+    # after the read's repeat: each set aside and counted
+    stale = client.counters.stale_sdo_answers
+    assert stale >= 1
     status = bus_status("/ssi_bridge: bus", "can", alive=True, connected=True,
                         achieved_rate=100.0, publish_rate=100.0,
                         counters=dataclasses.asdict(client.counters))
-    assert {kv.key: kv.value for kv in status.values}["stale_sdo_answers"] == "1"
+    assert {kv.key: kv.value for kv in status.values}["stale_sdo_answers"] == str(stale)
