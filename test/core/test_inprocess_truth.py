@@ -22,6 +22,7 @@ from ssi_bridge.sim.gateway.simulation import FaultKind as K
 from support.inprocess_truth import RATE, TruthRun
 from support.node_changes import hold_changes, timed
 from support.truth import TruthOracle
+from support.virtual_bus import send_syncs
 
 PARAMS = {"joints": ["joint1"], "publish_rate": RATE}
 
@@ -32,17 +33,8 @@ def _run(inprocess) -> TruthRun:
 
 def _foreign_syncs(channel: str, rate: float, seconds: float, stop: threading.Event) -> int:
     """SYNC (0x080) at ``rate`` Hz for ``seconds`` from another producer on the bus."""
-    bus = open_bus(BusConfig(interface="virtual", channel=channel))
-    sent = 0
-    try:
-        start = time.monotonic()
-        while not stop.is_set() and time.monotonic() - start < seconds:
-            bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
-            sent += 1
-            time.sleep(max(0.0, start + sent / rate - time.monotonic()))
-    finally:
-        bus.shutdown()
-    return sent
+    return send_syncs(open_bus(BusConfig(interface="virtual", channel=channel)), rate, seconds,
+                      stop)
 
 
 @pytest.mark.parametrize("rate,seconds", [(10.0, 2.0)])

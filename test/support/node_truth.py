@@ -32,6 +32,7 @@ from ssi_bridge_msgs.srv import InjectFault, SdoRead
 from ssi_bridge.base.udp_bus import open_udp_bus
 from support.stations import children
 from support.truth import TruthOracle, flatten, samples_from_joint_states
+from support.virtual_bus import send_syncs
 
 K = InjectFault.Request
 RATE = 200.0
@@ -235,17 +236,7 @@ class Run:
 
 def foreign_syncs(wire: str, rate: float, seconds: float, stop: threading.Event) -> int:
     """Send SYNC (0x080) at ``rate`` Hz for ``seconds`` from another producer on ``wire``."""
-    bus = open_udp_bus(wire)
-    sent = 0
-    try:
-        start = time.monotonic()
-        while not stop.is_set() and time.monotonic() - start < seconds:
-            bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
-            sent += 1
-            time.sleep(max(0.0, start + sent / rate - time.monotonic()))
-    finally:
-        bus.shutdown()
-    return sent
+    return send_syncs(open_udp_bus(wire), rate, seconds, stop)
 
 
 def two_stations(channel: str) -> dict[str, Any]:

@@ -4,8 +4,11 @@ to one test, and an SSI line that answers with the value the test sets."""
 from __future__ import annotations
 
 import itertools
+import threading
+import time
 from collections.abc import Iterator
 
+import can
 import can.interfaces.virtual as virtual
 
 from ssi_bridge.protocol.readout import LineReadout
@@ -33,3 +36,18 @@ class ScriptedReader:
     def read(self, t: float, n_bits: int, bit_rate_hz: float) -> LineReadout:
         return LineReadout(latch_time=t, n_bits=n_bits, data=self.value & ((1 << n_bits) - 1),
                            end_time=t + (n_bits + 1) / bit_rate_hz)
+
+
+def send_syncs(bus: can.BusABC, rate: float, seconds: float, stop: threading.Event) -> int:
+    """Send SYNC (0x080) at ``rate`` Hz for ``seconds`` (or until ``stop``) on ``bus``, as
+    another SYNC producer would; shut ``bus`` down after. Returns how many were sent."""
+    sent = 0
+    try:
+        start = time.monotonic()
+        while not stop.is_set() and time.monotonic() - start < seconds:
+            bus.send(can.Message(arbitration_id=0x080, data=b"", is_extended_id=False))
+            sent += 1
+            time.sleep(max(0.0, start + sent / rate - time.monotonic()))
+    finally:
+        bus.shutdown()
+    return sent
