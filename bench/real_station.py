@@ -13,13 +13,14 @@ from __future__ import annotations
 
 import contextlib
 import select
-import signal
 import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 from ssi_bridge.base.udp_bus import derive_channel
+# test/ is on the path: bench_node.py, which every importer of this module loads, puts it there
+from support.stations import stop_station
 
 STATION_EXE_PARTS = ("install", "ssi_bridge", "lib", "ssi_bridge", "station")
 #: the ``station`` program's line once it has sent its boot-up (sim/program.py READY)
@@ -61,13 +62,7 @@ def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, 
                 line = proc.stdout.readline()
         yield proc
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5)
+        stop_station(proc)
         proc.stdout.close()
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import statistics
 import subprocess
 import sys
@@ -22,6 +21,8 @@ from pathlib import Path
 
 import pytest
 import yaml
+
+from support.stations import stop_station
 
 from .conftest import dds_env, installed_executable
 
@@ -130,13 +131,7 @@ def test_station_and_node_on_two_hosts_subscriber_on_a_third(namespaces, domain_
         result = json.loads(sub.stdout.strip().splitlines()[-1])
     finally:
         for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait(5)
+            stop_station(proc)
     stamps = result["stamps"]
     assert len(stamps) > 10, ("no joint_states crossed the network", logs["node"].read_text())
     spacing = statistics.median(b - a for a, b in zip(stamps, stamps[1:])) / 1e9
