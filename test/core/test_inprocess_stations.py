@@ -16,13 +16,13 @@ import math
 import time
 from pathlib import Path
 
-import can
 from diagnostic_msgs.msg import DiagnosticStatus as D
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.settings import BusConfig, load_params_file
 from ssi_bridge.sim.gateway.bus import open_bus
 from ssi_bridge.sim.gateway.simulation import FaultKind as K
+from support.stations import assert_own_motion
 
 PERIOD = 0.5
 SYNC_COB_ID = 0x080
@@ -60,23 +60,7 @@ def test_three_joints_on_two_stations_publish_their_own_motion(inprocess):
     b = inprocess(_params())
     b.run_until(lambda: len(b.joint_state_msgs()) > 60, 10.0, "joint_states of both stations")
     elapsed = time.monotonic() - t_start
-    msgs = b.joint_state_msgs()
-    # a joint whose sample was not latched at a stamp is left out of that message
-    full = [m for m in msgs if list(m.name) == list(MOTION)]
-    assert len(full) >= 0.8 * len(msgs), "the joints of both stations are published together"
-    last = full[-1]
-    for i, (joint, (velocity, start)) in enumerate(MOTION.items()):
-        # velocity: the constant shaft speed, from this joint's own station; bound as for one
-        # station (docs/node.md), the window at least 3.5 periods (CycleThread)
-        truth = 2 * math.pi * velocity
-        bound = STEP / (3.5 / RATE) + 0.01 * abs(truth)
-        speeds = [m.velocity[i] for m in full[-30:]]
-        worst = max(speeds, key=lambda v: abs(v - truth))
-        assert abs(worst - truth) <= bound, (joint, truth, bound, worst, speeds)
-        # position: start + velocity x (time since the simulated station started)
-        expected = 2 * math.pi * start
-        assert abs(last.position[i] - expected) <= 2 * math.pi * abs(velocity) * elapsed + 0.01, \
-            (joint, last.position[i], expected)
+    assert_own_motion(b.joint_state_msgs(), MOTION, STEP, RATE, elapsed)
 
 
 def test_register_write_reaches_only_the_joints_station(inprocess):

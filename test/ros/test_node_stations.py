@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState
 
 from .conftest import joint_of, latest_status, wait_for_level
 from ssi_bridge_msgs.srv import InjectFault
+from support.stations import assert_own_motion
 
 PERIOD = 0.5
 #: rev/s and start (rev) of each joint's simulated constant motion
@@ -49,25 +50,7 @@ def test_three_joints_on_two_stations_publish_their_own_motion(running, probe, t
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
     probe.wait_for(lambda: len(msgs) > 60, 10.0, "joint_states of both stations", node)
     elapsed = time.monotonic() - t_start
-    # a joint whose sample was not latched at a stamp is left out of that message
-    full = [m for _, m in msgs if list(m.name) == list(MOTION)]
-    assert len(full) >= 0.8 * len(msgs), "the joints of both stations are published together"
-    last = full[-1]
-    for i, (joint, (velocity, start)) in enumerate(MOTION.items()):
-        # velocity: the constant shaft speed, from this joint's own station
-        # bound as for one station: one count over the window of 4 periods plus SYNC-stamp
-        # timing noise (docs/node.md). The window is at least 3.5 periods: a cycle less than
-        # half a period late runs at once (CycleThread), so the oldest of its five samples
-        # may be up to half a period late (a busy machine)
-        truth = 2 * math.pi * velocity
-        bound = STEP / (3.5 / RATE) + 0.01 * abs(truth)
-        speeds = [m.velocity[i] for m in full[-30:]]
-        worst = max(speeds, key=lambda v: abs(v - truth))
-        assert abs(worst - truth) <= bound, (joint, truth, bound, worst, speeds)
-        # position: start + velocity x (time since the simulated station started)
-        expected = 2 * math.pi * start
-        assert abs(last.position[i] - expected) <= 2 * math.pi * abs(velocity) * elapsed + 0.01, \
-            (joint, last.position[i], expected)
+    assert_own_motion([m for _, m in msgs], MOTION, STEP, RATE, elapsed)
 
 
 @pytest.mark.parametrize("transport", ["udp_multicast"])  # virtual: test/core/test_inprocess_stations.py

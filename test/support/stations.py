@@ -4,6 +4,8 @@ found in /proc."""
 
 from __future__ import annotations
 
+import math
+
 import signal
 import subprocess
 from pathlib import Path
@@ -76,3 +78,33 @@ def gone(pid: int) -> bool:
     except OSError:
         return True
     return state in ("Z", "X")
+
+
+def assert_own_motion(msgs: list, motion: dict[str, tuple[float, float]], step: float,
+                      rate: float, elapsed: float) -> None:
+    """The joints of several stations publish each its own station's motion.
+
+    :param msgs: the JointState messages received, in order
+    :param motion: per joint, in the configured order, (velocity in rev/s, start in rev)
+    :param step: one count of the joints' encoders (rad)
+    :param rate: the publish rate (Hz)
+    :param elapsed: seconds since the simulated stations started (an upper bound)
+
+    A message holding every joint is most of them (a joint whose sample was not latched at a
+    stamp is left out of that message). Velocity: the constant shaft speed, bound as for one
+    station (docs/node.md): one count over a window of at least 3.5 periods (a cycle less
+    than half a period late runs at once, CycleThread) plus SYNC-stamp timing noise.
+    Position: start + velocity x the time since the station started.
+    """
+    full = [m for m in msgs if list(m.name) == list(motion)]
+    assert len(full) >= 0.8 * len(msgs), "the joints of both stations are published together"
+    last = full[-1]
+    for i, (joint, (velocity, start)) in enumerate(motion.items()):
+        truth = 2 * math.pi * velocity
+        bound = step / (3.5 / rate) + 0.01 * abs(truth)
+        speeds = [m.velocity[i] for m in full[-30:]]
+        worst = max(speeds, key=lambda v: abs(v - truth))
+        assert abs(worst - truth) <= bound, (joint, truth, bound, worst, speeds)
+        expected = 2 * math.pi * start
+        assert abs(last.position[i] - expected) <= 2 * math.pi * abs(velocity) * elapsed + 0.01, \
+            (joint, last.position[i], expected)
