@@ -111,6 +111,19 @@ def _sample(seconds: float, interval: float = 0.0005, top: int = 45) -> list[str
     return out
 
 
+def thread_cpu() -> dict[str, int]:
+    """CPU ns each thread of this process has run (``/proc/self/task/*/schedstat``), by name
+    (threads of the same name summed)."""
+    out: dict[str, int] = defaultdict(int)
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            out[name] += int((task / "schedstat").read_text().split()[0])
+        except OSError:
+            continue  # the thread ended
+    return out
+
+
 def main(argv: list[str]) -> int:
     from rclpy.parameter import Parameter
 
@@ -185,6 +198,21 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
         rclpy.try_shutdown()
         for line in counts:
             print(line)
+        return 0
+    if "--plain" in argv:  # nothing wrapped: each thread's CPU, for perf or a sampler
+        threading.Thread(target=rclpy.spin, args=(node,), daemon=True).start()
+        time.sleep(2.0)
+        cpu0, c0 = thread_cpu(), node.cycle.cycles
+        print(f"measuring pid {os.getpid()} for {seconds:g} s", flush=True)
+        time.sleep(seconds)
+        cpu1, cycles = thread_cpu(), node.cycle.cycles - c0
+        node.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+        print(f"{cycles} cycles; CPU per thread, s/s (us per cycle): " + ", ".join(
+            f"{name} {(cpu1[name] - cpu0.get(name, 0)) / 1e9 / seconds:.3f} "
+            f"({(cpu1[name] - cpu0.get(name, 0)) / 1e3 / max(cycles, 1):.0f})"
+            for name in sorted(cpu1, key=lambda n: cpu0.get(n, 0) - cpu1[n])[:6]))
         return 0
     publisher._publish = cycle  # type: ignore[method-assign]
     publisher._finish = _timed(per_cycle, "finish", publisher._finish)  # type: ignore
@@ -274,9 +302,14 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
     try:
         time.sleep(2.0)
         c0, m0, i0 = node.cycle.cycles, node.cycle.missed, node.cycle_core.incomplete_cycles
+        cpu0 = thread_cpu()
         measuring.set()
         time.sleep(seconds)
         measuring.clear()
+        cpu1 = thread_cpu()
+        print("CPU per thread, s/s (schedstat): " + ", ".join(
+            f"{name} {(cpu1[name] - cpu0.get(name, 0)) / 1e9 / seconds:.3f}"
+            for name in sorted(cpu1, key=lambda n: cpu0.get(n, 0) - cpu1[n])))
         for gen in sorted(gc_runs):
             runs = np.array(gc_runs[gen]) / 1e3
             print(f"gc generation {gen}: {len(runs)} collections, median {np.median(runs):.0f} "
