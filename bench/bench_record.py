@@ -114,17 +114,19 @@ def bench_replay(tmp: Path) -> None:
 def bench_node_recording(tmp: Path) -> None:
     """The node's CPU at 1 kHz (1 encoder) with recording on vs off, measured in one run.
 
-    Uses bench_node.py's harness (installed node + subscriber process); the recording also
-    builds ~/status every cycle, which is part of what recording costs.
+    Uses the node benchmark's harness (installed node + subscriber process, node_measure.py);
+    the recording also builds ~/status every cycle, which is part of what recording costs.
     """
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import bench_node as bn
+    from node_cases import NODE_NS, node_cmd
+    from node_measure import measure
+    from node_procs import dds_env, domain_id
 
-    domain_id = bn._domain_id()
-    env = bn.dds_env(domain_id)
-    topic = f"{bn.NODE_NS}/joint_states"
-    off = bn.measure("rec_off", bn.node_cmd(1, domain_id, tmp), topic, env, tmp)
-    on = bn.measure("rec_on", bn.node_cmd(1, domain_id, tmp, {
+    domain = domain_id()
+    env = dds_env(domain)
+    topic = f"{NODE_NS}/joint_states"
+    off = measure("rec_off", node_cmd(1, domain, tmp), topic, env, tmp)
+    on = measure("rec_on", node_cmd(1, domain, tmp, {
         "record.enabled": True, "record.root": str(tmp / "sessions")}), topic, env, tmp)
     emit("node_recording_cpu_s_per_s", on["cpu_s_per_s"], "s/s", off["cpu_s_per_s"],
          "node process CPU per second at 1 kHz with recording on; baseline: recording off, "

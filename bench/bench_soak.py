@@ -38,7 +38,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
-import bench_node as bn  # noqa: E402 - the node harness (env, stop by PID)
+from node_cases import NODE_EXE  # noqa: E402
+from node_measure import STARTUP_TIMEOUT_S, SUBSCRIBER  # noqa: E402
+import node_procs  # noqa: E402
+from node_procs import dds_env, stop, tail  # noqa: E402
 from benchlib import cpu_seconds, save  # noqa: E402
 from benchlib import emit_record as emit  # noqa: E402
 
@@ -88,7 +91,7 @@ def node_cmd(work: Path, tag: str, domain_id: int, record: bool) -> list[str]:
                        "record.path": tag, "record.max_duration": SPLIT_S})
     pfile = work / f"params_{tag}.yaml"
     pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    return [str(bn.NODE_EXE), "--ros-args", "--params-file", str(CONFIG), "--params-file",
+    return [str(NODE_EXE), "--ros-args", "--params-file", str(CONFIG), "--params-file",
             str(pfile), "-r", f"__ns:={NS}"]
 
 
@@ -101,14 +104,14 @@ def missed_cycles(stamps_ns: list[int]) -> int:
 
 def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path) -> dict:
     """One soak: node + subscriber for ``minutes``; RSS, CPU, received stamps, the bag."""
-    env = bn.dds_env(domain_id)
+    env = dds_env(domain_id)
     out, ready = work / f"{tag}.samples", work / f"{tag}.ready"
     pub_log, sub_log = work / f"{tag}.node.log", work / f"{tag}.sub.log"
     procs: list[subprocess.Popen] = []
     topic = f"{NS}/joint_states"
     try:
         with open(sub_log, "wb") as log:
-            sub = subprocess.Popen([sys.executable, str(bn.SUBSCRIBER), topic, str(out),
+            sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out),
                                     str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env,
                                    cwd=work, start_new_session=True)
         procs.append(sub)
@@ -117,15 +120,15 @@ def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path
                                     stderr=subprocess.STDOUT, env=env, cwd=work,
                                     start_new_session=True)
         procs.append(node)
-        deadline = time.monotonic() + bn.STARTUP_TIMEOUT_S
+        deadline = time.monotonic() + STARTUP_TIMEOUT_S
         while not ready.exists():
             for p, log_path in ((node, pub_log), (sub, sub_log)):
                 if p.poll() is not None:
                     raise RuntimeError(f"{tag}: {p.args[0]} exited {p.returncode}: "
-                                       f"{bn._tail(log_path)}")
+                                       f"{tail(log_path)}")
             if time.monotonic() > deadline:
-                raise RuntimeError(f"{tag}: no joint_states within {bn.STARTUP_TIMEOUT_S} s: "
-                                   f"{bn._tail(pub_log)}")
+                raise RuntimeError(f"{tag}: no joint_states within {STARTUP_TIMEOUT_S} s: "
+                                   f"{tail(pub_log)}")
             time.sleep(0.05)
         time.sleep(WARMUP_S)
         cpu0, m0 = cpu_seconds(node.pid), time.monotonic()
@@ -134,19 +137,19 @@ def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path
         while time.monotonic() < end:
             samples.append((time.monotonic() - m0, rss_mb(node.pid)))
             if node.poll() is not None:
-                raise RuntimeError(f"{tag}: node exited {node.returncode}: {bn._tail(pub_log)}")
+                raise RuntimeError(f"{tag}: node exited {node.returncode}: {tail(pub_log)}")
             time.sleep(max(0.0, min(SAMPLE_S, end - time.monotonic())))
         samples.append((time.monotonic() - m0, rss_mb(node.pid)))
         cpu1, m1 = cpu_seconds(node.pid), time.monotonic()
-        bn._stop(node, timeout=30.0)    # SIGINT: the node closes its bag
+        stop(node, timeout=30.0)  # SIGINT: the node closes its bag
         if node.returncode != 0:
-            raise RuntimeError(f"{tag}: node exited {node.returncode}: {bn._tail(pub_log)}")
-        bn._stop(sub)
+            raise RuntimeError(f"{tag}: node exited {node.returncode}: {tail(pub_log)}")
+        stop(sub)
         if not out.exists():
-            raise RuntimeError(f"{tag}: subscriber wrote no samples: {bn._tail(sub_log)}")
+            raise RuntimeError(f"{tag}: subscriber wrote no samples: {tail(sub_log)}")
     finally:
         for p in reversed(procs):
-            bn._stop(p)
+            stop(p)
     with open(out) as f:
         stamps = [int(line.split()[1]) for line in f if line.strip()]
     return {"rss": samples, "rss_growth": slope_per_10min(samples),
@@ -239,9 +242,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     records: list[dict] = []
     try:
-        if not bn.NODE_EXE.exists():
-            raise RuntimeError(f"{bn.NODE_EXE} missing: run `make setup`")
-        domain_id = bn._domain_id()
+        if not NODE_EXE.exists():
+            raise RuntimeError(f"{NODE_EXE} missing: run `make setup`")
+        domain_id = node_procs.domain_id()
         with tempfile.TemporaryDirectory(prefix="bench_soak_") as tmp:
             work = Path(tmp)
             on = run_phase("rec", True, args.minutes, domain_id, work)

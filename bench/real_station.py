@@ -1,4 +1,4 @@
-"""The node as a real deployment runs it, for bench_node's driver-only figures.
+"""The node as a real deployment runs it, for the driver-only figures of node_driver.py.
 
 With ``simulation.enabled: true`` the node's own bus end is the simulated wire
 (``sim/gateway/wire_bus.py``): the node's SYNC is paced at bit time in the node's process and
@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from ssi_bridge.base.udp_bus import derive_channel
-# test/ is on the path: bench_node.py, which every importer of this module loads, puts it there
+# test/ is on the path: node_procs.py, which every importer of this module loads, puts it there
 from support.stations import stop_station
 
 STATION_EXE_PARTS = ("install", "ssi_bridge", "lib", "ssi_bridge", "station")

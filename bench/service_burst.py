@@ -31,7 +31,12 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import bench_node as bn  # noqa: E402 - the shared helpers of the node benchmark
+from benchlib import cpu_seconds, save  # noqa: E402
+from benchlib import emit_record as emit  # noqa: E402
+from node_cases import NODE_NS, RATE_HZ, node_cmd  # noqa: E402
+from node_measure import STARTUP_TIMEOUT_S, SUBSCRIBER, WARMUP_S  # noqa: E402
+from node_procs import (  # noqa: E402
+    dds_env, domain_id, real_time_subscriber, stop, subscriber_scheduling, tail)
 
 CLIENTS = 4
 CALLS_PER_CLIENT = 250
@@ -111,8 +116,8 @@ def burst(domain_id: int, service: str) -> dict:
 def run(records: list[dict], extra: dict | None = None) -> None:
     import numpy as np
 
-    domain_id = bn._domain_id()
-    env = bn.dds_env(domain_id)
+    domain = domain_id()
+    env = dds_env(domain)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with tempfile.TemporaryDirectory(prefix="bench_burst_") as tmp:
         work = Path(tmp)
@@ -121,33 +126,33 @@ def run(records: list[dict], extra: dict | None = None) -> None:
         try:
             with open(work / "sub.log", "wb") as log:
                 procs.append(subprocess.Popen(
-                    [sys.executable, str(bn.SUBSCRIBER), f"{bn.NODE_NS}/joint_states", str(out),
+                    [sys.executable, str(SUBSCRIBER), f"{NODE_NS}/joint_states", str(out),
                      str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                    start_new_session=True, preexec_fn=bn._real_time_subscriber))
+                    start_new_session=True, preexec_fn=real_time_subscriber))
             with open(work / "node.log", "wb") as log:
-                node = subprocess.Popen(bn.node_cmd(1, domain_id, work, extra), stdout=log,
+                node = subprocess.Popen(node_cmd(1, domain, work, extra), stdout=log,
                                         stderr=subprocess.STDOUT, env=env, cwd=work,
                                         start_new_session=True)
             procs.append(node)
-            deadline = time.monotonic() + bn.STARTUP_TIMEOUT_S
+            deadline = time.monotonic() + STARTUP_TIMEOUT_S
             while not ready.exists():
                 if node.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"node not publishing: {bn._tail(work / 'node.log')}")
+                    raise RuntimeError(f"node not publishing: {tail(work / 'node.log')}")
                 time.sleep(0.05)
-            time.sleep(bn.WARMUP_S)
+            time.sleep(WARMUP_S)
             # the baseline window ends before the clients' process starts: its set-up (rclpy
             # init, four nodes, discovery) takes a core for a second or two and is no part of
             # the burst
-            cpu0, m0, w0 = bn.cpu_seconds(node.pid), time.monotonic(), time.time_ns()
+            cpu0, m0, w0 = cpu_seconds(node.pid), time.monotonic(), time.time_ns()
             time.sleep(BEFORE_S)
-            cpu1, m1, w1 = bn.cpu_seconds(node.pid), time.monotonic(), time.time_ns()
-            result = burst(domain_id, f"{bn.NODE_NS}/ssi_bridge/read_register")
-            cpu2, m2 = bn.cpu_seconds(node.pid), time.monotonic()
+            cpu1, m1, w1 = cpu_seconds(node.pid), time.monotonic(), time.time_ns()
+            result = burst(domain, f"{NODE_NS}/ssi_bridge/read_register")
+            cpu2, m2 = cpu_seconds(node.pid), time.monotonic()
             time.sleep(0.2)
-            bn._stop(procs[0])
+            stop(procs[0])
         finally:
             for p in reversed(procs):
-                bn._stop(p)
+                stop(p)
         before = _rate(out, w0, w1)
         during = _rate(out, result["t0_ns"], result["t1_ns"])
     n = len(result["sent"])
@@ -155,32 +160,32 @@ def run(records: list[dict], extra: dict | None = None) -> None:
     busy = sum(m.startswith("read_register: busy:") for m in result["messages"])
     other = [m for m in result["messages"] if m not in ("ok", "") and "busy:" not in m]
     note = (f"{CLIENTS} clients x {CALLS_PER_CLIENT} ~/read_register calls at once to the node at "
-            f"{bn.RATE_HZ:g} Hz (1 encoder), {bn.subscriber_scheduling()}"
+            f"{RATE_HZ:g} Hz (1 encoder), {subscriber_scheduling()}"
             + "".join(f", {k} {v}" for k, v in (extra or {}).items()))
-    bn.emit(records, {"metric": "service_burst_answered_fraction", "value": len(times) / n,
-                      "unit": "", "baseline": 1.0, "ratio": round(len(times) / n, 4),
-                      "goal": "ratio >= 1.0", "goal_met": len(times) == n,
-                      "note": f"answers / calls; {note}"
-                              + (f"; unexpected answers: {other[:3]}" if other else "")})
-    bn.emit(records, {"metric": "service_burst_busy_fraction", "value": round(busy / n, 4),
-                      "unit": "", "note": f"prompt 'busy: N queued' refusals / calls; {note}"})
+    emit(records, {"metric": "service_burst_answered_fraction", "value": len(times) / n,
+                   "unit": "", "baseline": 1.0, "ratio": round(len(times) / n, 4),
+                   "goal": "ratio >= 1.0", "goal_met": len(times) == n,
+                   "note": f"answers / calls; {note}"
+                           + (f"; unexpected answers: {other[:3]}" if other else "")})
+    emit(records, {"metric": "service_burst_busy_fraction", "value": round(busy / n, 4),
+                   "unit": "", "note": f"prompt 'busy: N queued' refusals / calls; {note}"})
     if times:
         for q in (50, 99):
-            bn.emit(records, {"metric": f"service_burst_answer_p{q}_ms",
-                              "value": round(float(np.percentile(times, q)), 2), "unit": "ms",
-                              "note": f"call -> answer time, all answers; {note}"})
+            emit(records, {"metric": f"service_burst_answer_p{q}_ms",
+                           "value": round(float(np.percentile(times, q)), 2), "unit": "ms",
+                           "note": f"call -> answer time, all answers; {note}"})
     cpu_before, cpu_during = (cpu1 - cpu0) / (m1 - m0), (cpu2 - cpu1) / (m2 - m1)
-    bn.emit(records, {"metric": "service_burst_node_cpu_s_per_s", "value": round(cpu_during, 3),
-                      "unit": "s/s", "baseline": round(cpu_before, 3),
-                      "ratio": round(cpu_during / cpu_before, 3) if cpu_before else None,
-                      "note": f"node process CPU s per s during the burst (baseline: before); "
-                              f"{note}"})
+    emit(records, {"metric": "service_burst_node_cpu_s_per_s", "value": round(cpu_during, 3),
+                   "unit": "s/s", "baseline": round(cpu_before, 3),
+                   "ratio": round(cpu_during / cpu_before, 3) if cpu_before else None,
+                   "note": f"node process CPU s per s during the burst (baseline: before); "
+                           f"{note}"})
     ratio = during / before if before else 0.0
-    bn.emit(records, {"metric": "service_burst_joint_states_rate_hz", "value": round(during, 1),
-                      "unit": "Hz", "baseline": round(before, 1), "ratio": round(ratio, 3),
-                      "goal": "ratio >= 0.9", "goal_met": ratio >= 0.9,
-                      "note": f"joint_states received per s from the first call to the last "
-                              f"answer; baseline = the {BEFORE_S:g} s before the clients start; {note}"})
+    emit(records, {"metric": "service_burst_joint_states_rate_hz", "value": round(during, 1),
+                   "unit": "Hz", "baseline": round(before, 1), "ratio": round(ratio, 3),
+                   "goal": "ratio >= 0.9", "goal_met": ratio >= 0.9,
+                   "note": f"joint_states received per s from the first call to the last "
+                           f"answer; baseline = the {BEFORE_S:g} s before the clients start; {note}"})
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -196,9 +201,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         run(records, extra)
     except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
-        bn.emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}",
-                          "note": traceback.format_exc(limit=3)[-800:]})
-    bn.save(records)
+        emit(records, {"metric": "service_burst", "error": f"{type(err).__name__}: {err}",
+                       "note": traceback.format_exc(limit=3)[-800:]})
+    save(records)
     return 0
 
 
