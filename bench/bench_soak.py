@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -39,7 +38,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 from node_cases import NODE_EXE  # noqa: E402
-from node_measure import STARTUP_TIMEOUT_S, SUBSCRIBER  # noqa: E402
+from node_measure import publisher_and_subscriber  # noqa: E402
 import node_procs  # noqa: E402
 from node_procs import dds_env, stop, tail  # noqa: E402
 from benchlib import cpu_seconds, save  # noqa: E402
@@ -105,31 +104,11 @@ def missed_cycles(stamps_ns: list[int]) -> int:
 def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path) -> dict:
     """One soak: node + subscriber for ``minutes``; RSS, CPU, received stamps, the bag."""
     env = dds_env(domain_id)
-    out, ready = work / f"{tag}.samples", work / f"{tag}.ready"
-    pub_log, sub_log = work / f"{tag}.node.log", work / f"{tag}.sub.log"
-    procs: list[subprocess.Popen] = []
-    topic = f"{NS}/joint_states"
-    try:
-        with open(sub_log, "wb") as log:
-            sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out),
-                                    str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env,
-                                   cwd=work, start_new_session=True)
-        procs.append(sub)
-        with open(pub_log, "wb") as log:
-            node = subprocess.Popen(node_cmd(work, tag, domain_id, record), stdout=log,
-                                    stderr=subprocess.STDOUT, env=env, cwd=work,
-                                    start_new_session=True)
-        procs.append(node)
-        deadline = time.monotonic() + STARTUP_TIMEOUT_S
-        while not ready.exists():
-            for p, log_path in ((node, pub_log), (sub, sub_log)):
-                if p.poll() is not None:
-                    raise RuntimeError(f"{tag}: {p.args[0]} exited {p.returncode}: "
-                                       f"{tail(log_path)}")
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"{tag}: no joint_states within {STARTUP_TIMEOUT_S} s: "
-                                   f"{tail(pub_log)}")
-            time.sleep(0.05)
+    # both scheduled as this process, as the soak has always run them
+    with publisher_and_subscriber(tag, node_cmd(work, tag, domain_id, record),
+                                  f"{NS}/joint_states", env, work,
+                                  sub_preexec=None, pub_preexec=None) as run:
+        node, pub_log = run.pub, run.pub_log
         time.sleep(WARMUP_S)
         cpu0, m0 = cpu_seconds(node.pid), time.monotonic()
         samples: list[tuple[float, float]] = []
@@ -144,13 +123,7 @@ def run_phase(tag: str, record: bool, minutes: float, domain_id: int, work: Path
         stop(node, timeout=30.0)  # SIGINT: the node closes its bag
         if node.returncode != 0:
             raise RuntimeError(f"{tag}: node exited {node.returncode}: {tail(pub_log)}")
-        stop(sub)
-        if not out.exists():
-            raise RuntimeError(f"{tag}: subscriber wrote no samples: {tail(sub_log)}")
-    finally:
-        for p in reversed(procs):
-            stop(p)
-    with open(out) as f:
+    with open(run.samples) as f:
         stamps = [int(line.split()[1]) for line in f if line.strip()]
     return {"rss": samples, "rss_growth": slope_per_10min(samples),
             "cpu": (cpu1 - cpu0) / (m1 - m0), "stamps": stamps, "window_s": m1 - m0,

@@ -17,8 +17,8 @@ from pathlib import Path
 from benchlib import cpu_seconds
 from benchlib import emit_record as emit
 from node_cases import NODE_NS, RATE_HZ, node_cmd
-from node_measure import STARTUP_TIMEOUT_S, SUBSCRIBER, WARMUP_S
-from node_procs import stop, tail
+from node_measure import WARMUP_S, publisher_and_subscriber, wait_for
+from node_procs import stop
 
 LIVEVIEW_CLIENT = Path(__file__).resolve().parent / "liveview_client.py"
 LIVEVIEW_ROUNDS = 3
@@ -35,23 +35,6 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
-
-
-def _wait_file(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str) -> None:
-    """Wait for ``path`` to exist.
-
-    :raises RuntimeError: one of ``procs`` (process, its log) exited first, or nothing came
-        within STARTUP_TIMEOUT_S
-    """
-    deadline = time.monotonic() + STARTUP_TIMEOUT_S
-    while not path.exists():
-        for p, log in procs:
-            if p.poll() is not None:
-                raise RuntimeError(f"{what}: {p.args[1] if len(p.args) > 1 else p.args[0]} "
-                                   f"exited {p.returncode}: {tail(log)}")
-        if time.monotonic() > deadline:
-            raise RuntimeError(f"{what}: nothing within {STARTUP_TIMEOUT_S} s")
-        time.sleep(0.05)
 
 
 def _cpu_window(pid: int) -> tuple[float, float, int, int]:
@@ -73,19 +56,9 @@ def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[st
     windows: dict[str, list[tuple[float, float, int, int]]] = {"idle": [], **{
         case: [] for case in LIVEVIEW_CASES}}
     ws_rates: list[float] = []
-    procs: list[subprocess.Popen] = []
-    ready, pub_log, sub_log = work / "lv.ready", work / "lv.pub.log", work / "lv.sub.log"
-    try:
-        with open(sub_log, "wb") as log:
-            procs.append(subprocess.Popen(
-                [sys.executable, str(SUBSCRIBER), f"{NODE_NS}/joint_states",
-                 str(work / "lv.samples"), str(ready)], stdout=log, stderr=subprocess.STDOUT,
-                env=env, cwd=work, start_new_session=True))
-        with open(pub_log, "wb") as log:
-            node = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env,
-                                    cwd=work, start_new_session=True)
-        procs.append(node)
-        _wait_file(ready, [(node, pub_log)], "live view node: first joint_states")
+    with publisher_and_subscriber("lv", cmd, f"{NODE_NS}/joint_states", env, work,
+                                  sub_preexec=None, pub_preexec=None) as run:
+        node = run.pub
         time.sleep(WARMUP_S)
         for r in range(LIVEVIEW_ROUNDS):
             windows["idle"].append(_cpu_window(node.pid))
@@ -99,8 +72,8 @@ def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[st
                          ",".join(topics), str(c_ready), str(c_out)], stdout=log,
                         stderr=subprocess.STDOUT, env=env, cwd=work, start_new_session=True)
                 try:
-                    _wait_file(c_ready, [(client, c_log), (node, pub_log)],
-                               f"live view client on {topics}")
+                    wait_for(c_ready, [(client, c_log), (node, run.pub_log)],
+                             f"live view client on {topics}")
                     time.sleep(0.5)
                     windows[case].append(_cpu_window(node.pid))
                 finally:
@@ -109,12 +82,9 @@ def measure_liveview(domain_id: int, env: dict[str, str], work: Path) -> dict[st
                     n, first, last = (int(v) for v in c_out.read_text().split())
                     ws_rates.append((n - 1) / ((last - first) / 1e9))
                 time.sleep(0.5)  # the server notices the disconnect; serializing stops
-    finally:
-        for p in reversed(procs):
-            stop(p)
     import numpy as np
 
-    recv = np.loadtxt(work / "lv.samples", dtype=np.int64, ndmin=2)[:, 0]
+    recv = np.loadtxt(run.samples, dtype=np.int64, ndmin=2)[:, 0]
     out: dict[str, list[float]] = {"ws_rate_hz": ws_rates}
     for case, wins in windows.items():
         cycles = [int(((recv >= w0) & (recv < w1)).sum()) for _, _, w0, w1 in wins]

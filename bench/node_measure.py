@@ -5,14 +5,19 @@ subscriber in another process (``bench/node_subscriber.py``, which records the r
 time and ``header.stamp`` of every JointState), waits for the first message, lets
 :data:`WARMUP_S` pass and measures :data:`MEASURE_S`: the rate, the jitter, the latency
 (receive wall time - header.stamp), the publisher's CPU and its children's, and, where the
-publisher writes them, its spans (``ssi_bridge/ros/span_probe.py``).
+publisher writes them, its spans (``ssi_bridge/ros/span_probe.py``). Benchmarks that measure
+something else of a publisher with its subscriber running start the two with
+:func:`publisher_and_subscriber`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +45,72 @@ def span_window(path: Path, w0: int, w1: int) -> Any:
     return (rows[sel, 1] - rows[sel, 0]) / 1e3
 
 
+def wait_for(path: Path, procs: list[tuple[subprocess.Popen, Path]], what: str,
+             timeout: float = STARTUP_TIMEOUT_S) -> None:
+    """Wait until ``path`` exists (a process's sign that it is ready).
+
+    :raises RuntimeError: one of ``procs`` (a process, its log) exited first (with its log's
+        tail), or ``timeout`` s passed (with the first process's log's tail)
+    """
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        for p, log in procs:
+            if p.poll() is not None:
+                args = [str(a) for a in p.args] if isinstance(p.args, list) else [str(p.args)]
+                name = Path(args[1]).name if args[0] == sys.executable else args[0]
+                raise RuntimeError(f"{what}: {name} exited {p.returncode}: {tail(log)}")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{what}: nothing within {timeout} s; log: {tail(procs[0][1])}")
+        time.sleep(0.05)
+
+
+@dataclass(frozen=True)
+class Running:
+    """A publisher and the subscriber of :func:`publisher_and_subscriber`, both running."""
+
+    pub: subprocess.Popen
+    sub: subprocess.Popen
+    #: the subscriber's records, one line a message: receive wall time (ns), header.stamp (ns)
+    samples: Path
+    pub_log: Path
+    sub_log: Path
+
+
+@contextlib.contextmanager
+def publisher_and_subscriber(
+        tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path, *,
+        sub_preexec: Callable[[], None] | None = real_time_subscriber,
+        pub_preexec: Callable[[], None] | None = die_with_parent) -> Iterator[Running]:
+    """The subscriber on ``topic`` and the publisher ``cmd`` started (files ``<tag>.*`` in
+    ``work``), the block run once the first message arrived; at its end the subscriber is
+    stopped and must have written its samples. Both are stopped by PID however the block ends.
+    ``sub_preexec`` / ``pub_preexec``: their preexec_fn (None: scheduled as this process).
+
+    :raises RuntimeError: as :func:`wait_for`, or the subscriber wrote no samples
+    """
+    samples, ready = work / f"{tag}.samples", work / f"{tag}.ready"
+    pub_log, sub_log = work / f"{tag}.pub.log", work / f"{tag}.sub.log"
+    procs: list[subprocess.Popen] = []
+    try:
+        with open(sub_log, "wb") as log:
+            sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(samples),
+                                    str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env,
+                                   cwd=work, start_new_session=True, preexec_fn=sub_preexec)
+        procs.append(sub)
+        with open(pub_log, "wb") as log:
+            pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
+                                   start_new_session=True, preexec_fn=pub_preexec)
+        procs.append(pub)
+        wait_for(ready, [(pub, pub_log), (sub, sub_log)], f"{tag}: first message on {topic}")
+        yield Running(pub, sub, samples, pub_log, sub_log)
+        stop(sub)
+        if not samples.exists():
+            raise RuntimeError(f"{tag}: subscriber wrote no samples: {tail(sub_log)}")
+    finally:
+        for p in reversed(procs):
+            stop(p)
+
+
 def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Path,
             rate: float = RATE_HZ, spans: Path | None = None, span_env: bool = True) -> dict:
     """Run ``cmd`` (the publisher) and the subscriber; return the window's figures.
@@ -52,58 +123,27 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
     ``children_cpu_s_per_s`` its child processes'. Both processes are stopped by PID before
     it returns.
 
-    :raises RuntimeError: a process exited early, no message came within
-        :data:`STARTUP_TIMEOUT_S`, the subscriber wrote nothing, or the window held fewer
-        than 3 messages
+    :raises RuntimeError: as :func:`publisher_and_subscriber`, the publisher exited in the
+        window, or the window held fewer than 3 messages
     """
     import numpy as np
 
     if spans is not None and span_env:
         env = {**env, SPAN_ENV: str(spans)}
 
-    out = work / f"{tag}.samples"
-    ready = work / f"{tag}.ready"
-    pub_log = work / f"{tag}.pub.log"
-    sub_log = work / f"{tag}.sub.log"
-    procs: list[subprocess.Popen] = []
-    try:
-        with open(sub_log, "wb") as log:
-            sub = subprocess.Popen([sys.executable, str(SUBSCRIBER), topic, str(out), str(ready)],
-                                   stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True,
-                                   preexec_fn=real_time_subscriber)
-        procs.append(sub)
-        with open(pub_log, "wb") as log:
-            pub = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                                   start_new_session=True,
-                                   preexec_fn=die_with_parent)
-        procs.append(pub)
-        deadline = time.monotonic() + STARTUP_TIMEOUT_S
-        while not ready.exists():
-            for p, log in ((pub, pub_log), (sub, sub_log)):
-                if p.poll() is not None:
-                    raise RuntimeError(f"{tag}: {p.args[0]} exited {p.returncode}: {tail(log)}")
-            if time.monotonic() > deadline:
-                raise RuntimeError(f"{tag}: no message on {topic} within {STARTUP_TIMEOUT_S} s; "
-                                   f"publisher log: {tail(pub_log)}")
-            time.sleep(0.05)
+    with publisher_and_subscriber(tag, cmd, topic, env, work) as run:
         time.sleep(WARMUP_S)
-        kids = descendants(pub.pid)
-        cpu0, kid0, w0, m0 = (cpu_seconds(pub.pid), cpu_of(kids), time.time_ns(),
+        kids = descendants(run.pub.pid)
+        cpu0, kid0, w0, m0 = (cpu_seconds(run.pub.pid), cpu_of(kids), time.time_ns(),
                               time.monotonic())
         time.sleep(MEASURE_S)
-        cpu1, kid1, w1, m1 = (cpu_seconds(pub.pid), cpu_of(kids), time.time_ns(),
+        cpu1, kid1, w1, m1 = (cpu_seconds(run.pub.pid), cpu_of(kids), time.time_ns(),
                               time.monotonic())
-        if pub.poll() is not None:
-            raise RuntimeError(f"{tag}: publisher exited {pub.returncode}: {tail(pub_log)}")
-        stop(sub)
-        if not out.exists():
-            raise RuntimeError(f"{tag}: subscriber wrote no samples: {tail(sub_log)}")
-    finally:
-        for p in reversed(procs):
-            stop(p)
+        if run.pub.poll() is not None:
+            raise RuntimeError(f"{tag}: publisher exited {run.pub.returncode}: "
+                               f"{tail(run.pub_log)}")
 
-    data = np.loadtxt(out, dtype=np.int64, ndmin=2)
+    data = np.loadtxt(run.samples, dtype=np.int64, ndmin=2)
     recv, stamp = data[:, 0], data[:, 1]
     sel = (recv >= w0) & (recv < w1)
     recv, stamp = recv[sel], stamp[sel]
@@ -113,7 +153,7 @@ def measure(tag: str, cmd: list[str], topic: str, env: dict[str, str], work: Pat
     period_us = 1e6 / rate
     jitter = np.abs(np.diff(recv) / 1e3 - period_us)
     latency = (recv - stamp) / 1e3
-    log = tail(pub_log, 200_000)
+    log = tail(run.pub_log, 200_000)
     return {
         "latency": latency,
         "received": len(recv),

@@ -20,7 +20,6 @@ rate/latency cases. Prints JSON lines and appends them to bench/results/latest.j
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import tempfile
 import threading
@@ -34,9 +33,8 @@ sys.path.insert(0, str(HERE))
 from benchlib import cpu_seconds, save  # noqa: E402
 from benchlib import emit_record as emit  # noqa: E402
 from node_cases import NODE_NS, RATE_HZ, node_cmd  # noqa: E402
-from node_measure import STARTUP_TIMEOUT_S, SUBSCRIBER, WARMUP_S  # noqa: E402
-from node_procs import (  # noqa: E402
-    dds_env, domain_id, real_time_subscriber, stop, subscriber_scheduling, tail)
+from node_measure import WARMUP_S, publisher_and_subscriber  # noqa: E402
+from node_procs import dds_env, domain_id, subscriber_scheduling  # noqa: E402
 
 CLIENTS = 4
 CALLS_PER_CLIENT = 250
@@ -121,24 +119,11 @@ def run(records: list[dict], extra: dict | None = None) -> None:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     with tempfile.TemporaryDirectory(prefix="bench_burst_") as tmp:
         work = Path(tmp)
-        out, ready = work / "burst.samples", work / "burst.ready"
-        procs: list[subprocess.Popen] = []
-        try:
-            with open(work / "sub.log", "wb") as log:
-                procs.append(subprocess.Popen(
-                    [sys.executable, str(SUBSCRIBER), f"{NODE_NS}/joint_states", str(out),
-                     str(ready)], stdout=log, stderr=subprocess.STDOUT, env=env, cwd=work,
-                    start_new_session=True, preexec_fn=real_time_subscriber))
-            with open(work / "node.log", "wb") as log:
-                node = subprocess.Popen(node_cmd(1, domain, work, extra), stdout=log,
-                                        stderr=subprocess.STDOUT, env=env, cwd=work,
-                                        start_new_session=True)
-            procs.append(node)
-            deadline = time.monotonic() + STARTUP_TIMEOUT_S
-            while not ready.exists():
-                if node.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"node not publishing: {tail(work / 'node.log')}")
-                time.sleep(0.05)
+        # the node scheduled as this process, as the burst has always run it
+        with publisher_and_subscriber("burst", node_cmd(1, domain, work, extra),
+                                      f"{NODE_NS}/joint_states", env, work,
+                                      pub_preexec=None) as running:
+            node = running.pub
             time.sleep(WARMUP_S)
             # the baseline window ends before the clients' process starts: its set-up (rclpy
             # init, four nodes, discovery) takes a core for a second or two and is no part of
@@ -149,12 +134,8 @@ def run(records: list[dict], extra: dict | None = None) -> None:
             result = burst(domain, f"{NODE_NS}/ssi_bridge/read_register")
             cpu2, m2 = cpu_seconds(node.pid), time.monotonic()
             time.sleep(0.2)
-            stop(procs[0])
-        finally:
-            for p in reversed(procs):
-                stop(p)
-        before = _rate(out, w0, w1)
-        during = _rate(out, result["t0_ns"], result["t1_ns"])
+        before = _rate(running.samples, w0, w1)
+        during = _rate(running.samples, result["t0_ns"], result["t1_ns"])
     n = len(result["sent"])
     times = [(a - s) * 1e3 for s, a in zip(result["sent"], result["answered"]) if a is not None]
     busy = sum(m.startswith("read_register: busy:") for m in result["messages"])
