@@ -1,4 +1,4 @@
-"""WebSocket client process of bench_node.py's live view case: one Foxglove client, subscribed.
+"""WebSocket client process of the live view case (node_liveview.py): one Foxglove client.
 
 Usage: ``python bench/liveview_client.py URL TOPIC[,TOPIC...] READY_FILE OUT_FILE``
 

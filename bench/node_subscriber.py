@@ -1,4 +1,4 @@
-"""Subscriber process of bench_node.py: record receive time and header.stamp of JointState.
+"""Subscriber process of the node benchmark (node_measure.py): receive time and header.stamp.
 
 Usage: ``python bench/node_subscriber.py TOPIC OUT_FILE READY_FILE``
 

@@ -2,7 +2,7 @@
 
 The installed node runs one simulated encoder at 1000 Hz; ``bench/node_subscriber.py`` records
 every joint_states message in another process (SCHED_FIFO 3 where permitted, as in
-bench_node.py: a starved subscriber would count its own backlog). After a warm-up, 4 clients (4 rclpy nodes in
+node_procs.py: a starved subscriber would count its own backlog). After a warm-up, 4 clients (4 rclpy nodes in
 this process, KEEP_ALL queues so the clients themselves drop nothing) each send 250
 ``~/read_register`` calls at once, 1000 in all, and wait for every answer (success, or the
 node's prompt "busy: N queued" refusal). Reported, same run:
