@@ -2,7 +2,7 @@
 that completed a cycle to ``publish()`` of its ``joint_states`` returning.
 
 Off unless the environment variable :data:`SPAN_LOG_ENV` names a file when the node starts
-(``bench/bench_node.py`` sets it for the node it measures). Off, the node holds ``None`` and
+(``bench/node_measure.py`` sets it for the node it measures). Off, the node holds ``None`` and
 a cycle pays one ``is None`` test; nothing a user sees changes either way. On, every
 published ``joint_states`` adds one record to the file: three little-endian int64, the
 receive timestamp (ns, CLOCK_REALTIME) of the newest frame the master had received, the
