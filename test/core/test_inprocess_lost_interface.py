@@ -6,7 +6,8 @@ unplugged its calls fail as socketcan's do on a lost network device (``CanOperat
 ENETDOWN "Network is down") and opening it fails with ENODEV (a USB adapter pulled out).
 Bus ERROR with the OS reason and
 the joint STALE within 0.5 s of the unplug; fresh positions within 2 s of the return; the
-station configured again; the log quiet. Moved from test/ros/test_node_lost_interface.py
+bus OK again and the joint's level what its cycles since call for; the station configured
+again; the log quiet. Moved from test/ros/test_node_lost_interface.py
 (docs/testing.md); the bus status as the node builds it (support/inprocess_bus.py).
 """
 
@@ -21,6 +22,7 @@ from typing import Any
 import can
 from diagnostic_msgs.msg import DiagnosticStatus as D
 
+from ssi_bridge.core.health import RATIO_WINDOW_S, STALE_RATIO_WARN
 from ssi_bridge.exceptions import BusError
 from ssi_bridge.protocol.settings import BusConfig
 from ssi_bridge.sim.gateway.bus import open_bus
@@ -67,6 +69,24 @@ def _frozen_or_fresh(b: Any, since: float, frozen: float) -> list[float]:
             and m[2][0] != frozen]
 
 
+def _recovered(b: Any, joint: str) -> bool:
+    """The joint's level has nothing of the loss left: OK, or a WARN/ERROR its own last
+    RATIO_WINDOW_S of cycles call for (core/health.py: the share of SYNCs left out, at least
+    STALE_RATIO_WARN), never STALE. The in-process station is starved with the test process
+    on a busy machine: its answers come later than latch_bound and are rightly left out,
+    which the joint's level says, at the start as after the return."""
+    level = b.level(joint)
+    if level == D.OK:
+        return True
+    if level >= D.STALE or not b.results:
+        return False
+    results = list(b.results)
+    window = [r for r in results[-int(2 * b.rate * RATIO_WINDOW_S):]
+              if r.t_sync > results[-1].t_sync - RATIO_WINDOW_S]
+    left_out = sum(1 for r in window for c in r.joints if c.joint.name == joint and c.reason)
+    return left_out >= STALE_RATIO_WARN * len(window)
+
+
 def test_an_unplugged_interface_comes_back_without_a_restart(inprocess, caplog):
     caplog.set_level(logging.INFO, logger="ssi_bridge")
     Cable.unplugged = False
@@ -96,8 +116,8 @@ def test_an_unplugged_interface_comes_back_without_a_restart(inprocess, caplog):
             fresh = _frozen_or_fresh(b, back, frozen)[0]
             print(f"loss {cycle}: fresh positions {fresh - back:.3f} s after the return")
             assert fresh - back < 2.0
-            b.run_until(lambda: b.bus_status().level == D.OK and b.level("joint1") == D.OK,
-                        2 * PERIOD + 5, "bus and joint1 OK again")
+            b.run_until(lambda: b.bus_status().level == D.OK and _recovered(b, "joint1"),
+                        2 * PERIOD + 5, "bus OK and joint1 recovered from the loss")
         # configured again after each return (the station never lost its NMT state)
         b.run_until(lambda: b.client.counters.configurations >= 3, 2 * PERIOD + 5,
                     "the station configured again after each return")

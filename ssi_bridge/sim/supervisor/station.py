@@ -176,7 +176,10 @@ class ChildStation:
                 cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                 preexec_fn=_die_with_parent, process_group=0, close_fds=True)
             assert self.proc.stdin is not None
-            self.proc.stdin.write(yaml.safe_dump(station_params(self.settings, self.bus))
+            # libyaml's emitter where PyYAML has it: each per-joint key repeats the joint's
+            # name, and the pure-Python emitter takes seconds for a long one
+            self.proc.stdin.write(yaml.dump(station_params(self.settings, self.bus),
+                                            Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper))
                                   .encode())
             self.proc.stdin.close()
             self._forwarder = threading.Thread(target=self._forward_log, name="station-log",
