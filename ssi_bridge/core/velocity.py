@@ -85,13 +85,14 @@ class VelocityEstimator:
         if self._ignore_until is not None and t <= self._ignore_until:
             return self.velocity
         raw = to_int32(counts)
-        if self._last_raw is None:
+        last_raw = self._last_raw
+        if last_raw is None:
             self._unwrapped = raw
         else:
-            step = raw - self._last_raw
+            step = raw - last_raw
             modulus = self._modulus
             if modulus:
-                half = modulus // 2
+                half = modulus >> 1
                 step = (step + half) % modulus - half
             last_t = self._last_t
             max_speed = self.max_speed
@@ -108,11 +109,16 @@ class VelocityEstimator:
                 return math.nan
             self._unwrapped += step
         self._last_raw = raw
-        if self._samples and t <= self._samples[-1][0]:
+        samples = self._samples
+        if samples and t <= samples[-1][0]:
             return self.velocity
         self._last_t = t
-        self._samples.append((t, self._unwrapped))
-        return self.velocity
+        unwrapped = self._unwrapped
+        samples.append((t, unwrapped))
+        if len(samples) < 2:
+            return self.velocity
+        t0, c0 = samples[0]  # the property's difference, with the newest sample at hand
+        return (unwrapped - c0) / (t - t0) * self._unit_per_count
 
     @property
     def velocity(self) -> float:
