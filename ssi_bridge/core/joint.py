@@ -206,7 +206,9 @@ class Joint:
             of it when ``stale``), as :meth:`ChannelHealth.observe` takes it
         """
         counters = self.counters
-        self.health.observe(now, stale=stale, implausible=implausible, sts=counters.last_sts,
+        image = counters.last_image
+        self.health.observe(now, stale=stale, implausible=implausible,
+                            sts=image[7] if image is not None else None,  # last_sts
                             consecutive_stale=counters.consecutive_stale,
                             stale_limit=self.stale_cycles, seq=seq, lost=lost,
                             silent=counters.consecutive_silent >= self.stale_cycles)
@@ -218,23 +220,18 @@ class Joint:
         self.counters.consecutive_silent += 1
         self.observe(now, stale=True, implausible=False)
 
-    def _settle(self, settled: tuple[float, float] | None, seq: int, implausible: bool) -> None:
-        """The health of the SYNC before this one, judged now (``settled``: its wire time and
-        the share of its data lost, None for the first SYNC): an answer on the wire in time but
-        handled late is counted for its SYNC, so the stale ratio measures the bus."""
-        if settled is not None:
-            t_prev, lost = settled
-            self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
-                         lost=lost)
-
     def settle(self, seq: int, settled: tuple[float, float] | None) -> None:
-        """The health of the SYNC before ``seq`` (:meth:`_settle`), after :meth:`output` or
+        """The health of the SYNC before ``seq``, judged now, after :meth:`output` or
         :meth:`leave_out` of SYNC ``seq``: what :meth:`update` and :meth:`set_aside` do last,
-        for a caller that publishes the cycle first.
+        for a caller that publishes the cycle first. An answer on the wire in time but handled
+        late is counted for its SYNC, so the stale ratio measures the bus.
 
         :param settled: (wire time, share not vouched) of the SYNC before, None for the first
         """
-        self._settle(settled, seq, self._implausible)
+        if settled is not None:
+            t_prev, lost = settled
+            self.observe(t_prev, stale=lost > 0, implausible=self._implausible, seq=seq - 1,
+                         lost=lost)
 
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
