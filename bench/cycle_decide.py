@@ -10,8 +10,9 @@ their frame checks) deciding each SYNC as the node does: the part before ``publi
 (``settle``). Prints median / p99 (us) per cycle of each part after a warm-up of 500 cycles:
 ``feed`` (the frame log's records of the cycle's frames, what the receive thread adds per
 frame), ``decide`` (``Cycle.run``), ``build`` (the JointState) and ``settle``.
-In-process timing without the node's other threads: the figures to compare changes of the
-per-joint path by, not the node's latency (``bench_node.py``).
+The thread's CPU time (``time.thread_time_ns``), in-process without the node's other threads:
+the figures to compare changes of the per-joint path by on a shared machine, not the node's
+latency (``bench_node.py``).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ def main(argv: list[str]) -> int:
     core = Cycle(joints, {0: log})
     states = JointStates()  # the node's: one message filled each cycle
     parts: dict[str, list[float]] = {"feed": [], "decide": [], "build": [], "settle": []}
-    clock = time.perf_counter_ns
+    clock = time.thread_time_ns  # CPU time: what another process on the core takes is not counted
     gc.collect()
     for k in range(1, cycles + WARM_UP + 1):
         t = k * PERIOD

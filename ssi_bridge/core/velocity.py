@@ -10,7 +10,7 @@ import math
 from collections import deque
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.core.joint_scale import JointScale, to_int32
+from ssi_bridge.core.joint_scale import JointScale
 
 
 class VelocityEstimator:
@@ -40,6 +40,7 @@ class VelocityEstimator:
         #: the scale's constants, read every sample (JointScale is frozen)
         self._unit_per_count = scale.unit_per_count
         self._modulus = scale.modulus or 0
+        self._half = self._modulus >> 1
         self.window = window
         self.max_speed = max_speed
         #: samples whose step exceeded ``max_speed`` (since construction)
@@ -82,17 +83,20 @@ class VelocityEstimator:
         :returns: the estimate in joint units/s; NaN while unknown (see the class)
         """
         self.last_implausible = False
-        if self._ignore_until is not None and t <= self._ignore_until:
+        ignore = self._ignore_until
+        if ignore is not None and t <= ignore:
             return self.velocity
-        raw = to_int32(counts)
+        raw = counts & 0xFFFF_FFFF  # to_int32, inline: once per joint and cycle
+        if raw & 0x8000_0000:
+            raw -= 0x1_0000_0000
         last_raw = self._last_raw
         if last_raw is None:
-            self._unwrapped = raw
+            unwrapped = raw
         else:
             step = raw - last_raw
             modulus = self._modulus
             if modulus:
-                half = modulus >> 1
+                half = self._half
                 step = (step + half) % modulus - half
             last_t = self._last_t
             max_speed = self.max_speed
@@ -107,13 +111,13 @@ class VelocityEstimator:
                 self._last_raw, self._last_t, self._unwrapped = raw, t, raw
                 self._samples.append((t, raw))
                 return math.nan
-            self._unwrapped += step
+            unwrapped = self._unwrapped + step
+        self._unwrapped = unwrapped
         self._last_raw = raw
         samples = self._samples
         if samples and t <= samples[-1][0]:
             return self.velocity
         self._last_t = t
-        unwrapped = self._unwrapped
         samples.append((t, unwrapped))
         if len(samples) < 2:
             return self.velocity
