@@ -8,8 +8,8 @@ and a ``core/cycle.Cycle`` of N joints (slots 1..N, GENERIC encoders with
 their frame checks) deciding each SYNC as the node does: the part before ``publish()``
 (``run(settle=False)`` and the JointState), then the health of the SYNC before
 (``settle``). Prints median / p99 (us) per cycle of each part after a warm-up of 500 cycles:
-``feed`` (the frame log's records of the cycle's frames, what the receive thread adds per
-frame), ``decide`` (``Cycle.run``), ``build`` (the JointState) and ``settle``.
+``prepare`` (rule 3 asked ahead, the cycle thread), ``feed`` (the frame log's records of the
+cycle's frames, what the receive thread adds per frame), ``decide`` (``Cycle.run``), ``build`` (the JointState) and ``settle``.
 The thread's CPU time (``time.thread_time_ns``), in-process without the node's other threads:
 the figures to compare changes of the per-joint path by on a shared machine, not the node's
 latency (``bench_node.py``).
@@ -47,13 +47,16 @@ def main(argv: list[str]) -> int:
                              max_speed=-1.0, stale_cycles=10) for s in range(1, n + 1)}
     core = Cycle(joints, {0: log})
     states = JointStates()  # the node's: one message filled each cycle
-    parts: dict[str, list[float]] = {"feed": [], "decide": [], "build": [], "settle": []}
+    parts: dict[str, list[float]] = {"prepare": [], "feed": [], "decide": [], "build": [],
+                                     "settle": []}
     clock = time.thread_time_ns  # CPU time: what another process on the core takes is not counted
     gc.collect()
     for k in range(1, cycles + WARM_UP + 1):
         t = k * PERIOD
         log.sync(k, t)
+        p0 = clock()
         core.prepare(k)  # the cycle thread, while the answers are on the wire
+        p1 = clock()
         answers = [(slot, 37 * k * slot) for slot in range(1, n + 1)]
         images = [encode_input(pos & 0xFFFFFF, int(Reg.REG_SSI_FRAME), False, False, False,
                                0, 0, 0) for _slot, pos in answers]
@@ -69,7 +72,7 @@ def main(argv: list[str]) -> int:
         core.settle(result)
         t4 = clock()
         if k > WARM_UP:
-            for name, dt in zip(parts, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            for name, dt in zip(parts, (p1 - p0, t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
                 parts[name].append(dt / 1e3)
     print(f"{n} joint(s), {cycles} cycles, us median / p99: " + ", ".join(
         f"{name} {statistics.median(v):.1f} / {_p99(v):.1f}" for name, v in parts.items())
