@@ -233,7 +233,7 @@ class StationLog:
     def _spanned(self) -> None:
         """Under the lock: :attr:`_span` after the cached answers changed."""
         c = self._in_step
-        self._span = (min(f for f, _ in c.values()), max(c)) if c else (math.inf, -math.inf)
+        self._span = (min(c.values())[0], max(c)) if c else (math.inf, -math.inf)
 
     # -- the cycle's side -------------------------------------------------------------------
     def sync_time(self, seq: int) -> float | None:
