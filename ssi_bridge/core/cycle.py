@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ssi_bridge.core.cycle_log import StationLog, Verdict, VouchedSample
+from ssi_bridge.core.cycle_log import Answer, StationLog, VouchedSample
 from ssi_bridge.core.joint import Joint, JointOutput
 
 
@@ -79,7 +79,7 @@ class Cycle:
         append = result.joints.append
         logs = self.logs
         # one pass over each station's slots: its frame log answers for all of them at once
-        answers: dict[int, dict[int, Verdict]] = {}
+        answers: dict[int, dict[int, Answer]] = {}
         incomplete = False
         for joint in self.joints.values():
             log = logs.get(joint.settings.station)
@@ -91,18 +91,18 @@ class Cycle:
             by_slot = answers.get(id(log))
             if by_slot is None:
                 slots = log.slots
-                by_slot = answers[id(log)] = dict(zip(slots, log.verdicts(slots, seq)))
-            verdict = by_slot.get(joint.slot) or log.verdict(joint.slot, seq)
-            sample = verdict.sample
+                by_slot = answers[id(log)] = dict(zip(slots, log.answers(slots, seq)))
+            sample, reason, _missing, image, position = (by_slot.get(joint.slot)
+                                                         or log.answers((joint.slot,), seq)[0])
             if sample is None:  # set aside: a stale cycle, left out of the message
-                joint.leave_out(verdict.reason, verdict.image, verdict.position)
-                append(JointCycle(joint, None, None, verdict.reason, verdict.image))
+                joint.leave_out(reason, image, position)
+                append(JointCycle(joint, None, None, reason, image))
                 incomplete = True
                 continue
             # latched at t_sync: its latch time is the stamp
-            image, position = sample.process_input, sample.position
-            joint.count(t_sync, image, position, t_sync)
-            append(JointCycle(joint, joint.output(t_sync, image, position, t_sync), sample, "",
+            value = sample.position
+            joint.count(t_sync, image, value, t_sync)
+            append(JointCycle(joint, joint.output(t_sync, image, value, t_sync), sample, "",
                               image))
         if incomplete:
             self.incomplete_cycles += 1

@@ -104,8 +104,11 @@ class Verdict:
     position: int | None = None
 
 
-#: the verdict of every slot at a SYNC the log does not hold
-_UNKNOWN = Verdict(None, UNKNOWN_SYNC, 1.0)
+#: a :class:`Verdict`'s fields as a plain tuple, in its order (sample, reason, missing, image,
+#: position): what :meth:`StationLog.answers` gives the cycle, one per slot
+Answer = tuple[VouchedSample | None, str, float, bytes, int | None]
+#: the answer of every slot at a SYNC the log does not hold
+_UNKNOWN: Answer = (None, UNKNOWN_SYNC, 1.0, b"", None)
 
 
 class StationLog:
@@ -179,13 +182,8 @@ class StationLog:
             self._insert(t)
 
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
-        """A process input image of ``slot`` ended on the wire at ``t``.
-
-        :param slot: the module's slot
-        :param t: the frame's wire time (s)
-        :param data: the 8 bytes of the image
-        :param count: images received for the slot so far, this one included
-        """
+        """A process input image of ``slot`` (its 8 bytes ``data``; ``count``: images received
+        for the slot so far, this one included) ended on the wire at ``t`` (s)."""
         self._add(slot, (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count))
 
     def position(self, slot: int, t: float, value: int) -> None:
@@ -248,25 +246,20 @@ class StationLog:
     def verdicts(self, slots: Sequence[int], seq: int) -> list[Verdict]:
         """:meth:`verdict` of each of ``slots`` at the master's SYNC ``seq``, in that order:
         the SYNC looked up and rule 3 asked once for all of them."""
-        t_k, answers = self._judged(slots, seq)
-        if t_k is None:
-            return [_UNKNOWN] * len(slots)
-        out = []
-        for slot, (reason, img, pos) in zip(slots, answers):
-            image = img[_IMAGE] if img is not None else b""
-            sample = (VouchedSample(slot, pos[_POSITION], image, t_k, img[_COUNT],
-                                    min(img[_T], pos[_T]) - t_k)
-                      if not reason and img is not None and pos is not None else None)
-            out.append(Verdict(sample, reason, ((img is None) + (pos is None)) / 2, image,
-                               pos[_POSITION] if pos is not None else None))
-        return out
+        return [Verdict(*answer) for answer in self.answers(slots, seq)]
 
-    def _judged(self, slots: Sequence[int], seq: int
-                ) -> tuple[float | None, list[tuple[str, Frame | None, Frame | None]]]:
+    def answers(self, slots: Sequence[int], seq: int) -> list[Answer]:
+        """:meth:`verdicts` as plain tuples (:data:`Answer`), for the cycle on the receive
+        thread: no instance per slot."""
+        t_k, answers = self._judged(slots, seq, vouch=True)
+        return answers if t_k is not None else [_UNKNOWN] * len(slots)
+
+    def _judged(self, slots: Sequence[int], seq: int, vouch: bool
+                ) -> tuple[float | None, list[Answer]]:
         """Rules 1-3 for each of ``slots`` at the master's SYNC ``seq``, one pass over each
-        slot's window: (the SYNC's wire time, None when not in the log; per slot (why it is set
-        aside, "" when vouched for; the window's newest image and position frames or None))."""
-        out: list[tuple[str, Frame | None, Frame | None]] = []
+        slot's window: (the SYNC's wire time, None when not in the log; per slot its answer,
+        the sample left out (None) unless ``vouch``)."""
+        out: list[Answer] = []
         with self._lock:
             t_k = self._own.get(seq)
             if t_k is None:
@@ -300,7 +293,13 @@ class StationLog:
                     reason = LATE
                 else:
                     reason = "" if in_step else UNSETTLED
-                out.append((reason, img, pos))
+                image = img[_IMAGE] if img is not None else b""
+                sample = (VouchedSample(slot, pos[_POSITION], image, t_k, img[_COUNT],
+                                        min(img[_T], pos[_T]) - t_k)
+                          if vouch and not reason and img is not None and pos is not None
+                          else None)
+                out.append((sample, reason, ((img is None) + (pos is None)) / 2, image,
+                            pos[_POSITION] if pos is not None else None))
         return t_k, out
 
     def _station_in_step(self, t_k: float, i: int) -> bool:
@@ -387,14 +386,14 @@ class StationLog:
         :returns: per slot, (the SYNC's wire time, the share of the slot's answer not
             vouched: 0.0 when its sample is), or None for each when the SYNC is not in the log
         """
-        t, answers = self._judged(slots, seq)
+        t, answers = self._judged(slots, seq, vouch=False)
         if t is None:
             return [None] * len(slots)
         # the share of a slot's two TPDOs that never came; all of it for one set aside
-        return [(t, 0.0 if not reason else
-                 ((img is None) + (pos is None)) / 2 or 1.0) for reason, img, pos in answers]
+        return [(t, 0.0 if not reason else missing or 1.0)
+                for _sample, reason, missing, _image, _position in answers]
 
 
 __all__ = ["IMAGE", "KEEP_FRAMES", "KEEP_SYNCS", "LATE", "NO_ANSWER", "PARTIAL", "POSITION",
-           "REASONS", "SURPLUS", "UNKNOWN_SYNC", "UNSETTLED", "Frame", "StationLog",
+           "REASONS", "SURPLUS", "UNKNOWN_SYNC", "UNSETTLED", "Answer", "Frame", "StationLog",
            "Verdict", "VouchedSample"]
