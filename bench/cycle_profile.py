@@ -267,10 +267,8 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
 
     bus.recv = timed_recv  # type: ignore[method-assign]
     node.cycle_core.run = _timed(per_cycle, "decide", node.cycle_core.run)  # type: ignore
-    from ssi_bridge.ros import cycle_publish
-
-    cycle_publish.joint_state_msg = _timed(per_cycle, "build",  # type: ignore
-                                           cycle_publish.joint_state_msg)
+    states = publisher._joint_states  # the kept joint_states message and its filling
+    states.fill = _timed(per_cycle, "build", states.fill)  # type: ignore[method-assign]
     node.publish_safe = _timed(per_cycle, "publish", node.publish_safe)  # type: ignore
     node._publish_on_change = _timed(per_cycle, "levels", node._publish_on_change)  # type: ignore
     for log in set(node.frame_logs.values()):

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ssi_bridge.core.cycle_log import StationLog, Verdict, VouchedSample
+from ssi_bridge.core.cycle_log import Answer, StationLog, VouchedSample
 from ssi_bridge.core.joint import Joint, JointOutput
 
 
@@ -76,12 +76,10 @@ class Cycle:
         depends on) to :meth:`settle`, for a caller that publishes first.
         """
         result = CycleResult(seq, t_sync)
-        parts = result.joints
-        append = parts.append
+        append = result.joints.append
         logs = self.logs
-        decide = self._joint
         # one pass over each station's slots: its frame log answers for all of them at once
-        answers: dict[int, dict[int, Verdict]] = {}
+        answers: dict[int, dict[int, Answer]] = {}
         incomplete = False
         for joint in self.joints.values():
             log = logs.get(joint.settings.station)
@@ -93,13 +91,19 @@ class Cycle:
             by_slot = answers.get(id(log))
             if by_slot is None:
                 slots = log.slots
-                by_slot = answers[id(log)] = dict(zip(slots, log.verdicts(slots, seq)))
-            verdict = by_slot.get(joint.slot)
-            part = decide(joint, verdict if verdict is not None else log.verdict(joint.slot, seq),
-                          t_sync)
-            if part.output is None:
+                by_slot = answers[id(log)] = dict(zip(slots, log.answers(slots, seq)))
+            sample, reason, _missing, image, position = (by_slot.get(joint.slot)
+                                                         or log.answers((joint.slot,), seq)[0])
+            if sample is None:  # set aside: a stale cycle, left out of the message
+                joint.leave_out(reason, image, position)
+                append(JointCycle(joint, None, None, reason, image))
                 incomplete = True
-            append(part)
+                continue
+            # latched at t_sync: its latch time is the stamp
+            value = sample.position
+            joint.count(t_sync, image, value, t_sync)
+            append(JointCycle(joint, joint.output(t_sync, image, value, t_sync), sample, "",
+                              image))
         if incomplete:
             self.incomplete_cycles += 1
         if settle:
@@ -124,17 +128,6 @@ class Cycle:
                 by_slot = answers[id(log)] = dict(zip(slots, log.settled_all(slots, seq - 1)))
             slot = joint.slot
             joint.settle(seq, by_slot[slot] if slot in by_slot else log.settled(slot, seq - 1))
-
-    @staticmethod
-    def _joint(joint: Joint, verdict: Verdict, t_sync: float) -> JointCycle:
-        sample = verdict.sample
-        if sample is None:
-            joint.leave_out(verdict.reason, verdict.image, verdict.position)
-            return JointCycle(joint, None, None, verdict.reason, verdict.image)
-        image = sample.process_input
-        joint.count(t_sync, image, sample.position, t_sync)
-        out = joint.output(t_sync, image, sample.position, t_sync)
-        return JointCycle(joint, out, sample, "", image)
 
 
 __all__ = ["Cycle", "CycleResult", "JointCycle"]

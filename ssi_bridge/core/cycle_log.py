@@ -42,6 +42,7 @@ from bisect import bisect_left, bisect_right, insort
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Final
 
 #: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
 IMAGE, POSITION = 0, 1
@@ -59,18 +60,14 @@ KEEP_SYNCS = 256
 KEEP_FRAMES = 256
 
 
-@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
-class Frame:
-    """One received TPDO of one slot: its kind, wire time (s) and content."""
-
-    kind: int
-    t: float
-    #: the 8-byte process input image (IMAGE), else b""
-    image: bytes
-    #: REG_SSI_POS (POSITION), else 0
-    position: int
-    #: images received for the slot so far (IMAGE), else 0
-    count: int
+#: one received TPDO of one slot is a plain tuple (cheaper than an instance, on the receive
+#: thread), read through these indices (mypy takes a literal Final as a tuple index):
+_T: Final = 0  # wire time (s)
+_KIND: Final = 1  # IMAGE or POSITION
+_IMAGE: Final = 2  # the 8-byte process input image (IMAGE), else b""
+_POSITION: Final = 3  # REG_SSI_POS (POSITION), else 0
+_COUNT: Final = 4  # images received for the slot so far (IMAGE), else 0
+Frame = tuple[float, int, bytes, int, int]
 
 
 @dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
@@ -107,8 +104,11 @@ class Verdict:
     position: int | None = None
 
 
-#: the verdict of every slot at a SYNC the log does not hold
-_UNKNOWN = Verdict(None, UNKNOWN_SYNC, 1.0)
+#: a :class:`Verdict`'s fields as a plain tuple, in its order (sample, reason, missing, image,
+#: position): what :meth:`StationLog.answers` gives the cycle, one per slot
+Answer = tuple[VouchedSample | None, str, float, bytes, int | None]
+#: the answer of every slot at a SYNC the log does not hold
+_UNKNOWN: Answer = (None, UNKNOWN_SYNC, 1.0, b"", None)
 
 
 class StationLog:
@@ -139,6 +139,9 @@ class StationLog:
         #: about its SYNC and, for the health, the one before. An answer stands until a frame
         #: or a SYNC within its windows changes (:meth:`_forget`)
         self._in_step: dict[float, tuple[float, bool]] = {}
+        #: the wire times those answers' windows span, from the earliest first SYNC to the
+        #: latest SYNC asked about (empty: inf, -inf): a frame outside changes none of them
+        self._span = (math.inf, -math.inf)
         #: windows before the SYNC that must show the station in step (rule 3)
         self.history = history
         self._lock = threading.Lock()
@@ -179,23 +182,14 @@ class StationLog:
             self._insert(t)
 
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
-        """A process input image of ``slot`` ended on the wire at ``t``.
-
-        :param slot: the module's slot
-        :param t: the frame's wire time (s)
-        :param data: the 8 bytes of the image
-        :param count: images received for the slot so far, this one included
-        """
-        self._add(slot, Frame(IMAGE, t, bytes(data), 0, count))
+        """A process input image of ``slot`` (its 8 bytes ``data``; ``count``: images received
+        for the slot so far, this one included) ended on the wire at ``t`` (s)."""
+        self._add(slot, (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count))
 
     def position(self, slot: int, t: float, value: int) -> None:
-        """A position (REG_SSI_POS) of ``slot`` ended on the wire at ``t``.
-
-        :param slot: the module's slot
-        :param t: the frame's wire time (s)
-        :param value: REG_SSI_POS as received
-        """
-        self._add(slot, Frame(POSITION, t, b"", value, 0))
+        """A position of ``slot`` (REG_SSI_POS ``value`` as received) ended on the wire at
+        ``t`` (s)."""
+        self._add(slot, (t, POSITION, b"", value, 0))
 
     def _insert(self, t: float) -> None:
         syncs = self._syncs
@@ -212,11 +206,14 @@ class StationLog:
     def _add(self, slot: int, frame: Frame) -> None:
         with self._lock:
             frames = self._frames.get(slot)
+            lo, hi = self._span
             if frames is None:
                 frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
-            elif len(frames) == KEEP_FRAMES:
-                self._forget(frames[0].t)  # about to fall out
-            self._forget(frame.t)
+            elif len(frames) == KEEP_FRAMES and lo <= frames[0][_T] <= hi:
+                self._forget(frames[0][_T])  # about to fall out
+            t = frame[_T]
+            if lo <= t <= hi:  # as a rule a frame answers the newest SYNC: after them all
+                self._forget(t)
             frames.append(frame)
 
     def _forget(self, t: float) -> None:
@@ -228,6 +225,13 @@ class StationLog:
             stale = [key for key, (first, _ok) in cache.items() if first <= t <= key]
             for key in stale:
                 del cache[key]
+            if stale:
+                self._spanned()
+
+    def _spanned(self) -> None:
+        """Under the lock: :attr:`_span` after the cached answers changed."""
+        c = self._in_step
+        self._span = (min(c.values())[0], max(c)) if c else (math.inf, -math.inf)
 
     # -- the cycle's side -------------------------------------------------------------------
     def sync_time(self, seq: int) -> float | None:
@@ -242,33 +246,61 @@ class StationLog:
     def verdicts(self, slots: Sequence[int], seq: int) -> list[Verdict]:
         """:meth:`verdict` of each of ``slots`` at the master's SYNC ``seq``, in that order:
         the SYNC looked up and rule 3 asked once for all of them."""
+        return [Verdict(*answer) for answer in self.answers(slots, seq)]
+
+    def answers(self, slots: Sequence[int], seq: int) -> list[Answer]:
+        """:meth:`verdicts` as plain tuples (:data:`Answer`), for the cycle on the receive
+        thread: no instance per slot."""
+        t_k, answers = self._judged(slots, seq, vouch=True)
+        return answers if t_k is not None else [_UNKNOWN] * len(slots)
+
+    def _judged(self, slots: Sequence[int], seq: int, vouch: bool
+                ) -> tuple[float | None, list[Answer]]:
+        """Rules 1-3 for each of ``slots`` at the master's SYNC ``seq``, one pass over each
+        slot's window: (the SYNC's wire time, None when not in the log; per slot its answer,
+        the sample left out (None) unless ``vouch``)."""
+        out: list[Answer] = []
         with self._lock:
             t_k = self._own.get(seq)
             if t_k is None:
-                return [_UNKNOWN] * len(slots)
+                return None, out
             syncs = self._syncs
             i = bisect_left(syncs, t_k)
             t_next = syncs[i + 1] if i + 1 < len(syncs) else math.inf
             in_step = self._station_in_step(t_k, i)
             frames = self._frames
-            windows = [self._window(frames.get(slot, ()), t_k, t_next) for slot in slots]
-        judge = self._judge
-        return [judge(slot, t_k, in_step, images, positions)
-                for slot, (images, positions) in zip(slots, windows)]
-
-    @staticmethod
-    def _window(frames: Sequence[Frame], t_k: float, t_next: float
-                ) -> tuple[list[Frame], list[Frame]]:
-        """A slot's images and positions in the window [``t_k``, ``t_next``), newest first."""
-        images: list[Frame] = []
-        positions: list[Frame] = []
-        for f in reversed(frames):
-            t = f.t
-            if t < t_k:
-                break
-            if t < t_next:
-                (images if f.kind == IMAGE else positions).append(f)
-        return images, positions
+            bound = self.latch_bound
+            for slot in slots:
+                images = positions = 0
+                img: Frame | None = None
+                pos: Frame | None = None
+                for f in reversed(frames.get(slot, ())):
+                    t = f[_T]
+                    if t < t_k:
+                        break
+                    if t < t_next:
+                        if f[_KIND] == IMAGE:
+                            images += 1
+                            img = img or f  # newest first
+                        else:
+                            positions += 1
+                            pos = pos or f
+                if img is None or pos is None:
+                    reason = NO_ANSWER if img is None and pos is None else PARTIAL
+                elif images > 1 or positions > 1:
+                    reason = SURPLUS
+                elif min(img[_T], pos[_T]) - t_k > bound:
+                    reason = LATE
+                else:
+                    reason = "" if in_step else UNSETTLED
+                image = img[_IMAGE] if img is not None else b""
+                sample = (VouchedSample(slot, pos[_POSITION], image, t_k, img[_COUNT],
+                                        min(img[_T], pos[_T]) - t_k)
+                          if vouch and not reason and img is not None and pos is not None
+                          else None)
+                out.append((sample, reason, ((img is None) + (pos is None)) / 2, image,
+                            pos[_POSITION] if pos is not None else None))
+        return t_k, out
 
     def _station_in_step(self, t_k: float, i: int) -> bool:
         """Rule 3 for the SYNC at ``t_k`` (index ``i`` of the SYNCs), under the lock: in each
@@ -293,6 +325,7 @@ class StationLog:
         if len(cache) >= 4:
             del cache[min(cache)]
         cache[t_k] = (bounds[0] if len(bounds) == back + 1 else -math.inf, ok)
+        self._spanned()
         return ok
 
     def prepare(self, seq: int) -> None:
@@ -315,7 +348,7 @@ class StationLog:
         for slot in self.slots:
             inside: list[Frame] = []
             for f in reversed(frames_of.get(slot, ())):
-                t = f.t
+                t = f[_T]
                 if t >= t_k:
                     continue
                 if t < lo:
@@ -326,36 +359,15 @@ class StationLog:
             counts = [0] * (2 * back)  # per window: images, positions
             first = [math.inf] * back
             for f in inside:
-                t = f.t
+                t = f[_T]
                 w = bisect_right(bounds, t) - 1
-                counts[2 * w + f.kind] += 1
+                counts[2 * w + f[_KIND]] += 1
                 if t < first[w]:
                     first[w] = t
             for w in range(back):
                 if counts[2 * w] != 1 or counts[2 * w + 1] != 1 or first[w] - bounds[w] > bound:
                     return False
         return True
-
-    def _judge(self, slot: int, t_k: float, in_step: bool, images: list[Frame],
-               positions: list[Frame]) -> Verdict:
-        """Rules 1-3 on one slot's frames around SYNC ``t_k`` (newest first in the lists)."""
-        missing = ((not images) + (not positions)) / 2
-        image = images[0].image if images else b""
-        position = positions[0].position if positions else None
-        if missing == 1.0:
-            return Verdict(None, NO_ANSWER, missing)
-        if missing:
-            return Verdict(None, PARTIAL, missing, image, position)
-        if len(images) > 1 or len(positions) > 1:
-            return Verdict(None, SURPLUS, 0.0, image, position)
-        img, pos = images[0], positions[0]
-        delay = min(img.t, pos.t) - t_k
-        if delay > self.latch_bound:
-            return Verdict(None, LATE, 0.0, image, position)
-        if not in_step:
-            return Verdict(None, UNSETTLED, 0.0, image, position)
-        return Verdict(VouchedSample(slot, pos.position, img.image, t_k, img.count, delay), "",
-                       0.0, image, position)
 
     def settled(self, slot: int, seq: int) -> tuple[float, float] | None:
         """(wire time, share of the slot's answer not vouched) of the master's SYNC ``seq``,
@@ -374,13 +386,14 @@ class StationLog:
         :returns: per slot, (the SYNC's wire time, the share of the slot's answer not
             vouched: 0.0 when its sample is), or None for each when the SYNC is not in the log
         """
-        t = self.sync_time(seq)
+        t, answers = self._judged(slots, seq, vouch=False)
         if t is None:
             return [None] * len(slots)
-        return [(t, 0.0 if v.sample is not None else (v.missing or 1.0))
-                for v in self.verdicts(slots, seq)]
+        # the share of a slot's two TPDOs that never came; all of it for one set aside
+        return [(t, 0.0 if not reason else missing or 1.0)
+                for _sample, reason, missing, _image, _position in answers]
 
 
 __all__ = ["IMAGE", "KEEP_FRAMES", "KEEP_SYNCS", "LATE", "NO_ANSWER", "PARTIAL", "POSITION",
-           "REASONS", "SURPLUS", "UNKNOWN_SYNC", "UNSETTLED", "Frame", "StationLog",
+           "REASONS", "SURPLUS", "UNKNOWN_SYNC", "UNSETTLED", "Answer", "Frame", "StationLog",
            "Verdict", "VouchedSample"]

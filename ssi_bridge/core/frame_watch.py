@@ -89,6 +89,8 @@ class FrameWatch:
             return
         frame_len = Para1.decode(para1).ssi_frame_len
         self.check = FrameCheck(self.cfg, frame_len) if 1 <= frame_len <= 32 else None
+        #: the bits of REG_RD_DATA the frame as read fills (IMAGE_STRUCT)
+        self._frame_mask = (1 << frame_len) - 1
 
     def set_cam(self, cam: CamSettings) -> None:
         """Follow the CAM settings of the gateway (object 0x6B00's limits, enable and polarity).
@@ -104,10 +106,10 @@ class FrameWatch:
         if check is None or image[4] & (_ADR_MASK | _ABORT) != _FRAME_REGISTER:
             self.checked = False
             return None
-        frame = int.from_bytes(image[0:4], "big") & ((1 << check.frame_len) - 1)  # IMAGE_STRUCT
-        before, self.verdict = self.verdict, check.check(frame)
+        before = self.verdict
+        self.verdict = after = check.check(int.from_bytes(image[0:4], "big") & self._frame_mask)
         self.checked = True
-        return before, self.verdict
+        return before, after
 
     def cam_state(self, reg_ssi_pos: int) -> int:
         """Object 0x6B00 for this REG_SSI_POS (000 Table 42, 0x01 = inside, polarity applied).

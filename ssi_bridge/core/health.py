@@ -214,32 +214,37 @@ class ChannelHealth:
         :returns: the debounced level, also in :attr:`level` (its text in :attr:`message`)
         """
         self._silent = silent
-        share = (1.0 if stale else 0.0) if lost is None else min(max(lost, 0.0), 1.0)
+        if lost is None:
+            share = 1.0 if stale else 0.0
+        else:
+            share = lost if 0.0 <= lost <= 1.0 else min(max(lost, 0.0), 1.0)
         syncs = self._syncs
+        # the window's sums in locals (the same additions in the same order), stored once
+        lost_sum, n, jumps = self.lost_in_window, self.syncs_in_window, self.jumps_in_window
         if seq is not None:
             last = self._last_seq
             if last is not None and seq > last + 1:
                 missed = seq - last - 1  # SYNCs on the wire that the node never handled
                 syncs.append((0.5 * (self._last_t + now), float(missed), missed, False))
-                self.lost_in_window += missed
-                self.syncs_in_window += missed
+                lost_sum += missed
+                n += missed
             self._last_seq = seq
         self._last_t = now
         syncs.append((now, share, 1, implausible))
-        self.lost_in_window += share
-        self.syncs_in_window += 1
-        self.jumps_in_window += implausible
+        lost_sum += share
+        n += 1
+        jumps += implausible
         horizon = now - self.window_s
         while syncs and syncs[0][0] < horizon:
             _t, was_lost, count, was_jump = syncs.popleft()
-            self.lost_in_window -= was_lost
-            self.syncs_in_window -= count
-            self.jumps_in_window -= was_jump
+            lost_sum -= was_lost
+            n -= count
+            jumps -= was_jump
         if not syncs:
-            self.lost_in_window = 0.0  # no float residue once the window empties
+            lost_sum = 0.0  # no float residue once the window empties
+        self.lost_in_window, self.syncs_in_window, self.jumps_in_window = lost_sum, n, jumps
         raw, message = channel_level(sts, consecutive_stale, stale_limit)
-        n = self.syncs_in_window
-        ratio = self.lost_in_window / n if n else 0.0
+        ratio = lost_sum / n if n else 0.0
         if self._first_t is None and sts is not None:
             self._first_t = now
         settled = self._first_t is not None and now - self._first_t >= 2 * self.window_s
@@ -274,7 +279,11 @@ class ChannelHealth:
             if raw >= ERROR:
                 errors.append(now)
         horizon = now - self.raise_after_s
-        for times in (recent, warns, errors):
+        while recent and recent[0] < horizon:
+            recent.popleft()
+        if not warns:
+            return None  # as a rule: no WARN nor ERROR (a subset of them) in the window
+        for times in (warns, errors):
             while times and times[0] < horizon:
                 times.popleft()
         n = len(recent)
@@ -306,6 +315,11 @@ class ChannelHealth:
             return raw
         confirmed = self._confirmed
         flapped = self._flapping(now, raw)
+        if flapped is None and raw == confirmed == self.level and len(self._history) == 1:
+            # steady (as a rule every cycle): nothing rises, falls or is remembered
+            self._up = None
+            self.message = self._messages.get(raw, self.message)
+            return raw
         if flapped is not None and flapped > confirmed:
             confirmed, raw, self._up = flapped, flapped, None
         elif raw < confirmed:

@@ -21,7 +21,8 @@ Every cycle, published or not, counts for the health at its SYNC's wire time.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
 from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
@@ -30,6 +31,7 @@ from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
 from ssi_bridge.protocol.families import family_max_speed
+from ssi_bridge.protocol.frame_check import CLEAN
 from ssi_bridge.protocol.images import ModuleStatus
 from ssi_bridge.protocol.joint_encoder import count_factor, joint_config, para1_mismatch
 from ssi_bridge.protocol.settings import JointSettings
@@ -88,7 +90,7 @@ def joint_scale(joint: JointSettings, cfg: EncoderConfig | None, para1: int) -> 
                       revolutions=joint.revolutions or 4096, direction=joint.direction)
 
 
-@dataclass
+@dataclass(slots=True)  # one per joint and cycle
 class JointOutput:
     """What one cycle of a joint publishes, and what it has to say on ``~/events``."""
 
@@ -96,8 +98,9 @@ class JointOutput:
     position: float
     #: joint units/s, NaN while unknown
     velocity: float
-    #: (success, sentence) for ``~/events``: frame-check edges and failures
-    events: list[tuple[bool, str]] = field(default_factory=list)
+    #: (success, sentence) for ``~/events``: frame-check edges and failures (as a rule none:
+    #: the shared empty tuple)
+    events: Sequence[tuple[bool, str]] = ()
 
 
 class Joint:
@@ -203,7 +206,9 @@ class Joint:
             of it when ``stale``), as :meth:`ChannelHealth.observe` takes it
         """
         counters = self.counters
-        self.health.observe(now, stale=stale, implausible=implausible, sts=counters.last_sts,
+        image = counters.last_image
+        self.health.observe(now, stale=stale, implausible=implausible,
+                            sts=image[7] if image is not None else None,  # last_sts
                             consecutive_stale=counters.consecutive_stale,
                             stale_limit=self.stale_cycles, seq=seq, lost=lost,
                             silent=counters.consecutive_silent >= self.stale_cycles)
@@ -215,23 +220,18 @@ class Joint:
         self.counters.consecutive_silent += 1
         self.observe(now, stale=True, implausible=False)
 
-    def _settle(self, settled: tuple[float, float] | None, seq: int, implausible: bool) -> None:
-        """The health of the SYNC before this one, judged now (``settled``: its wire time and
-        the share of its data lost, None for the first SYNC): an answer on the wire in time but
-        handled late is counted for its SYNC, so the stale ratio measures the bus."""
-        if settled is not None:
-            t_prev, lost = settled
-            self.observe(t_prev, stale=lost > 0, implausible=implausible, seq=seq - 1,
-                         lost=lost)
-
     def settle(self, seq: int, settled: tuple[float, float] | None) -> None:
-        """The health of the SYNC before ``seq`` (:meth:`_settle`), after :meth:`output` or
+        """The health of the SYNC before ``seq``, judged now, after :meth:`output` or
         :meth:`leave_out` of SYNC ``seq``: what :meth:`update` and :meth:`set_aside` do last,
-        for a caller that publishes the cycle first.
+        for a caller that publishes the cycle first. An answer on the wire in time but handled
+        late is counted for its SYNC, so the stale ratio measures the bus.
 
         :param settled: (wire time, share not vouched) of the SYNC before, None for the first
         """
-        self._settle(settled, seq, self._implausible)
+        if settled is not None:
+            t_prev, lost = settled
+            self.observe(t_prev, stale=lost > 0, implausible=self._implausible, seq=seq - 1,
+                         lost=lost)
 
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
@@ -321,19 +321,21 @@ class Joint:
         fresh = sample_time >= t_sync
         estimator = self.velocity
         position = to_int32(reg_ssi_pos) * self._unit_per_count  # JointScale.position
-        implausible = False
-        out = JointOutput(position, math.nan)
+        implausible = corrupt = False
+        events: Sequence[tuple[bool, str]] = ()
         watch = self.frames
         # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
         seen = watch.evaluate(image) if image != watch.image else None
-        corrupt = seen is not None and seen[1].corrupt
         if seen is not None:
-            out.events += [(True, text) for text in edges(*seen)]
-            if corrupt:
+            before, after = seen
+            if after is not before:  # most frames: CLEAN after CLEAN, nothing changed
+                events = [(True, text) for text in edges(before, after)]
+            if after is not CLEAN and after.corrupt:
+                corrupt = True
                 counters.frame_errors += 1
-                text = watch.failures.failed(t_sync, seen[1])
+                text = watch.failures.failed(t_sync, after)
                 if text:
-                    out.events.append((False, text))
+                    events = [*events, (False, text)]
         counters.frame = watch.verdict if watch.checked else None
         sts = image[7]
         if sample_time <= self.para1_since:
@@ -355,8 +357,7 @@ class Joint:
             velocity = estimator.velocity
         self._implausible = implausible
         self.position = position
-        out.position, out.velocity = position, velocity
-        return out
+        return JointOutput(position, velocity, events)
 
 
 __all__ = ["ERRORS", "Joint", "JointOutput", "NOT_MEASURING", "encoder_layout", "joint_scale",

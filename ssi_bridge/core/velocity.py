@@ -10,7 +10,7 @@ import math
 from collections import deque
 
 from ssi_bridge.exceptions import ConfigError
-from ssi_bridge.core.joint_scale import JointScale, to_int32
+from ssi_bridge.core.joint_scale import JointScale
 
 
 class VelocityEstimator:
@@ -40,6 +40,7 @@ class VelocityEstimator:
         #: the scale's constants, read every sample (JointScale is frozen)
         self._unit_per_count = scale.unit_per_count
         self._modulus = scale.modulus or 0
+        self._half = self._modulus >> 1
         self.window = window
         self.max_speed = max_speed
         #: samples whose step exceeded ``max_speed`` (since construction)
@@ -82,16 +83,20 @@ class VelocityEstimator:
         :returns: the estimate in joint units/s; NaN while unknown (see the class)
         """
         self.last_implausible = False
-        if self._ignore_until is not None and t <= self._ignore_until:
+        ignore = self._ignore_until
+        if ignore is not None and t <= ignore:
             return self.velocity
-        raw = to_int32(counts)
-        if self._last_raw is None:
-            self._unwrapped = raw
+        raw = counts & 0xFFFF_FFFF  # to_int32, inline: once per joint and cycle
+        if raw & 0x8000_0000:
+            raw -= 0x1_0000_0000
+        last_raw = self._last_raw
+        if last_raw is None:
+            unwrapped = raw
         else:
-            step = raw - self._last_raw
+            step = raw - last_raw
             modulus = self._modulus
             if modulus:
-                half = modulus // 2
+                half = self._half
                 step = (step + half) % modulus - half
             last_t = self._last_t
             max_speed = self.max_speed
@@ -106,13 +111,18 @@ class VelocityEstimator:
                 self._last_raw, self._last_t, self._unwrapped = raw, t, raw
                 self._samples.append((t, raw))
                 return math.nan
-            self._unwrapped += step
+            unwrapped = self._unwrapped + step
+        self._unwrapped = unwrapped
         self._last_raw = raw
-        if self._samples and t <= self._samples[-1][0]:
+        samples = self._samples
+        if samples and t <= samples[-1][0]:
             return self.velocity
         self._last_t = t
-        self._samples.append((t, self._unwrapped))
-        return self.velocity
+        samples.append((t, unwrapped))
+        if len(samples) < 2:
+            return self.velocity
+        t0, c0 = samples[0]  # the property's difference, with the newest sample at hand
+        return (unwrapped - c0) / (t - t0) * self._unit_per_count
 
     @property
     def velocity(self) -> float:

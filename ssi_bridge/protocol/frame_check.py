@@ -49,6 +49,11 @@ class FrameVerdict(NamedTuple):
         return self.parity_error or self.filler_error or self.checksum_error
 
 
+#: the verdict of a frame that passed every check and carries no status bit (one shared
+#: instance: :meth:`FrameCheck.check` returns it for most frames, once a cycle per joint)
+CLEAN = FrameVerdict(False, False, False, False, False)
+
+
 def _area_mask(cfg: EncoderConfig) -> int:
     """Bits of the position area a value can set (the rest are filler, always 0)."""
     db, w = cfg.field_bits, cfg.value_bits
@@ -153,6 +158,9 @@ class FrameCheck:
             got = word & self._crc_mask
             want = crc15(word >> self._crc_read) >> self._cut
             checksum_error = got != want
-        return FrameVerdict(parity_error, bool(frame & self._zero),
-                            bool(logical & self._power), bool(logical & self._errors),
-                            checksum_error)
+        filler = frame & self._zero
+        status = logical & (self._power | self._errors)
+        if not (parity_error or filler or status or checksum_error):
+            return CLEAN
+        return FrameVerdict(parity_error, bool(filler), bool(logical & self._power),
+                            bool(logical & self._errors), checksum_error)

@@ -31,7 +31,7 @@ from ssi_bridge.client.cycle_feed import sync_number
 from ssi_bridge.client.listener import ObservedCycle
 from ssi_bridge.core.cycle import CycleResult
 from ssi_bridge.ros.cycle import cycle_waits
-from ssi_bridge.ros.messages import joint_state_msg, status_msg, time_msg
+from ssi_bridge.ros.messages import JointStates, status_msg
 from ssi_bridge.ros.rclpy_compat import RCLError
 
 logger = logging.getLogger(__name__)
@@ -62,6 +62,9 @@ class CyclePublisher:
         self._handed: PublishedCycle | None = None
         #: the cycle published last, finished after the next SYNC went out
         self._pending: PublishedCycle | None = None
+        #: joint_states, one message filled each cycle (a cycle is finished before the next
+        #: one is decided, so nothing holds the one before when it is filled again)
+        self._joint_states = JointStates()
 
     # -- the master's cycle (cycle thread, receive thread) ---------------------------------
     def on_cycle(self) -> None:
@@ -184,7 +187,7 @@ class CyclePublisher:
         result = core.run(seq, t_sync, settle=False)
         handed = False
         try:
-            js = joint_state_msg(result, time_msg(stamp_ns), node.settings.frame_id)
+            js = self._joint_states.fill(result, stamp_ns, node.settings.frame_id)
             if js.name:
                 if not node.publish_safe(node.joint_pub, js):
                     return None

@@ -5,6 +5,7 @@ Kept apart from the node so the per-cycle message building reads (and is timed) 
 
 from __future__ import annotations
 
+from array import array
 
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import JointState
@@ -70,17 +71,48 @@ def channel_msg(name: str, slot: int, image: bytes, position: int, inp: ProcessI
 
 
 
+class JointStates:
+    """joint_states of each cycle, in one message kept and filled again (a new message and
+    its arrays cost several times as much, on the path from the last TPDO to ``publish()``).
+
+    The message :meth:`fill` returns is the same object every call, its content the latest
+    cycle's: whoever holds it must be done with it (``publish()`` and the recorder serialize
+    it at once) before the next cycle is filled.
+    """
+
+    def __init__(self) -> None:
+        self.msg = JointState()
+        #: the names in the message (the joints published last), never changed in place
+        self._names: list[str] = []
+
+    def fill(self, result: CycleResult, stamp_ns: int, frame_id: str) -> JointState:
+        """The kept message with ``result``'s cycle: only the joints with a sample latched at
+        the stamp (ROS time ``stamp_ns``), in the configured order; no name when none is."""
+        msg = self.msg
+        outputs = [(part.joint.name, part.output) for part in result.joints
+                   if part.output is not None]
+        names = [name for name, _ in outputs]
+        if names == self._names:  # as a rule: the arrays are filled in place
+            position, velocity = msg.position, msg.velocity
+            for i, (_, out) in enumerate(outputs):
+                position[i] = out.position
+                velocity[i] = out.velocity
+        else:
+            msg.name = self._names = names
+            msg.position = array("d", [out.position for _, out in outputs])
+            msg.velocity = array("d", [out.velocity for _, out in outputs])
+        header = msg.header
+        stamp = header.stamp
+        stamp.sec, stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        if header.frame_id != frame_id:
+            header.frame_id = frame_id
+        return msg
+
+
 def joint_state_msg(result: CycleResult, stamp: Time, frame_id: str) -> JointState:
-    """joint_states of one cycle: only the joints with a sample latched at ``stamp``."""
-    js = JointState()
-    js.header.stamp = stamp
-    js.header.frame_id = frame_id
-    for part in result.published:
-        assert part.output is not None
-        js.name.append(part.joint.name)
-        js.position.append(part.output.position)
-        js.velocity.append(part.output.velocity)
-    return js
+    """joint_states of one cycle (a message of its own): only the joints with a sample
+    latched at ``stamp``."""
+    return JointStates().fill(result, stamp.sec * 1_000_000_000 + stamp.nanosec, frame_id)
 
 
 def status_msg(result: CycleResult, header: Header) -> Status:
