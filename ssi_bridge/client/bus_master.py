@@ -82,6 +82,8 @@ class CanMaster:
         self.gate = CycleGate()
         #: the interface's error frames per class, bus-off and error passive
         self.error_frames = ErrorFrameWatch()
+        #: wire time of the latest SYNC of another producer (0.0: none yet)
+        self._foreign_sync_at = 0.0
 
     def connect(self) -> None:
         """Open the bus and start canopen's network (idempotent)."""
@@ -152,6 +154,7 @@ class CanMaster:
         """Another producer's SYNC at wire time ``at`` (receive thread): no TPDO after it
         counts for this master's cycle (``client/foreign.py``)."""
         with self.gate.cond:
+            self._foreign_sync_at = max(self._foreign_sync_at, at)
             for client in self.clients:
                 client.table.on_foreign_sync(at)
 
@@ -225,18 +228,39 @@ class CanMaster:
         process starved, not its frames lost), up to ``unanswered_timeout`` in all. Frames lost
         on the wire never come, so waiting for them would only delay the next SYNC: the SYNC
         period stays the configured one under frame loss (CiA 301 0x1006 is a period). Nor is
-        a station waited for whose gateway is known silent (no heartbeat): the other stations'
+        a station waited for whose gateway is known silent (no heartbeat), nor any once
+        another producer's SYNC followed this one: every frame after it answers that SYNC
+        (``SlotTable.on_foreign_sync``), so none can complete this cycle. The other stations'
         cycles keep their period.
         """
         start = time.monotonic()
-        if self.gate.wait(timeout):
-            return True
-        with self.gate.cond:
+        gate = self.gate
+        with gate.cond:  # one hold of the lock for the wait and the checks (it is re-entrant)
+            if gate.wait(timeout):
+                return True
             if all(client.table.answering or not client.gateway_alive
+                   or self._foreign_sync_at > client.table.sync_time
                    for client in self.clients):
                 return False
-        left = unanswered_timeout - (time.monotonic() - start)
-        return left > 0 and self.gate.wait(left)
+            left = unanswered_timeout - (time.monotonic() - start)
+            return left > 0 and gate.wait(left)
+
+    def wait_claim(self, timeout: float, unanswered_timeout: float = 0.0) -> bool:
+        """:meth:`wait_cycle`, then ``CycleGate.claim`` of the cycle armed for it, under one
+        hold of the gate's lock: True when the caller runs the cycle itself (no frame took it),
+        False once the receive thread has run it (raises what :meth:`wait_cycle` raises, the
+        cycle claimed all the same).
+
+        :param timeout: the wait for the cycle (s), as :meth:`wait_cycle` takes it
+        :param unanswered_timeout: the longest wait (s) while a station answered nothing
+        """
+        gate = self.gate
+        with gate.cond:
+            try:
+                self.wait_cycle(timeout, unanswered_timeout)
+            finally:
+                mine = gate.claim()
+        return mine
 
     def send(self, cob_id: int, data: bytes) -> None:
         """Send one frame under the send lock.

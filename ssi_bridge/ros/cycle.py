@@ -76,6 +76,10 @@ class LoopThread:
 
     def __init__(self, name: str, priority: int = 0) -> None:
         self._stop = threading.Event()
+        #: held while the thread sleeps; :meth:`stop` releases it to end a sleep at once (one
+        #: lock acquire a sleep: an Event's wait costs a condition and a new lock each time)
+        self._wake = threading.Lock()
+        self._wake.acquire()
         self._thread = threading.Thread(target=self._main, name=name, daemon=True)
         self.priority = priority
         #: the thread's scheduling once it runs ("SCHED_FIFO 5", "normal"; "" before)
@@ -88,6 +92,11 @@ class LoopThread:
     def stop(self, timeout: float = 2.0) -> None:
         """Ask the thread to end and wait for the running step to finish."""
         self._stop.set()
+        if self._wake.locked():
+            try:
+                self._wake.release()
+            except RuntimeError:  # released meanwhile by another stop()
+                pass
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout)
 
@@ -101,6 +110,11 @@ class LoopThread:
 
     def _run(self) -> None:
         raise NotImplementedError
+
+    def _sleep(self, seconds: float) -> None:
+        """Sleep ``seconds`` (a stop ends the sleep at once)."""
+        if seconds > 0 and self._wake.acquire(timeout=seconds):
+            self._wake.release()  # stopped: every later sleep ends at once too
 
 
 class CycleThread(LoopThread):
@@ -125,10 +139,13 @@ class CycleThread(LoopThread):
         #: cycles run and cycles skipped because a step overran its slot
         self.cycles = 0
         self.missed = 0
+        #: when the next step is due (the clock's time), for the running step
+        self.due = 0.0
 
     def _run(self) -> None:
         deadline = self._clock()
         while not self._stop.is_set():
+            self.due = deadline + self.period
             try:
                 self._step()
             except Exception:  # noqa: BLE001 - the loop must outlive one bad cycle
@@ -143,7 +160,7 @@ class CycleThread(LoopThread):
                 behind = int(late / self.period) + 1  # skip to the next slot boundary
                 self.missed += behind
                 deadline += behind * self.period
-            self._stop.wait(deadline - now)
+            self._sleep(deadline - now)
         if self._end is not None:
             try:
                 self._end()

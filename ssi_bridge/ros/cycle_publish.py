@@ -11,10 +11,13 @@ wait (``ros/cycle.cycle_waits``) is decided and published by the cycle thread at
 as before. Either way the cycle core decides with the same rules (``core/cycle.py``), and the
 next SYNC goes out only after the cycle was published. The rest of a cycle (the health of the
 SYNC before, ``~/events``, ``~/status``, recording, diagnostics on a level change) is done by
-the cycle thread right after its next SYNC, while that SYNC's TPDOs are on the wire, and
-before it hands that cycle to the receive thread: each cycle's messages still go out in
-order, and the time from one SYNC to the next holds only the wire and joint_states. The last
-cycle is finished when the cycle thread ends. Listen-only, the observer thread publishes each
+the cycle thread once the cycle is published, when at least half a period is left before the
+next SYNC is due (a level change then reaches /diagnostics a period sooner, and the next
+cycle's frames find the cycle thread idle); otherwise right after its next SYNC, while that
+SYNC's TPDOs are on the wire, and before it hands that cycle to the receive thread. Either
+way each cycle's messages go out in order, and the time from one SYNC to the next holds only
+the wire and joint_states when it is short. The last cycle is finished when the cycle thread
+ends. Listen-only, the observer thread publishes each
 observed cycle whole.
 """
 
@@ -30,7 +33,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge.client.cycle_feed import sync_number
 from ssi_bridge.client.listener import ObservedCycle
 from ssi_bridge.core.cycle import CycleResult
-from ssi_bridge.ros.cycle import cycle_waits
+from ssi_bridge.ros.cycle import CycleThread, cycle_waits
 from ssi_bridge.ros.messages import JointStates, status_msg
 from ssi_bridge.ros.rclpy_compat import RCLError
 
@@ -60,7 +63,8 @@ class CyclePublisher:
         self._armed = (0.0, 0)
         #: the cycle the receive thread published, for the cycle thread to finish
         self._handed: PublishedCycle | None = None
-        #: the cycle published last, finished after the next SYNC went out
+        #: the cycle published last, finished before the next SYNC when there is time, else
+        #: after it went out
         self._pending: PublishedCycle | None = None
         #: joint_states, one message filled each cycle (a cycle is finished before the next
         #: one is decided, so nothing holds the one before when it is filled again)
@@ -95,24 +99,27 @@ class CyclePublisher:
         # counted in cycles_missed, instead of sending SYNCs nobody can answer. The master
         # wakes once every station's cycle is complete and its publish (if handed) ended.
         assert master is not None
-        gate = master.gate
         seq = sync_number(client, t_sync)
         self._armed = (t_sync, seq)
         self._handed = None
         node.cycle_core.prepare(seq)  # off the path from the last TPDO to publish()
-        armed = gate.arm(self._on_complete)  # False: complete already, published here
-        mine = not armed
-        try:
-            master.wait_cycle(*cycle_waits(1.0 / node.settings.publish_rate,
-                                           node.cycle_wire_s))
-        finally:
-            if armed:
-                mine = gate.claim()  # False: the receive thread took it (and has finished)
+        period = 1.0 / node.settings.publish_rate
+        if master.gate.arm(self._on_complete):
+            # mine False: the receive thread took it (and has finished)
+            mine = master.wait_claim(*cycle_waits(period, node.cycle_wire_s))
+        else:  # complete already (nothing to wait for): published here
+            mine = True
         if mine:
             node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
             self._pending = self._publish(*self._armed)
         else:
             self._pending, self._handed = self._handed, None
+        cycle = node.cycle
+        if isinstance(cycle, CycleThread) and cycle.due - time.monotonic() >= 0.5 * period:
+            # half a period to spare before the next SYNC: the rest of the cycle now, so its
+            # diagnostics and ~/status come a period sooner and the next cycle's frames find
+            # the cycle thread idle
+            self._finish_pending()
 
     def _finish_pending(self) -> None:
         """Finish the cycle published last (:meth:`_finish`); an error is logged, and the
@@ -209,7 +216,8 @@ class CyclePublisher:
         result, js, stamp_ns = cycle.result, cycle.joint_state, cycle.stamp_ns
         node.cycle_core.settle(result)
         recorder = node.recorder
-        if js.name:
+        capturing = recorder.capturing  # else record() keeps nothing: no topic name to ask
+        if capturing and js.name:
             recorder.record(node.joint_pub.topic_name, js, stamp_ns)
         for part in result.joints:
             out = part.output
@@ -219,7 +227,7 @@ class CyclePublisher:
                                             ok, text)
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         status_pub = node.status_pub
-        if (recorder.capturing or status_pub.get_subscription_count() > 0
+        if (capturing or status_pub.get_subscription_count() > 0
                 or node.liveview.wants(status_pub)):
             status = status_msg(result, js.header)
             if status.channels and node.publish_safe(status_pub, status):

@@ -183,30 +183,37 @@ class NodeDiagnostics:
         self._publish = publish
         self._refresh_cams = refresh_cams
         self.bus = BusFindings(lambda: bus.master, lambda: view.settings.diagnostics_period)
-        self._last_levels: tuple[object, ...] = ()
+        self._last_levels: list[object] = []
 
     def reset(self) -> None:
         """A new bus side: no level to compare with, every bus counter from zero."""
-        self._last_levels = ()
+        self._last_levels = []
         self.bus.reset()
 
     def achieved_rate(self) -> float:
         """Cycles per second over the last diagnostics period (at least 1 s, at most uptime)."""
         return self._rate.per_second(self._view.settings.diagnostics_period)
 
-    def _levels(self) -> tuple[object, ...]:
-        """The diagnostic levels without building the statuses (checked every cycle)."""
-        joints = self._joints.values()
-        levels: list[object] = [j.level for j in joints]
-        # PowerFail / error bits change a joint's level too (a failed check under noise would
-        # flip it every few cycles: that one waits for the periodic message). No check (a
-        # register read holds REG_RD_ADR) raises nothing, as a clean one: not a change, or
-        # every ~/read_register would publish the diagnostics twice
-        levels += [(bool(f and f.power_failure), bool(f and f.encoder_error))
-                   for j in joints for f in (j.counters.frame,)]
-        levels.extend(int(c.gateway_alive) for c in self._bus.station_clients.values())
-        levels.append(int(self._client().gateway_alive) * 2 + int(bool(self.bus_problem())))
-        return tuple(levels)
+    def _levels(self) -> list[object]:
+        """The diagnostic levels without building the statuses (checked every cycle).
+
+        One flat list, no object per joint: a joint's level, then its frame findings as one
+        number (PowerFail 2, encoder error 1). PowerFail / error bits change a joint's level
+        too (a failed check under noise would flip it every few cycles: that one waits for the
+        periodic message). No check (a register read holds REG_RD_ADR) raises nothing, as a
+        clean one: not a change, or every ~/read_register would publish the diagnostics
+        twice. Then each station's heartbeat, and the first client's with whether the bus has
+        a problem."""
+        levels: list[object] = []
+        append = levels.append
+        for joint in self._joints.values():
+            append(joint.level)
+            frame = joint.counters.frame
+            append(0 if frame is None else 2 * frame.power_failure + frame.encoder_error)
+        for client in self._bus.station_clients.values():
+            append(client.gateway_alive)
+        append(int(self._client().gateway_alive) * 2 + self._has_bus_problem())
+        return levels
 
     def publish_on_change(self) -> None:
         """Publish the diagnostics at once when a level changed since the last call (each
@@ -328,6 +335,16 @@ class NodeDiagnostics:
         bus_off = master.error_frames.problem() if master is not None else ""
         return "; ".join(p for p in (link, bus_off, self._recorder.error, self._liveview.error,
                                      ended) if p)
+
+    def _has_bus_problem(self) -> bool:
+        """Whether :meth:`bus_problem` says anything, without putting it into words (each
+        cycle's change test)."""
+        station, master = self._bus.station, self._bus.master
+        if self._recorder.error or self._liveview.error:
+            return True
+        if master is not None and (master.interface_problem() or master.error_frames.problem()):
+            return True
+        return station is not None and bool(station.problem())
 
     def on_timer(self) -> None:
         """Periodic diagnostics while the bus side is open; the CAM objects are re-read here

@@ -111,3 +111,26 @@ def test_a_silent_station_does_not_hold_up_the_others_cycles(rig, request) -> No
         waited = time.monotonic() - start
         assert waited < 1.0, f"waited {waited:.2f} s for a silent station"
         assert clients[1].table.cycle_complete()
+
+
+def test_no_starved_turn_once_another_producer_synced(rig, request) -> None:
+    """CiA 301 allows one SYNC producer. Once another producer's SYNC followed the master's,
+    every frame after it answers that SYNC and is not taken for this cycle, so a station that
+    has answered nothing yet can no longer complete it: the wait ends at its first timeout
+    instead of giving the station a starved process's turn (which would slow every SYNC of a
+    flood of foreign SYNCs to that turn)."""
+    master, clients, sniffer = rig
+    clients[3].heartbeat_timeout = 30.0  # station 3 stays alive for this test: not the reason
+    request.node.stations[1].stop()  # station 3 answers nothing from now on
+    clients[1].sync()
+    sniffer.send(can.Message(arbitration_id=0x080, is_extended_id=False, data=b""))
+    start = time.monotonic()
+    assert not master.wait_cycle(0.2, 3.0)
+    waited = time.monotonic() - start
+    assert clients[3].gateway_alive
+    assert waited < 1.5, f"waited {waited:.2f} s: a starved station's turn after a foreign SYNC"
+    # without the foreign SYNC the silent (but alive) station gets its turn, as before
+    clients[1].sync()
+    start = time.monotonic()
+    assert not master.wait_cycle(0.2, 1.0)
+    assert time.monotonic() - start >= 0.9
