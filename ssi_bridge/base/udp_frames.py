@@ -134,14 +134,17 @@ def unpack_frame(data: bytes, received: float) -> UdpFrame:
 
     :raises Exception: what python-can's ``unpack_message`` raises for ``data``
     """
-    try:
-        d = _unpackb(data, raw=False)
-    except Exception:  # noqa: BLE001 - python-can's unpack below raises it again, as its own
-        d = None
-    frame = _classic(d) if type(d) is dict and len(d) == len(_KEYS) else None
+    frame = _laid_out(data)
     if frame is None:
-        sent = unpack_message(data, check=True)  # its timestamp: the sender's
-        return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
+        try:
+            d = _unpackb(data, raw=False)
+        except Exception:  # noqa: BLE001 - python-can's unpack below raises it again, as its own
+            d = None
+        frame = _classic(d) if type(d) is dict and len(d) == len(_KEYS) else None
+        if frame is None:
+            sent = unpack_message(data, check=True)  # its timestamp: the sender's
+            return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
+        _learn(data, frame, len(d["data"]))
     sent_at = frame.timestamp
     frame.timestamp = received
     frame.wire_time = (sent_at if sent_at > 0 and abs(received - sent_at) <= WIRE_TIME_PLAUSIBLE
@@ -208,5 +211,80 @@ def pack_frame(msg: can.Message) -> bytes:
                      _TAIL[fd << 2 | brs << 1 | esi]))
 
 
-__all__ = ["UdpFrame", "UndecodableFrame", "WIRE_TIME_PLAUSIBLE", "pack_frame", "unpack_frame",
+# -- reading a datagram by its layout -----------------------------------------------------------
+# A classic frame packed by python-can (or pack_frame) is: map header, "timestamp" key, float64
+# marker (_HEAD); the float64; the identifier's key and value; flags, channel None, dlc key
+# (_MIDDLE); the dlc; data key and bin 8 marker; the payload's length; the payload; the FD flags
+# (_TAIL[0]: all False). Everything from the identifier's key to the payload's length is the
+# same for every frame of one COB-ID, kind and length: its "layout", learnt from the first
+# such frame python-can's decoding took, then read by position. msgpack's decoding of a
+# byte string is unique, so a datagram that matches a layout decodes to its fields exactly.
+
+_TS_AT = len(_HEAD)
+_ID_AT = _TS_AT + 8
+_AID_AT = _ID_AT + len(_ID_KEY)
+#: bytes of a msgpack unsigned integer by its first byte (positive fixint, uint 8/16/32)
+_UINT_BYTES = {**{b: 1 for b in range(0x80)}, 0xCC: 2, 0xCD: 3, 0xCE: 5}
+#: from the identifier's end to the payload: _MIDDLE, the dlc (0-8: one byte), the data key
+#: and bin 8 marker, the payload's length
+_TO_PAYLOAD = len(_MIDDLE[0]) + 1 + len(_DATA_BIN8) + 1
+_CLASSIC_TAIL = _TAIL[0]
+_F64_AT = struct.Struct(">d").unpack_from
+#: layout bytes -> (identifier, extended, remote, error, dlc, payload bytes in the datagram)
+_LAYOUTS: dict[bytes, tuple[int, bool, bool, bool, int, int]] = {}
+#: layouts kept (a bus has a few dozen: COB-IDs x lengths); beyond, the others are decoded
+LAYOUTS_KEPT = 4096
+
+
+def _laid_out(data: bytes) -> UdpFrame | None:
+    """The frame of ``data`` when it has a layout seen before (its timestamp the sender's),
+    else None."""
+    if len(data) <= _AID_AT or not data.startswith(_HEAD):
+        return None
+    width = _UINT_BYTES.get(data[_AID_AT])
+    if width is None:
+        return None
+    end = _AID_AT + width + _TO_PAYLOAD
+    layout = _LAYOUTS.get(data[_ID_AT:end])
+    if layout is None:
+        return None
+    aid, ext, rtr, err, dlc, n = layout
+    if len(data) != end + n + len(_CLASSIC_TAIL) or not data.endswith(_CLASSIC_TAIL):
+        return None
+    ts = _F64_AT(data, _TS_AT)[0]
+    if not 0.0 <= ts < _INF:
+        return None
+    frame = _new_message(UdpFrame)
+    frame.timestamp = ts
+    frame.arbitration_id = aid
+    frame.is_extended_id = ext
+    frame.is_remote_frame = rtr
+    frame.is_error_frame = err
+    frame.channel = None
+    frame.dlc = dlc
+    frame.data = bytearray() if rtr else bytearray(data[end:end + n])
+    frame.is_fd = False
+    frame.is_rx = True
+    frame.bitrate_switch = False
+    frame.error_state_indicator = False
+    return frame
+
+
+def _learn(data: bytes, frame: UdpFrame, n: int) -> None:
+    """Keep the layout of ``data``, which decoded to ``frame`` (``n`` payload bytes in the
+    datagram), when it is laid out as python-can packs a frame (and room is left)."""
+    if frame.channel is not None or len(_LAYOUTS) >= LAYOUTS_KEPT or len(data) <= _AID_AT:
+        return
+    layout = b"".join((_ID_KEY, _uint(frame.arbitration_id), _MIDDLE[
+        frame.is_extended_id << 2 | frame.is_remote_frame << 1 | frame.is_error_frame],
+        _uint(frame.dlc), _DATA_BIN8, _LENGTHS[n]))
+    if (len(layout) == _AID_AT - _ID_AT + _UINT_BYTES.get(data[_AID_AT], 0) + _TO_PAYLOAD
+            and data.startswith(_HEAD) and data.startswith(layout, _ID_AT)
+            and len(data) == _ID_AT + len(layout) + n + len(_CLASSIC_TAIL)
+            and data.endswith(_CLASSIC_TAIL)):
+        _LAYOUTS[layout] = (frame.arbitration_id, frame.is_extended_id, frame.is_remote_frame,
+                            frame.is_error_frame, frame.dlc, n)
+
+
+__all__ = ["LAYOUTS_KEPT", "UdpFrame", "UndecodableFrame", "WIRE_TIME_PLAUSIBLE", "pack_frame", "unpack_frame",
            "wire_time_of"]

@@ -13,6 +13,7 @@ import math
 import os
 import random
 import socket
+import struct
 import time
 
 import can
@@ -21,6 +22,7 @@ import pytest
 
 from ssi_bridge.base.can_compat import pack_message, unpack_message
 from ssi_bridge.base.udp_bus import UdpCanBus, UndecodableFrame, derive_channel, open_udp_bus
+from ssi_bridge.base import udp_frames
 from ssi_bridge.base.udp_frames import UdpFrame, pack_frame, unpack_frame, wire_time_of
 
 FIELDS = tuple(n for n in can.Message.__slots__ if n != "__weakref__")
@@ -76,6 +78,37 @@ def test_random_frames_pack_and_unpack_as_python_can() -> None:
         assert datagram == pack_message(msg)
         received = msg.timestamp + rng.choice([0.0, 2e-4, 3.0])
         _same_as_python_can(datagram, received)
+
+
+def test_frames_of_a_known_layout_are_read_by_position_as_python_can_reads_them() -> None:
+    """The second frame of a COB-ID, kind and length is read by its layout (learnt from the
+    first): the same result as python-can's, and a datagram that differs from the layout
+    anywhere else (a stamp python-can refuses, the FD flags, its length) is not taken by it."""
+    rng = random.Random(5)
+    for can_id, ext, kind in ((0x181, False, "data"), (0x1FFFFFF0, True, "data"),
+                              (0x701, False, "remote"), (0x0C0, False, "error"),
+                              (0x2E1, False, "data")):
+        for n in range(9):
+            for _ in range(3):
+                msg = can.Message(timestamp=time.time(), arbitration_id=can_id,
+                                  is_extended_id=ext, is_remote_frame=kind == "remote",
+                                  is_error_frame=kind == "error",
+                                  dlc=n if kind == "remote" else None,
+                                  data=None if kind == "remote" else rng.randbytes(n))
+                _same_as_python_can(pack_message(msg), msg.timestamp + 1e-4)
+    assert udp_frames._LAYOUTS, "no layout learnt"
+    known = pack_message(can.Message(timestamp=1.5, arbitration_id=0x181, is_extended_id=False,
+                                     data=b"\x01\x02"))
+    assert udp_frames._laid_out(known) is not None
+    stamp = known.index(struct.pack(">d", 1.5))
+    for odd in (-1.0, math.nan, math.inf):
+        _same_as_python_can(known[:stamp] + struct.pack(">d", odd) + known[stamp + 8:], 1.5)
+    for cut in (1, 3, 20):
+        _same_as_python_can(known[:-cut], 1.5)
+    _same_as_python_can(known + b"\xc0", 1.5)
+    fd_on = pack_message(can.Message(timestamp=1.5, arbitration_id=0x181, is_extended_id=False,
+                                      data=b"\x01\x02", is_fd=True))
+    _same_as_python_can(fd_on, 1.5)
 
 
 def _map(**changes: object) -> bytes:
