@@ -9,7 +9,8 @@ publicly:
 * :func:`steps_itself`: whether a bus receives through python-can's ``BusABC.recv`` (then
   :func:`recv_step` is its step);
 * :func:`is_shut_down`: ``BusABC._is_shutdown``;
-* the udp_multicast interface's internals ``SO_TIMESTAMPNS`` and ``unpack_message``, and
+* the udp_multicast interface's internals ``SO_TIMESTAMPNS``, ``pack_message`` and
+  ``unpack_message`` (its wire format, ``base/udp_frames.py``), and
   :class:`MulticastSockets` / :class:`MulticastBus`, python-can's socket pair
   (``GeneralPurposeUdpMulticastBus``: its ``_create_socket`` hook and ``_socket``) and its
   ``UdpMulticastBus`` (``_multicast``) on sockets of the caller's (``base/udp_bus.py``
@@ -29,7 +30,9 @@ import can
 from can.interfaces.udp_multicast.bus import (  # noqa: F401 - re-exported for base/udp_bus.py
     SO_TIMESTAMPNS, GeneralPurposeUdpMulticastBus, UdpMulticastBus,
 )
-from can.interfaces.udp_multicast.utils import unpack_message  # noqa: F401 - re-exported
+from can.interfaces.udp_multicast.utils import (  # noqa: F401 - re-exported
+    pack_message, unpack_message,
+)
 
 
 def steps_itself(bus: can.BusABC) -> bool:
@@ -105,5 +108,5 @@ class MulticastBus(UdpMulticastBus):
 
 
 __all__ = ["GeneralPurposeUdpMulticastBus", "MulticastBus", "MulticastSockets", "SO_TIMESTAMPNS",
-           "UdpMulticastBus", "is_shut_down", "recv_step",
+           "UdpMulticastBus", "is_shut_down", "pack_message", "recv_step",
            "recv_step_unfiltered", "steps_itself", "unpack_message"]

@@ -37,7 +37,7 @@ from __future__ import annotations
 import queue
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Protocol
 
 import can
 import canopen
@@ -173,15 +173,21 @@ class CheckedRemoteNode(canopen.RemoteNode):
 
 
 #: a subscriber that raised, the frame's COB-ID and data, and what it raised (:func:`dispatch`)
-OnRaise = Callable[[Callable[..., Any], int, bytearray, Exception], None]
+OnRaise = Callable[[Callable[..., object], int, bytearray, Exception], None]
 
 
 def dispatch(network: canopen.Network, can_id: int, data: bytearray, timestamp: float,
              on_raise: OnRaise, subscribed: list[Subscriber] | tuple[()] = ()) -> None:
     """canopen's ``Network.notify`` for one frame, each subscriber on its own: one that raises
     goes to ``on_raise`` (with the frame and its exception) and the others still get the
-    frame; then the network's node scanner notes ``can_id``. ``subscribed``: the subscribers
-    of ``can_id`` when the caller has just looked them up (:func:`subscribers`)."""
+    frame; then the network's node scanner notes ``can_id``.
+
+    :param can_id: the frame's CAN identifier
+    :param data: its payload, handed to every subscriber
+    :param timestamp: the time handed to every subscriber (the master's: its wire time)
+    :param subscribed: the subscribers of ``can_id`` when the caller has just looked them up
+        (:func:`subscribers`); empty: looked up here
+    """
     for callback in subscribed or network.subscribers.get(can_id, ()):  # as canopen's notify
         try:
             callback(can_id, data, timestamp)

@@ -7,7 +7,8 @@ traffic. :class:`UdpCanBus` is that interface with what a CAN wire needs:
 
 * a sender does not receive its own frames (a CAN controller does not either; python-can's
   bus would, through multicast loop-back): frames go out through a second socket and
-  datagrams from that socket's address are dropped on receipt;
+  datagrams from that socket's address are dropped, by the kernel where it takes a socket
+  filter (Linux: the receive thread does not even wake up for them), else on receipt;
 * the group is joined on one chosen interface (``127.0.0.1`` by default) and sent from it,
   so a station on the same host never puts a frame on the LAN;
 * the receive socket is bound to the group address itself (not 0.0.0.0), so the kernel
@@ -19,6 +20,10 @@ traffic. :class:`UdpCanBus` is that interface with what a CAN wire needs:
   the receive paths of master and station (``base/rx_guard.py``) count and drop it and go on;
 * the receive queue is as deep as the kernel allows (``RECEIVE_BUFFER_BYTES``): a process
   starved of CPU for a moment reads the frames late, it does not lose them.
+
+A bus without filters receives in one step (``recv``: the socket waits for the datagram, the
+datagram becomes one frame, ``base/udp_frames.py``) and packs a frame it sends in one
+(python-can's wire format, byte for byte); with filters ``recv`` is python-can's own loop.
 
 The channel string is ``GROUP[:PORT][@INTERFACE_ADDRESS]``, e.g. ``239.74.163.2:43113@127.0.0.1``.
 Receive timestamps are the kernel's (``SO_TIMESTAMPNS``, ``time.time()`` base), as python-can
@@ -35,14 +40,17 @@ import errno
 import hashlib
 import ipaddress
 import logging
+import ctypes
 import socket
 import struct
+import time
 from dataclasses import dataclass
 
 import can
 
-from ssi_bridge.base.can_compat import (
-    SO_TIMESTAMPNS, MulticastBus, MulticastSockets, unpack_message,
+from ssi_bridge.base.can_compat import SO_TIMESTAMPNS, MulticastBus, MulticastSockets
+from ssi_bridge.base.udp_frames import (
+    WIRE_TIME_PLAUSIBLE, UdpFrame, UndecodableFrame, pack_frame, unpack_frame, wire_time_of,
 )
 from ssi_bridge.exceptions import ConfigError
 
@@ -58,6 +66,16 @@ IP_MULTICAST_ALL = 49
 #: loses no frame because a reader was late, so a starved process reads them late instead
 #: (the default 208 kB holds ~256 datagrams: 85 ms of a 1 kHz cycle with two slots)
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
+#: Linux: attach a classic BPF program to a socket (asm-generic/socket.h)
+SO_ATTACH_FILTER = 26
+#: classic BPF (linux/filter.h): loads relative to the network (IP) header, the opcodes of
+#: a 16- and a 32-bit absolute load, a jump if equal to a constant, a return of a constant
+_SKF_NET_OFF = -0x100000
+_LDH_ABS, _LD_ABS, _JEQ_K, _RET_K = 0x28, 0x20, 0x15, 0x06
+#: the receive timestamp's control message: struct timespec (python-can's layout)
+_TIMESPEC = struct.Struct("@ll").unpack
+#: what a receive step returns for a datagram it dropped (its own frame, a CAN FD frame)
+_DROPPED = object()
 #: derived groups live in the administratively scoped 239.74.0.0/16 (RFC 2365)
 _DERIVED_NET = (239, 74)
 #: derived ports: above Linux's ephemeral range (net.ipv4.ip_local_port_range, 32768-60999 by
@@ -73,59 +91,6 @@ _PORTS = tuple(p for p in range(*_DERIVED_PORTS)
                if (p - _DDS_PORT_BASE) % _DDS_DOMAIN_GAIN >= _DDS_FREE_OFFSET)
 #: where Linux keeps its ephemeral port range
 _EPHEMERAL_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
-#: a sender's timestamp is taken as the frame's wire time only this close to its receive time
-#: (s): a python-can tool may send a frame with no stamp (0) or replay a logged one
-WIRE_TIME_PLAUSIBLE = 1.0
-
-_new_message = can.Message.__new__
-#: the fields of a can.Message (its __slots__ minus the weak-reference slot)
-_FIELDS = tuple(n for n in can.Message.__slots__ if n != "__weakref__")
-
-
-class UndecodableFrame(can.CanOperationError):
-    """A datagram on the group that is not a CAN frame (the bus drops it; the next goes on)."""
-
-
-class UdpFrame(can.Message):
-    """A frame received on udp_multicast: the kernel's receive ``timestamp`` and the sender's
-    :attr:`wire_time` (its end on the wire, the instant every receiver shares)."""
-
-    __slots__ = ("wire_time",)
-    wire_time: float
-
-    @classmethod
-    def of(cls, msg: can.Message, timestamp: float, wire_time: float) -> UdpFrame:
-        """A copy of ``msg`` (fields and a new payload) with these two times."""
-        frame = _new_message(cls)
-        for name in _FIELDS:
-            setattr(frame, name, getattr(msg, name))
-        frame.data = bytearray(msg.data)
-        frame.timestamp = timestamp
-        frame.wire_time = wire_time
-        return frame
-
-    def __copy__(self) -> UdpFrame:
-        return UdpFrame.of(self, self.timestamp, self.wire_time)
-
-    def __deepcopy__(self, memo: dict[int, object] | None) -> UdpFrame:
-        return UdpFrame.of(self, self.timestamp, self.wire_time)
-
-
-def wire_time_of(sent: float, received: float) -> float:
-    """The wire time of a frame the sender stamped ``sent`` and the kernel received at
-    ``received``: ``sent`` when it is a plausible stamp (within :data:`WIRE_TIME_PLAUSIBLE`),
-    else ``received``."""
-    if sent > 0 and abs(received - sent) <= WIRE_TIME_PLAUSIBLE:
-        return sent
-    return received
-
-
-def unpack_frame(data: bytes, received: float) -> UdpFrame:
-    """A python-can udp_multicast datagram as a :class:`UdpFrame` received at ``received``."""
-    sent = unpack_message(data, check=True)  # its timestamp: the sender's
-    return UdpFrame.of(sent, received, wire_time_of(sent.timestamp, received))
-
-
 @dataclass(frozen=True)
 class Endpoint:
     """Where a udp_multicast CAN bus meets: group, UDP port, and the local interface address."""
@@ -200,6 +165,38 @@ def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     return Endpoint(f"{_DERIVED_NET[0]}.{_DERIVED_NET[1]}.{x}.{y}", port, interface).channel
 
 
+def own_frames_filter(address: tuple[str, int]) -> list[tuple[int, int, int, int]]:
+    """A classic BPF program (code, jt, jf, k per instruction) that drops every datagram
+    from ``address`` (IPv4 address, UDP port) and accepts the others whole. A UDP socket's
+    filter sees the datagram from its UDP header on: the source port at offset 0."""
+    source = int.from_bytes(socket.inet_aton(address[0]), "big")
+    return [(_LDH_ABS, 0, 0, 0),  # A = the UDP source port
+            (_JEQ_K, 0, 3, address[1]),  # another port: accept
+            (_LD_ABS, 0, 0, (_SKF_NET_OFF + 12) & 0xFFFFFFFF),  # A = the IPv4 source
+            (_JEQ_K, 0, 1, source),  # another address: accept
+            (_RET_K, 0, 0, 0),  # this bus's own frame: dropped
+            (_RET_K, 0, 0, 0xFFFFFFFF)]  # accepted whole
+
+
+def drop_own_frames(sock: socket.socket, address: tuple[str, int]) -> bool:
+    """Have the kernel drop every datagram from ``address`` before ``sock`` queues it
+    (:func:`own_frames_filter` as a socket filter, ``SO_ATTACH_FILTER``).
+
+    :returns: True when the filter is attached; False where the system refuses it (the
+        receive path then drops those datagrams itself)
+    """
+    program = own_frames_filter(address)
+    code = ctypes.create_string_buffer(b"".join(struct.pack("@HBBI", *op) for op in program))
+    # struct sock_fprog: the instruction count and a pointer to them (the kernel copies them)
+    fprog = struct.pack("@HP", len(program), ctypes.addressof(code))
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER, fprog)
+    except OSError as err:
+        logger.debug("no socket filter for the own frames of %s: %s", address, err)
+        return False
+    return True
+
+
 class _GroupSockets(MulticastSockets):
     """python-can's multicast socket pair logic, joined and sent on one interface address."""
 
@@ -230,6 +227,8 @@ class _GroupSockets(MulticastSockets):
         self.send_socket = send
         #: datagrams from this address are this bus's own frames
         self.own_address = send.getsockname()
+        #: True when the kernel drops them before they reach the receive queue
+        self.kernel_drops_own = drop_own_frames(self.receive_socket, self.own_address)
 
     def _open_receive_socket(self) -> socket.socket:
         """The receive socket: python-can's options, bound to GROUP:PORT (not 0.0.0.0:PORT),
@@ -282,6 +281,14 @@ class UdpCanBus(MulticastBus):
         super().__init__(endpoint.channel, self.sockets, **kwargs)
         self.endpoint = endpoint
         self.channel_info = f"udp_multicast {endpoint.channel}"
+        sockets = self.sockets
+        self._receive_socket = sockets.receive_socket
+        #: the wait the receive socket is set to (its timeout: None waits for ever)
+        self._socket_wait: float | None = self._receive_socket.gettimeout()
+        self._receive_sizes = (sockets.max_buffer, sockets.received_ancillary_buffer_size)
+        self._own_address = sockets.own_address
+        self._send_datagram = sockets.send_socket.sendto
+        self._group_address = (endpoint.group, endpoint.port)
 
     @property
     def receive_buffer_bytes(self) -> int:
@@ -289,26 +296,93 @@ class UdpCanBus(MulticastBus):
         net.core.rmem_max; :data:`RECEIVE_BUFFER_BYTES`)."""
         return int(self.sockets.receive_socket.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
 
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        result = self.sockets.recv(timeout)
-        if not result:
-            return None, False
-        data, sender, timestamp = result
-        if sender[:2] == self.sockets.own_address:
-            return None, False  # our own frame looped back
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send ``msg`` (python-can's wire format, ``base/udp_frames.pack_frame``); ``timeout``
+        is not used (a datagram is sent at once or fails).
+
+        :raises can.CanOperationError: a CAN FD frame (this bus is classic CAN), or the
+            socket's error (its cause)
+        """
+        if msg.is_fd:
+            raise can.CanOperationError("cannot send FD message over bus with CAN FD disabled")
+        data = pack_frame(msg)
         try:
-            msg = unpack_frame(data, timestamp)
+            self._send_datagram(data, self._group_address)
+        except OSError as err:
+            raise can.CanOperationError(f"failed to send to {self.endpoint.channel}: {err}") \
+                from err
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """The next frame of another sender, None after ``timeout`` s (None: wait for one).
+
+        Without filters one receive step per frame; with filters python-can's ``recv`` loop.
+
+        :raises UndecodableFrame: a datagram on the group that is not a CAN frame
+        :raises can.CanOperationError: the socket failed (its OSError the cause)
+        """
+        if self.filters:
+            return super().recv(timeout)
+        msg = self._receive_step(timeout)
+        if msg is _DROPPED:
+            return self._receive_after_drop(timeout)
+        return msg  # type: ignore[return-value]  # a frame or None
+
+    def _receive_after_drop(self, timeout: float | None) -> can.Message | None:
+        """:meth:`recv` once a datagram was dropped: the next frame within what is left of
+        ``timeout`` (counted from here: a dropped datagram took a moment)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            msg = self._receive_step(left)
+            if msg is not _DROPPED:
+                return msg  # type: ignore[return-value]  # a frame or None
+            if left == 0.0:
+                return None
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        msg = self._receive_step(timeout)
+        return (None if msg is _DROPPED else msg), False  # type: ignore[return-value]
+
+    def _receive_step(self, timeout: float | None) -> object:
+        """One datagram within ``timeout`` (s; None: wait): its frame, None when none came,
+        :data:`_DROPPED` for the bus's own frame or a CAN FD frame."""
+        sock = self._receive_socket
+        if timeout != self._socket_wait:  # the socket waits in recvmsg (poll, then receive)
+            sock.settimeout(None if timeout is None else max(timeout, 0.0))
+            self._socket_wait = timeout
+        try:
+            data, ancillary, _flags, sender = sock.recvmsg(*self._receive_sizes)
+        except (TimeoutError, BlockingIOError):
+            return None
+        except OSError as err:
+            raise can.CanOperationError(
+                f"failed to receive on {self.endpoint.channel}: {err}") from err
+        if len(ancillary) != 1:
+            raise can.CanOperationError(
+                "Only requested a single extra field but got a different amount")
+        level, kind, stamp = ancillary[0]
+        if level != socket.SOL_SOCKET or kind != SO_TIMESTAMPNS:
+            raise can.CanOperationError("received control message type that was not requested")
+        seconds, nanoseconds = _TIMESPEC(stamp)
+        if nanoseconds >= 1e9:
+            raise can.CanOperationError(
+                f"Timestamp nanoseconds field was out of range: {nanoseconds} not less than 1e9")
+        if sender[:2] == self._own_address:
+            return _DROPPED  # our own frame looped back (where no socket filter dropped it)
+        try:
+            msg = unpack_frame(data, seconds + nanoseconds * 1.0e-9)
         except Exception as err:  # noqa: BLE001 - a foreign datagram on the group
             raise UndecodableFrame(
                 f"could not unpack received message: {len(data)} bytes from "
                 f"{sender[0]}:{sender[1]} ({type(err).__name__}: {err})") from err
         if msg.is_fd:
-            return None, False
-        return msg, False
+            return _DROPPED
+        return msg
 
 
 __all__ = ["DEFAULT_PORT", "Endpoint", "LOOPBACK", "UdpCanBus", "UdpFrame", "UndecodableFrame",
-           "derive_channel", "open_udp_bus", "parse_channel", "unpack_frame", "wire_time_of"]
+           "WIRE_TIME_PLAUSIBLE", "derive_channel", "drop_own_frames", "open_udp_bus",
+           "own_frames_filter", "pack_frame", "parse_channel", "unpack_frame", "wire_time_of"]
 
 
 def open_udp_bus(channel: str) -> can.BusABC:

@@ -13,7 +13,7 @@ from collections import deque
 
 import can
 
-from ssi_bridge.base.timebase import frame_wire_time, wire_now
+from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.wire import frame_bits
 
 SYNC_COB_ID = 0x080
@@ -21,6 +21,10 @@ SYNC_COB_ID = 0x080
 
 class BusLoad:
     """Frames (timestamp, wire seconds, is SYNC) of the last ``window`` seconds.
+
+    The receive and cycle threads add, the diagnostics read: a deque's appends and pops are
+    thread-safe and only :meth:`figures` pops (the oldest, one reader at a time), so adding
+    a frame takes no lock.
 
     :param bitrate: the bus's bit rate (bit/s)
     :param window: seconds of frames the load is computed over
@@ -30,7 +34,7 @@ class BusLoad:
         self.bitrate = bitrate
         self.window = window
         self._frames: deque[tuple[float, float, bool]] = deque()
-        self._lock = threading.Lock()
+        self._read_lock = threading.Lock()
 
     def add(self, msg: can.Message) -> None:
         """Account one frame (its timestamp, or now when it has none).
@@ -39,10 +43,11 @@ class BusLoad:
         """
         if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
             return
-        bits = frame_bits(msg.arbitration_id, msg.data, msg.is_remote_frame, msg.dlc)
-        with self._lock:
-            self._frames.append((frame_wire_time(msg) or wire_now(), bits / self.bitrate,
-                                 msg.arbitration_id == SYNC_COB_ID))
+        can_id = msg.arbitration_id
+        bits = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
+        # its wire time (base/timebase.frame_wire_time, inline: every frame passes here)
+        self._frames.append((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
+                             bits / self.bitrate, can_id == SYNC_COB_ID))
 
     def figures(self, now: float | None = None) -> dict[str, str]:
         """load %, frames and wire time per cycle over the window ending ``now``.
@@ -53,7 +58,7 @@ class BusLoad:
         (memory grows for as long as the step was).
         """
         now = wire_now() if now is None else now
-        with self._lock:
+        with self._read_lock:
             frames = self._frames
             while frames and not now - self.window <= frames[0][0] <= now + self.window:
                 frames.popleft()

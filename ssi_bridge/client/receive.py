@@ -25,9 +25,10 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.base.canopen_compat import OwnListenerNetwork, pdo_handler, subscribers
+from ssi_bridge.base.canopen_compat import (
+    OwnListenerNetwork, dispatch, pdo_handler, subscribers,
+)
 from ssi_bridge.base.rx_guard import GuardedListener
-from ssi_bridge.base.timebase import frame_wire_time
 from ssi_bridge.client.error_frames import ErrorFrameWatch
 from ssi_bridge.client.foreign import ForeignTraffic
 from ssi_bridge.protocol.dictionary import tpdo_cob_base
@@ -96,24 +97,46 @@ class FrameListener(GuardedListener):
             setattr(counters, kind, getattr(counters, kind) + 1)
 
     def on_message_received(self, msg: can.Message) -> None:
-        """Count ``msg`` (error frames per class too), then let canopen dispatch it."""
+        """Count ``msg`` (error frames per class too), then dispatch it as
+        :class:`~ssi_bridge.base.rx_guard.GuardedListener` does: its route and each
+        subscriber on its own, with its wire time (one pass: every frame of the bus
+        comes here)."""
         if not self.scheduling:
             self._schedule_this_thread()
         counters = self._counters
         counters.frames += 1
+        can_id = msg.arbitration_id
         if msg.is_error_frame:
             counters.can_errors += 1
-            self.error_frames.observe(msg.arbitration_id, msg.data)
+            self.error_frames.observe(can_id, msg.data)
         elif self.error_frames.bus_off:
-            self.error_frames.heard(msg.arbitration_id)
+            self.error_frames.heard(can_id)
         if self._load is not None:
             self._load.add(msg)
-        if msg.arbitration_id in self.foreign.ids and not (
-                msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id):
+        if msg.is_error_frame or msg.is_remote_frame:
+            return  # no service of the master's is a remote or error frame
+        data = msg.data
+        # base/timebase.frame_wire_time, inline
+        wire_t = getattr(msg, "wire_time", 0.0) or msg.timestamp
+        if can_id in self.foreign.ids and not msg.is_extended_id:
             # the master hears none of its own frames: another node's SYNC, NMT command, or
             # SDO request to one of its stations
-            self.foreign.observe(msg.arbitration_id, msg.data, frame_wire_time(msg))
-        GuardedListener.on_message_received(self, msg)
+            self.foreign.observe(can_id, data, wire_t)
+        if not self._plain_time:  # a subclass's handling time: the guarded listener's way
+            GuardedListener.on_message_received(self, msg)
+            return
+        rule = self.rules.get(can_id)
+        if rule is not None and len(data) != rule.length:
+            self.malformed(can_id, data, rule.problem(len(data)) or "")
+            return
+        network = self.network
+        route = self._routes.get(can_id)
+        if route is not None:
+            try:
+                route(can_id, data, wire_t)
+            except Exception as err:  # noqa: BLE001 - as dispatch: counted, receiving goes on
+                self._raised(route, can_id, data, err)
+        dispatch(network, can_id, data, wire_t, self._raised, subscribers(network, can_id))
 
 
 #: ``on_malformed(can_id, length, expected)``: a TPDO whose length is not its mapping's

@@ -153,6 +153,17 @@ class SlotTable:
         #: the cycle's frame log: every SYNC and TPDO with its wire time, or None
         self.sink: FrameSink | None = None
 
+    @property
+    def cond(self) -> threading.Condition:
+        """The condition guarding the table (the gate's, shared by a master's stations)."""
+        return self._cond
+
+    @cond.setter
+    def cond(self, cond: threading.Condition) -> None:
+        self._cond = cond
+        # its lock, taken and released by its own (C) methods on the hot path
+        self._acquire, self._release = cond.acquire, cond.release
+
     def slot(self, slot: int) -> SlotState:
         """The state of ``slot`` (raises KeyError with the valid range)."""
         try:
@@ -215,22 +226,12 @@ class SlotTable:
         if at > self.sync_time and (self._foreign_since is None or at < self._foreign_since):
             self._foreign_since = at
 
-    def _foreign(self, timestamp: float) -> bool:
-        """True for a TPDO that followed another producer's SYNC (counted, not taken)."""
-        since = self._foreign_since
-        if since is not None and timestamp > since:
-            self.foreign_answers += 1
-            if self.counters is not None:
-                self.counters.foreign_sync_answers += 1
-            return True
-        return False
-
-    def _late(self, timestamp: float) -> bool:
-        """True for a frame that was on the wire before the current SYNC (a late answer)."""
-        if 0.0 < timestamp < self.sync_time:
-            self.late_frames += 1
-            return True
-        return False
+    def _count_foreign(self) -> None:
+        """A TPDO that followed another producer's SYNC (after ``_foreign_since``): counted,
+        not taken."""
+        self.foreign_answers += 1
+        if self.counters is not None:
+            self.counters.foreign_sync_answers += 1
 
     def on_image(self, slot: int, data: bytes | bytearray, timestamp: float = 0.0) -> SlotState:
         """Store a received process input image (wire time ``timestamp``); return the slot.
@@ -243,14 +244,18 @@ class SlotTable:
         :returns: the slot's state after storing it
         """
         job: Callable[[], None] | None = None
-        with self.cond:
+        self._acquire()  # the lock of :attr:`cond` (its C methods: every TPDO comes here)
+        try:
             st = self._slots[slot]
             if self.sink is not None:
                 self.sink.image(slot, timestamp, data, st.image_count + 1)
-            if self._foreign(timestamp):
+            since = self._foreign_since
+            if since is not None and timestamp > since:  # _foreign, inline
+                self._count_foreign()
                 return st
             completed = False
-            if self._late(timestamp):
+            if 0.0 < timestamp < self.sync_time:  # _late, inline
+                self.late_frames += 1
                 st.image_seq = max(st.image_seq, self.sync_seq - 1)
             elif st.image_seq != self.sync_seq:
                 st.image_seq = self.sync_seq
@@ -262,6 +267,8 @@ class SlotTable:
             job = self._completes(completed)
             if job is _WAKE or self._input_waiters:
                 self.cond.notify_all()
+        finally:
+            self._release()
         if job is not None and job is not _WAKE:
             self._hand_off(job)
         return st
@@ -279,13 +286,18 @@ class SlotTable:
         else:
             values = POSITION_PAIR.unpack(bytes(data).ljust(POSITION_PAIR.size, b"\0"))
         job: Callable[[], None] | None = None
-        with self.cond:
+        self._acquire()
+        try:
             if self.sink is not None:
                 for slot, value in zip(slots, values):
                     self.sink.position(slot, timestamp, value)
-            if self._foreign(timestamp):
+            since = self._foreign_since
+            if since is not None and timestamp > since:  # _foreign, inline
+                self._count_foreign()
                 return
-            late = self._late(timestamp)
+            late = 0.0 < timestamp < self.sync_time  # _late, inline
+            if late:
+                self.late_frames += 1
             seq = self.sync_seq
             completed = False
             for slot, value in zip(slots, values):
@@ -301,6 +313,8 @@ class SlotTable:
             job = self._completes(completed)
             if job is _WAKE:
                 self.cond.notify_all()
+        finally:
+            self._release()
         if job is not None and job is not _WAKE:
             self._hand_off(job)
 

@@ -17,7 +17,6 @@ step), so a register access never pushes the cycle's own frames past the next SY
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Iterable, Sequence
 
@@ -28,8 +27,6 @@ SDO_RESERVE_FRAMES = 3
 #: bit rates of the rate table (bit/s)
 TABLE_BITRATES = (125_000, 250_000, 500_000, 1_000_000)
 _CRC15_POLY = 0x4599
-#: frame contents whose length :func:`frame_bits` remembers
-FRAME_BITS_CACHE = 256
 
 
 def _bits(value: int, width: int) -> list[int]:
@@ -76,23 +73,8 @@ def _crc15_of_int(value: int, width: int) -> int:
     return crc
 
 
-#: the CRC-15 of each byte value, for the byte-wise step of :func:`_fast_crc`
+#: the CRC-15 of each byte value, for the byte-wise step of :func:`frame_bits`
 _CRC_TABLE = [_crc15_of_int(byte, 8) for byte in range(256)]
-
-
-@functools.lru_cache(maxsize=4096)
-def _head_crc(head: int) -> int:
-    """:func:`_crc15_of_int` of the 19 header bits (a COB-ID's few heads repeat)."""
-    return _crc15_of_int(head, 19)
-
-
-def _fast_crc(head: int, payload: bytes) -> int:
-    """CRC-15 of the 19 header bits then the payload bytes (byte-wise table, same result)."""
-    crc = _head_crc(head)
-    table = _CRC_TABLE
-    for byte in payload:
-        crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) & 0xFF) ^ byte]
-    return crc
 
 
 def _step(last: int, run: int, bit: int) -> tuple[int, int, int]:
@@ -103,70 +85,77 @@ def _step(last: int, run: int, bit: int) -> tuple[int, int, int]:
     return 0, bit, run
 
 
-def _stuff_table() -> dict[tuple[int, int], list[tuple[int, int, int]]]:
-    """Per stuffing state (last level, run) and byte: stuff bits and the state after it."""
-    table = {}
-    for last in (-1, 0, 1):
-        for run in range(0, 5):
-            row = []
-            for byte in range(256):
-                n, lv, rn = 0, last, run
-                for i in range(7, -1, -1):
-                    k, lv, rn = _step(lv, rn, (byte >> i) & 1)
-                    n += k
-                row.append((n, lv, rn))
-            table[(last, run)] = row
+#: the stuffing states (last level, run length; -1: no bit yet) and their numbers
+_STATES = [(last, run) for last in (-1, 0, 1) for run in range(5)]
+_STATE_NO = {state: i for i, state in enumerate(_STATES)}
+_START = _STATE_NO[(-1, 0)]
+
+
+def _stuff_through(state: int, value: int, width: int) -> tuple[int, int]:
+    """Stuff bits inserted into the ``width`` bits of ``value`` (MSB first) sent from stuffing
+    state number ``state``, and the state number after them."""
+    count, (last, run) = 0, _STATES[state]
+    for i in range(width - 1, -1, -1):
+        k, last, run = _step(last, run, (value >> i) & 1)
+        count += k
+    return count, _STATE_NO[(last, run)]
+
+
+def _step_table(width: int) -> list[int]:
+    """Per state number s and ``width``-bit value v, at ``s << width | v``: the stuff bits
+    they insert << 4 | the state number after them."""
+    table = []
+    for state in range(len(_STATES)):
+        for value in range(1 << width):
+            count, after = _stuff_through(state, value, width)
+            table.append(count << 4 | after)
     return table
 
 
-_STUFF = _stuff_table()
-#: the stuffing states (last level, run) as row numbers of :data:`_STUFF_ROWS`
-_STATES = {state: i for i, state in enumerate(_STUFF)}
-#: per state number and byte: (stuff bits, the state number after it)
-_STUFF_ROWS = [[(n, _STATES[(lv, rn)]) for n, lv, rn in row] for row in _STUFF.values()]
+#: a byte of the data field or the CRC's last 8 bits; the CRC's first 7 bits
+_BYTE_STEP, _SEVEN_STEP = _step_table(8), _step_table(7)
+#: per frame head (SOF, identifier, RTR, IDE, r0, DLC: 19 bits): its CRC-15, the stuff bits
+#: in it and the stuffing state after it (few COB-IDs, few lengths)
+_HEADS: dict[int, tuple[int, int, int]] = {}
 
 
-def _fast_stuff(value: int, width: int) -> int:
-    """:func:`stuff_count` of the ``width``-bit number ``value`` (MSB first), a byte at a time."""
-    count, last, run = 0, -1, 0
-    lead = width % 8
-    for i in range(lead - 1, -1, -1):
-        k, last, run = _step(last, run, (value >> (width - lead + i)) & 1)
-        count += k
-    state, rows = _STATES[(last, run)], _STUFF_ROWS
-    for shift in range(width - lead - 8, -1, -8):
-        k, state = rows[state][(value >> shift) & 0xFF]
-        count += k
-    return count
+def _head(head: int) -> tuple[int, int, int]:
+    known = _HEADS.get(head)
+    if known is None:
+        count, state = _stuff_through(_START, head, 19)
+        known = _HEADS[head] = (_crc15_of_int(head, 19), count, state)
+    return known
 
 
 def frame_bits(can_id: int, data: bytes | bytearray = b"", remote: bool = False,
                dlc: int | None = None) -> int:
     """Bits a CAN 2.0A base frame occupies on the wire, SOF to the end of IFS, stuffing included.
 
-    Remembered for the last :data:`FRAME_BITS_CACHE` frame contents: a received frame is
-    counted by the wire (its place in time) and by the bus load, and SYNC, heartbeats and
-    unchanged images repeat, and the count walks every bit in Python.
+    One pass over the data bytes: the CRC-15 and the stuffing state advance a byte at a time
+    (tables per byte), from the head's, which is computed once per COB-ID and length; equal
+    to :func:`reference_frame_bits`, which walks the bits.
 
     :param can_id: the 11-bit identifier
     :param data: the data bytes
     :param remote: a remote frame (no data field)
     :param dlc: the DLC of a remote frame (default: ``len(data)``)
+    :raises ValueError: ``can_id`` is no 11-bit identifier
     """
-    payload = b"" if remote else bytes(data)
-    return _frame_bits(can_id, payload, remote, len(payload) if dlc is None else dlc)
-
-
-@functools.lru_cache(maxsize=FRAME_BITS_CACHE)
-def _frame_bits(can_id: int, payload: bytes, remote: bool, n: int) -> int:
     if not 0 <= can_id <= 0x7FF:
         raise ValueError(f"identifier 0x{can_id:X} is not an 11-bit base identifier")
+    payload = b"" if remote else data if type(data) in (bytes, bytearray) else bytes(data)
+    n = len(payload) if dlc is None else dlc
     # SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4): 19 bits
-    head = (can_id << 7) | ((1 if remote else 0) << 6) | (n & 0xF)
-    crc = _fast_crc(head, payload)
-    width = 34 + 8 * len(payload)
-    value = (((head << 8 * len(payload)) | int.from_bytes(payload, "big")) << 15) | crc
-    return width + _fast_stuff(value, width) + TAIL_BITS
+    crc, count, state = _head((can_id << 7) | ((1 if remote else 0) << 6) | (n & 0xF))
+    table, steps = _CRC_TABLE, _BYTE_STEP
+    for byte in payload:
+        crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) & 0xFF) ^ byte]
+        step = steps[state << 8 | byte]
+        count += step >> 4
+        state = step & 15
+    step = _SEVEN_STEP[state << 7 | crc >> 8]
+    count += (step >> 4) + (steps[(step & 15) << 8 | (crc & 0xFF)] >> 4)
+    return 34 + 8 * len(payload) + count + TAIL_BITS
 
 
 def reference_frame_bits(can_id: int, data: bytes = b"", remote: bool = False) -> int:

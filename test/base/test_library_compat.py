@@ -40,6 +40,8 @@ def test_the_udp_multicast_internals_are_there():
     assert issubclass(can_compat.UdpMulticastBus, can.BusABC)
     assert isinstance(can_compat.SO_TIMESTAMPNS, int)
     assert callable(can_compat.unpack_message)
+    frame = can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False)
+    assert can_compat.unpack_message(can_compat.pack_message(frame)).equals(frame)
     assert hasattr(can_compat.GeneralPurposeUdpMulticastBus, "recv")
 
 
