@@ -249,8 +249,8 @@ class StationLog:
         return [Verdict(*answer) for answer in self.answers(slots, seq)]
 
     def answers(self, slots: Sequence[int], seq: int) -> list[Answer]:
-        """:meth:`verdicts` as plain tuples (:data:`Answer`), for the cycle on the receive
-        thread: no instance per slot."""
+        """:meth:`verdicts` of ``slots`` at the master's SYNC ``seq`` as plain tuples
+        (:data:`Answer`), for the cycle on the receive thread: no instance per slot."""
         t_k, answers = self._judged(slots, seq, vouch=True)
         return answers if t_k is not None else [_UNKNOWN] * len(slots)
 
