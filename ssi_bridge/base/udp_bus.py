@@ -245,7 +245,6 @@ class UdpCanBus(MulticastBus):
         self.channel_info = f"udp_multicast {endpoint.channel}"
         sockets = self.sockets
         self._receive_socket = sockets.receive_socket
-        #: the wait the receive socket is set to (its timeout: None waits for ever)
         # a blocking socket whose receive waits at most SO_RCVTIMEO (set per timeout asked
         # for): one recvmsg per frame, no poll before it
         self._receive_socket.settimeout(None)
