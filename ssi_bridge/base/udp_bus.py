@@ -40,7 +40,6 @@ import errno
 import hashlib
 import ipaddress
 import logging
-import ctypes
 import socket
 import struct
 import time
@@ -49,6 +48,7 @@ from dataclasses import dataclass
 import can
 
 from ssi_bridge.base.can_compat import SO_TIMESTAMPNS, MulticastBus, MulticastSockets
+from ssi_bridge.base.own_frames import drop_own_frames, own_frames_filter
 from ssi_bridge.base.udp_frames import (
     WIRE_TIME_PLAUSIBLE, UdpFrame, UndecodableFrame, pack_frame, unpack_frame, wire_time_of,
 )
@@ -66,12 +66,6 @@ IP_MULTICAST_ALL = 49
 #: loses no frame because a reader was late, so a starved process reads them late instead
 #: (the default 208 kB holds ~256 datagrams: 85 ms of a 1 kHz cycle with two slots)
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
-#: Linux: attach a classic BPF program to a socket (asm-generic/socket.h)
-SO_ATTACH_FILTER = 26
-#: classic BPF (linux/filter.h): loads relative to the network (IP) header, the opcodes of
-#: a 16- and a 32-bit absolute load, a jump if equal to a constant, a return of a constant
-_SKF_NET_OFF = -0x100000
-_LDH_ABS, _LD_ABS, _JEQ_K, _RET_K = 0x28, 0x20, 0x15, 0x06
 #: the receive timestamp's control message: struct timespec (python-can's layout)
 _TIMESPEC = struct.Struct("@ll").unpack
 #: what a receive step returns for a datagram it dropped (its own frame, a CAN FD frame)
@@ -165,38 +159,6 @@ def derive_channel(name: str, interface: str = LOOPBACK) -> str:
     return Endpoint(f"{_DERIVED_NET[0]}.{_DERIVED_NET[1]}.{x}.{y}", port, interface).channel
 
 
-def own_frames_filter(address: tuple[str, int]) -> list[tuple[int, int, int, int]]:
-    """A classic BPF program (code, jt, jf, k per instruction) that drops every datagram
-    from ``address`` (IPv4 address, UDP port) and accepts the others whole. A UDP socket's
-    filter sees the datagram from its UDP header on: the source port at offset 0."""
-    source = int.from_bytes(socket.inet_aton(address[0]), "big")
-    return [(_LDH_ABS, 0, 0, 0),  # A = the UDP source port
-            (_JEQ_K, 0, 3, address[1]),  # another port: accept
-            (_LD_ABS, 0, 0, (_SKF_NET_OFF + 12) & 0xFFFFFFFF),  # A = the IPv4 source
-            (_JEQ_K, 0, 1, source),  # another address: accept
-            (_RET_K, 0, 0, 0),  # this bus's own frame: dropped
-            (_RET_K, 0, 0, 0xFFFFFFFF)]  # accepted whole
-
-
-def drop_own_frames(sock: socket.socket, address: tuple[str, int]) -> bool:
-    """Have the kernel drop every datagram from ``address`` before ``sock`` queues it
-    (:func:`own_frames_filter` as a socket filter, ``SO_ATTACH_FILTER``).
-
-    :returns: True when the filter is attached; False where the system refuses it (the
-        receive path then drops those datagrams itself)
-    """
-    program = own_frames_filter(address)
-    code = ctypes.create_string_buffer(b"".join(struct.pack("@HBBI", *op) for op in program))
-    # struct sock_fprog: the instruction count and a pointer to them (the kernel copies them)
-    fprog = struct.pack("@HP", len(program), ctypes.addressof(code))
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER, fprog)
-    except OSError as err:
-        logger.debug("no socket filter for the own frames of %s: %s", address, err)
-        return False
-    return True
-
-
 class _GroupSockets(MulticastSockets):
     """python-can's multicast socket pair logic, joined and sent on one interface address."""
 
@@ -283,9 +245,13 @@ class UdpCanBus(MulticastBus):
         self.channel_info = f"udp_multicast {endpoint.channel}"
         sockets = self.sockets
         self._receive_socket = sockets.receive_socket
-        #: the wait the receive socket is set to (its timeout: None waits for ever)
-        self._socket_wait: float | None = self._receive_socket.gettimeout()
-        self._receive_sizes = (sockets.max_buffer, sockets.received_ancillary_buffer_size)
+        # a blocking socket whose receive waits at most SO_RCVTIMEO (set per timeout asked
+        # for): one recvmsg per frame, no poll before it
+        self._receive_socket.settimeout(None)
+        #: the wait SO_RCVTIMEO is set to (None: none, it waits for ever)
+        self._socket_wait: float | None = None
+        self._max_bytes = sockets.max_buffer
+        self._ancillary_bytes = sockets.received_ancillary_buffer_size
         self._own_address = sockets.own_address
         self._send_datagram = sockets.send_socket.sendto
         self._group_address = (endpoint.group, endpoint.port)
@@ -343,16 +309,29 @@ class UdpCanBus(MulticastBus):
         msg = self._receive_step(timeout)
         return (None if msg is _DROPPED else msg), False  # type: ignore[return-value]
 
+    def _set_wait(self, timeout: float | None) -> None:
+        """Have a receive wait at most ``timeout`` s (> 0; None: for ever): SO_RCVTIMEO."""
+        seconds, micros = 0, 0
+        if timeout is not None:
+            seconds = int(timeout)
+            micros = max(int((timeout - seconds) * 1e6), 0 if seconds else 1)  # 0 0: for ever
+        self._receive_socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO,
+                                        struct.pack("@ll", seconds, micros))
+        self._socket_wait = timeout
+
     def _receive_step(self, timeout: float | None) -> object:
         """One datagram within ``timeout`` (s; None: wait): its frame, None when none came,
         :data:`_DROPPED` for the bus's own frame or a CAN FD frame."""
         sock = self._receive_socket
-        if timeout != self._socket_wait:  # the socket waits in recvmsg (poll, then receive)
-            sock.settimeout(None if timeout is None else max(timeout, 0.0))
-            self._socket_wait = timeout
+        flags = 0
+        if timeout is not None and timeout <= 0.0:
+            flags = socket.MSG_DONTWAIT
+        elif timeout != self._socket_wait:
+            self._set_wait(timeout)
         try:
-            data, ancillary, _flags, sender = sock.recvmsg(*self._receive_sizes)
-        except (TimeoutError, BlockingIOError):
+            data, ancillary, _flags, sender = sock.recvmsg(self._max_bytes,
+                                                           self._ancillary_bytes, flags)
+        except BlockingIOError:  # nothing came within SO_RCVTIMEO (or waiting: MSG_DONTWAIT)
             return None
         except OSError as err:
             raise can.CanOperationError(
