@@ -3,9 +3,11 @@
 Every CAN frame on a udp_multicast group is one msgpack map of the ``can.Message`` fields
 (python-can's ``pack_message``/``unpack_message``). The master's receive thread handles every
 frame of the bus, so the frames it sees all the time (classic data, remote and error frames)
-take a short path here: :func:`unpack_frame` turns the datagram into one :class:`UdpFrame`
-straight from the unpacked map, with python-can's checks (``Message(check=True)``) spelled
-out for these frames; :func:`pack_frame` writes the map's bytes from per-frame parts. Whatever
+take a short path here: :func:`unpack_frame` turns the datagram into one :class:`UdpFrame`,
+read by position when it is laid out as a frame of the same COB-ID, kind and length seen
+before, else straight from the unpacked map, with python-can's checks
+(``Message(check=True)``) spelled out for these frames; :func:`pack_frame` writes the map's
+bytes from per-frame parts. Whatever
 else a datagram holds (a CAN FD frame, a field of another type, a map of other keys, no
 msgpack at all) goes through python-can's own functions, so the result, or the error, is
 always python-can's (``test/base/test_udp_frames.py`` compares both on random frames).
