@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ssi_bridge.base.gc_pacing import CollectorPacing
 from ssi_bridge.base.realtime import run_this_thread_at
 from ssi_bridge.protocol import wire
 
@@ -117,6 +118,11 @@ class LoopThread:
             self._wake.release()  # stopped: every later sleep ends at once too
 
 
+#: a cycle leaves time to spare for a garbage collection when at least this share of the
+#: period is left before the next step
+GC_SPARE = 0.5
+
+
 class CycleThread(LoopThread):
     """Call ``step()`` every ``period`` seconds on an absolute schedule until stopped.
 
@@ -124,6 +130,8 @@ class CycleThread(LoopThread):
     overruns further skips to the next slot boundary (the skipped slots are counted in
     ``missed``) instead of bursting to catch up: a burst of SYNCs helps no master. ``end``,
     if given, runs once on the thread after its last step (what a step left to the next one).
+    While it runs, Python's garbage collector runs on it between steps with time to spare
+    (:attr:`pacing`), not wherever an allocation happens to trigger it.
     """
 
     def __init__(self, period: float, step: Callable[[], None], name: str = "ssi_cycle",
@@ -141,8 +149,18 @@ class CycleThread(LoopThread):
         self.missed = 0
         #: when the next step is due (the clock's time), for the running step
         self.due = 0.0
+        #: Python's garbage collector, run here when a cycle leaves time to spare
+        #: (base/gc_pacing.py): never on the receive thread between a TPDO and publish()
+        self.pacing = CollectorPacing()
 
     def _run(self) -> None:
+        self.pacing.start()
+        try:
+            self._loop()
+        finally:
+            self.pacing.stop()
+
+    def _loop(self) -> None:
         deadline = self._clock()
         while not self._stop.is_set():
             self.due = deadline + self.period
@@ -153,6 +171,8 @@ class CycleThread(LoopThread):
             self.cycles += 1
             deadline += self.period
             now = self._clock()
+            if self.pacing.step(deadline - now >= GC_SPARE * self.period) >= 0:
+                now = self._clock()  # the collection took its time
             if now >= deadline:
                 late = now - deadline
                 if late < 0.5 * self.period:

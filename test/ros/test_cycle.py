@@ -215,3 +215,43 @@ def test_a_thread_the_cycle_starts_for_slow_work_goes_back_to_normal_scheduling(
         time.sleep(0.01)
     loop.stop()
     assert views == {"inherited": os.SCHED_FIFO, "after": os.SCHED_OTHER}
+
+
+def test_the_garbage_collector_runs_on_the_cycle_thread_with_time_to_spare():
+    """While a cycle thread runs, no other thread triggers a collection (the receive thread
+    allocates per frame); the cycle thread collects between steps, by CPython's thresholds;
+    automatic collection is back when it stops (base/gc_pacing.py)."""
+    import gc
+
+    was = gc.isenabled()
+    gc.enable()
+    collected_on: list[str] = []
+
+    def note(phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            collected_on.append(threading.current_thread().name)
+
+    def allocate_cycles() -> None:  # a step that leaves reference cycles behind
+        for _ in range(200):
+            a: list[object] = []
+            a.append(a)
+
+    loop = CycleThread(0.01, allocate_cycles, name="ssi_cycle_gc_test")
+    gc.callbacks.append(note)
+    try:
+        loop.start()
+        time.sleep(0.1)
+        assert not gc.isenabled()
+        for _ in range(5 * gc.get_threshold()[0]):  # this thread allocates: no collection here
+            a: list[object] = []
+            a.append(a)
+        time.sleep(0.3)
+        loop.stop()
+    finally:
+        gc.callbacks.remove(note)
+        enabled_after = gc.isenabled()
+        if not was:
+            gc.disable()
+    assert enabled_after
+    assert collected_on and set(collected_on) == {"ssi_cycle_gc_test"}, collected_on
+    assert sum(loop.pacing.collections) == len(collected_on)
