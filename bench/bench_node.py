@@ -13,7 +13,9 @@ floor publisher (an rclpy thread woken by another process's datagram, publishing
 In this order, each part's figures printed as it ends; for each case (1, then 8 encoders):
 
 1. the driver alone (``node_driver.py``, ``node_<N>enc_driver[_real]_*`` and
-   ``node_<N>enc_station_child_cpu_s_per_s``): medians of three runs in one sitting
+   ``node_<N>enc_station_child_cpu_s_per_s``): medians of three runs in one sitting; the
+   real-deployment node against the I/O floor (``node_iofloor.py``, the driver's bus I/O
+   alone: ``node_<N>enc_driver_real_*_vs_io_floor``, ``node_<N>enc_io_floor_*``)
 2. the first of those runs against the bare and the floor publisher (``node_report.py``):
    ``node_<N>enc_rate_hz`` (goal >= 0.99x bare), ``_jitter_p99_us``, ``_latency_p50_us`` /
    ``_p99_us`` (goal p99 <= 1.2x bare), ``_cpu_s_per_s`` (the node's process alone, not its
@@ -50,7 +52,7 @@ from pathlib import Path
 from benchlib import emit_record as emit
 from benchlib import save
 from node_cases import CASES, NODE_EXE, NODE_NS, PIN_CPU, case_rate, node_cmd
-from node_driver import DRIVER_RUNS, driver_run, report_driver
+from node_driver import DRIVER_RUNS, driver_run, report_driver, report_io_floor
 from node_liveview import measure_liveview, report_liveview
 from node_measure import measure
 from node_procs import burners, dds_env, domain_id
@@ -82,9 +84,10 @@ def run(records: list[dict]) -> None:
         for n in CASES:
             try:
                 runs = [driver_run(n, r, domain, env, work) for r in range(DRIVER_RUNS)]
-                report_driver(records, n, [(nd, b, f) for nd, b, f, _ in runs])
-                report_driver(records, n, [(r, b, f) for _, b, f, r in runs], "real")
-                node, bare, floor, _ = runs[0]
+                report_driver(records, n, [(nd, b, f) for nd, b, f, _, _ in runs])
+                report_driver(records, n, [(r, b, f) for _, b, f, r, _ in runs], "real")
+                report_io_floor(records, n, [(r, b, f, io) for _, b, f, r, io in runs])
+                node, bare, floor, _, _ = runs[0]
                 report(records, n, node, bare)
                 report_floor(records, n, node, bare, floor)
                 plain[n] = node
