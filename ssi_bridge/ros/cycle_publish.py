@@ -140,18 +140,16 @@ class CyclePublisher:
         """The receive thread: the armed cycle's last TPDO arrived; publish it now.
 
         An error is logged and the receive path goes on (it is no frame's fault); the cycle
-        thread then finishes nothing of this cycle."""
+        thread then finishes nothing of this cycle. A shutdown racing it (the context goes
+        first) ends it quietly: the context is asked only then, not each cycle (an rclpy
+        call with two locks, on the path to the next frame)."""
         node = self.node
-        if not node.context.ok():
-            return
         node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
         try:
             self._handed = self._publish(*self._armed)
-        except RCLError:
+        except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
             if node.context.ok():
                 logger.exception("publishing the cycle failed; continuing with the next one")
-        except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
-            logger.exception("publishing the cycle failed; continuing with the next one")
 
     # -- listen-only (observer thread) -----------------------------------------------------
     def on_observed(self, cycle: ObservedCycle) -> None:
