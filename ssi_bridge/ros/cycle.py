@@ -139,13 +139,10 @@ class CycleThread(LoopThread):
         #: cycles run and cycles skipped because a step overran its slot
         self.cycles = 0
         self.missed = 0
-        #: when the next step is due (the clock's time), for the running step
-        self.due = 0.0
 
     def _run(self) -> None:
         deadline = self._clock()
         while not self._stop.is_set():
-            self.due = deadline + self.period
             try:
                 self._step()
             except Exception:  # noqa: BLE001 - the loop must outlive one bad cycle
