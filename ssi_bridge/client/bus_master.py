@@ -173,6 +173,12 @@ class CanMaster:
         bus)."""
         return self.link.figures() if self.link is not None else {}
 
+    def foreign_sync_within(self, window: float) -> bool:
+        """Whether another producer's SYNC ended on the wire within the last ``window`` s
+        (wire time), cheaply: the diagnostics' change test asks it each cycle. Such a SYNC
+        takes the master's cycles (``SlotTable.on_foreign_sync``) and makes the bus WARN."""
+        return wire_now() - self._foreign_sync_at <= window
+
     def foreign_traffic(self, window: float) -> str:
         """SYNC / NMT / SDO request frames of other nodes seen within ``window`` s, in words
         ("" if none), for a WARN of the bus diagnostics."""

@@ -147,8 +147,6 @@ class CycleThread(LoopThread):
         #: cycles run and cycles skipped because a step overran its slot
         self.cycles = 0
         self.missed = 0
-        #: when the next step is due (the clock's time), for the running step
-        self.due = 0.0
         #: Python's garbage collector, run here when a cycle leaves time to spare
         #: (base/gc_pacing.py): never on the receive thread between a TPDO and publish()
         self.pacing = CollectorPacing()
@@ -163,7 +161,6 @@ class CycleThread(LoopThread):
     def _loop(self) -> None:
         deadline = self._clock()
         while not self._stop.is_set():
-            self.due = deadline + self.period
             try:
                 self._step()
             except Exception:  # noqa: BLE001 - the loop must outlive one bad cycle

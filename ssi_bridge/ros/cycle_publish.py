@@ -11,13 +11,12 @@ wait (``ros/cycle.cycle_waits``) is decided and published by the cycle thread at
 as before. Either way the cycle core decides with the same rules (``core/cycle.py``), and the
 next SYNC goes out only after the cycle was published. The rest of a cycle (the health of the
 SYNC before, ``~/events``, ``~/status``, recording, diagnostics on a level change) is done by
-the cycle thread once the cycle is published, when at least half a period is left before the
-next SYNC is due (a level change then reaches /diagnostics a period sooner, and the next
-cycle's frames find the cycle thread idle); otherwise right after its next SYNC, while that
-SYNC's TPDOs are on the wire, and before it hands that cycle to the receive thread. Either
-way each cycle's messages go out in order, and the time from one SYNC to the next holds only
-the wire and joint_states when it is short. The last cycle is finished when the cycle thread
-ends. Listen-only, the observer thread publishes each
+the cycle thread right after its next SYNC, while that SYNC's TPDOs are on the wire, and
+before it hands that cycle to the receive thread: each cycle's messages still go out in
+order, and the time from one SYNC to the next holds only the wire and joint_states. (Doing it
+at once, when half a period was left, brought a level change a period sooner but measured no
+cheaper, and at 8 joints dearer for the receive thread: docs/node.md, "The cycle thread and
+prompt diagnostics".) The last cycle is finished when the cycle thread ends. Listen-only, the observer thread publishes each
 observed cycle whole.
 """
 
@@ -33,7 +32,7 @@ from sensor_msgs.msg import JointState
 from ssi_bridge.client.cycle_feed import sync_number
 from ssi_bridge.client.listener import ObservedCycle
 from ssi_bridge.core.cycle import CycleResult
-from ssi_bridge.ros.cycle import CycleThread, cycle_waits
+from ssi_bridge.ros.cycle import cycle_waits
 from ssi_bridge.ros.messages import JointStates, status_msg
 from ssi_bridge.ros.rclpy_compat import RCLError
 
@@ -63,8 +62,7 @@ class CyclePublisher:
         self._armed = (0.0, 0)
         #: the cycle the receive thread published, for the cycle thread to finish
         self._handed: PublishedCycle | None = None
-        #: the cycle published last, finished before the next SYNC when there is time, else
-        #: after it went out
+        #: the cycle published last, finished after the next SYNC went out
         self._pending: PublishedCycle | None = None
         #: joint_states, one message filled each cycle (a cycle is finished before the next
         #: one is decided, so nothing holds the one before when it is filled again)
@@ -114,12 +112,6 @@ class CyclePublisher:
             self._pending = self._publish(*self._armed)
         else:
             self._pending, self._handed = self._handed, None
-        cycle = node.cycle
-        if isinstance(cycle, CycleThread) and cycle.due - time.monotonic() >= 0.5 * period:
-            # half a period to spare before the next SYNC: the rest of the cycle now, so its
-            # diagnostics and ~/status come a period sooner and the next cycle's frames find
-            # the cycle thread idle
-            self._finish_pending()
 
     def _finish_pending(self) -> None:
         """Finish the cycle published last (:meth:`_finish`); an error is logged, and the
@@ -143,18 +135,16 @@ class CyclePublisher:
         """The receive thread: the armed cycle's last TPDO arrived; publish it now.
 
         An error is logged and the receive path goes on (it is no frame's fault); the cycle
-        thread then finishes nothing of this cycle."""
+        thread then finishes nothing of this cycle. A shutdown racing it (the context goes
+        first) ends it quietly: the context is asked only then, not each cycle (an rclpy
+        call with two locks, on the path to the next frame)."""
         node = self.node
-        if not node.context.ok():
-            return
         node._cycle_times.append(time.monotonic())  # the achieved rate: an interval
         try:
             self._handed = self._publish(*self._armed)
-        except RCLError:
+        except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
             if node.context.ok():
                 logger.exception("publishing the cycle failed; continuing with the next one")
-        except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
-            logger.exception("publishing the cycle failed; continuing with the next one")
 
     # -- listen-only (observer thread) -----------------------------------------------------
     def on_observed(self, cycle: ObservedCycle) -> None:

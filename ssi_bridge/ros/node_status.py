@@ -202,8 +202,8 @@ class NodeDiagnostics:
         too (a failed check under noise would flip it every few cycles: that one waits for the
         periodic message). No check (a register read holds REG_RD_ADR) raises nothing, as a
         clean one: not a change, or every ~/read_register would publish the diagnostics
-        twice. Then each station's heartbeat, and the first client's with whether the bus has
-        a problem."""
+        twice. Then each station's heartbeat, the first client's with whether the bus has a
+        problem, and whether another producer's SYNC was seen lately."""
         levels: list[object] = []
         append = levels.append
         for joint in self._joints.values():
@@ -213,6 +213,11 @@ class NodeDiagnostics:
         for client in self._bus.station_clients.values():
             append(client.gateway_alive)
         append(int(self._client().gateway_alive) * 2 + self._has_bus_problem())
+        # another producer's SYNC makes the bus WARN (BusFindings) and takes the cycles: at
+        # once, over the window the bus findings use (no message per foreign SYNC)
+        master = self._bus.master
+        append(master is not None and master.foreign_sync_within(
+            2 * self._view.settings.diagnostics_period))
         return levels
 
     def publish_on_change(self) -> None:

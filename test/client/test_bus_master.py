@@ -122,11 +122,14 @@ def test_no_starved_turn_once_another_producer_synced(rig, request) -> None:
     master, clients, sniffer = rig
     clients[3].heartbeat_timeout = 30.0  # station 3 stays alive for this test: not the reason
     request.node.stations[1].stop()  # station 3 answers nothing from now on
+    assert not master.foreign_sync_within(60.0), "no other producer yet"
     clients[1].sync()
     sniffer.send(can.Message(arbitration_id=0x080, is_extended_id=False, data=b""))
     start = time.monotonic()
     assert not master.wait_cycle(0.2, 3.0)
     waited = time.monotonic() - start
+    assert master.foreign_sync_within(60.0), "the diagnostics' change test sees it"
+    assert not master.foreign_sync_within(0.0)
     assert clients[3].gateway_alive
     assert waited < 1.5, f"waited {waited:.2f} s: a starved station's turn after a foreign SYNC"
     # without the foreign SYNC the silent (but alive) station gets its turn, as before
