@@ -247,4 +247,6 @@ def test_the_garbage_collector_runs_on_the_cycle_thread_with_time_to_spare():
             gc.disable()
     assert enabled_after
     assert collected_on and set(collected_on) == {"ssi_cycle_gc_test"}, collected_on
-    assert sum(loop.pacing.collections) == len(collected_on)
+    # each of the pacing's collections was seen (the thread, ending, may also have collected
+    # once after the collector came back on)
+    assert 1 <= sum(loop.pacing.collections) <= len(collected_on)
