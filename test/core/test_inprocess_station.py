@@ -36,9 +36,16 @@ def _times(msgs):
 def test_shipped_two_encoder_station(inprocess):
     with open(REPO / "config" / "ssi_bridge.yaml") as f:
         b = inprocess(load_params_file(f))
-    msgs = _collect(b, 2.0)
-    assert all(m.name == ["shoulder", "carriage"] for m in msgs)
-    assert all(m.header.frame_id == "station" for m in msgs)
+    collected = _collect(b, 2.0)
+    assert all(m.header.frame_id == "station" for m in collected)
+    # a joint the cycle sets aside is left out of that cycle's message (docs/node.md "The
+    # cycle"): a loaded machine starves the in-process station now and then, so a message
+    # may carry one of the two joints, in the configured order, never another or none
+    both = ["shoulder", "carriage"]
+    assert all(m.name in (both, ["shoulder"], ["carriage"]) for m in collected), \
+        {tuple(m.name) for m in collected}
+    msgs = [m for m in collected if m.name == both]
+    assert len(msgs) >= 0.8 * len(collected), f"{len(msgs)} of {len(collected)} carry both"
     t = _times(msgs)
     shoulder = np.array([m.position[0] for m in msgs])
     carriage = np.array([m.position[1] for m in msgs])
