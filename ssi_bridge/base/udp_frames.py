@@ -111,6 +111,13 @@ def _classic(d: dict[str, object]) -> UdpFrame | None:
         data = bytearray(payload)
     else:
         return None
+    return _classic_frame(ts, aid, ext, rtr, err, channel, dlc, data)
+
+
+def _classic_frame(ts: float, aid: int, ext: bool, rtr: bool, err: bool, channel: object,
+                   dlc: int, data: bytearray) -> UdpFrame:
+    """A received classic (not FD) frame of these fields, built without ``Message.__init__``'s
+    checks (the caller made them)."""
     frame = _new_message(UdpFrame)
     frame.timestamp = ts
     frame.arbitration_id = aid
@@ -256,20 +263,8 @@ def _laid_out(data: bytes) -> UdpFrame | None:
     ts = _F64_AT(data, _TS_AT)[0]
     if not 0.0 <= ts < _INF:
         return None
-    frame = _new_message(UdpFrame)
-    frame.timestamp = ts
-    frame.arbitration_id = aid
-    frame.is_extended_id = ext
-    frame.is_remote_frame = rtr
-    frame.is_error_frame = err
-    frame.channel = None
-    frame.dlc = dlc
-    frame.data = bytearray() if rtr else bytearray(data[end:end + n])
-    frame.is_fd = False
-    frame.is_rx = True
-    frame.bitrate_switch = False
-    frame.error_state_indicator = False
-    return frame
+    return _classic_frame(ts, aid, ext, rtr, err, None, dlc,
+                          bytearray() if rtr else bytearray(data[end:end + n]))
 
 
 def _learn(data: bytes, frame: UdpFrame, n: int) -> None:
