@@ -76,3 +76,36 @@ def test_a_wall_clock_step_back_empties_the_window_instead_of_growing_it() -> No
     figures = load.figures(now=stepped + 1e-3)
     assert len(load._frames) == 1 and figures["frames_per_cycle"] == "1.00"
     assert float(figures["bus_load_percent"]) < 0.1  # one SYNC frame in 1 s at 500 kbit/s
+
+
+def test_the_figures_are_those_of_the_frames_in_the_window_however_many_came_before() -> None:
+    """The window's wire time and SYNCs come from running totals (client/load.py): after
+    3 s of frames, SYNC and TPDOs of varying content, the last second's figures equal the
+    sum over exactly that second's frames (frame length by protocol/wire.frame_bits)."""
+    import can
+
+    from ssi_bridge.client.load import BusLoad
+
+    load = BusLoad(1_000_000, window=1.0)
+    t0 = 1.7e9
+    sent: list[tuple[float, int, bool]] = []
+    for cycle in range(3000):
+        t = t0 + cycle * 1e-3
+        frames = [can.Message(arbitration_id=0x80, is_extended_id=False, timestamp=t, data=b"")]
+        frames += [can.Message(arbitration_id=0x180 + 5, is_extended_id=False,
+                               timestamp=t + 1e-4 * (k + 1),
+                               data=(cycle * 7919 + k).to_bytes(4, "little") + b"\0\0\0\0")
+                   for k in range(cycle % 3)]
+        for m in frames:
+            load.add(m)
+            sent.append((m.timestamp, frame_bits(m.arbitration_id, m.data, False),
+                         m.arbitration_id == 0x80))
+    now = sent[-1][0]
+    window = [(b, s) for t, b, s in sent if now - 1.0 <= t <= now + 1.0]
+    busy = sum(b for b, _ in window) / 1_000_000
+    syncs = sum(1 for _, s in window if s)
+    figures = load.figures(now=now)
+    assert figures["bus_load_percent"] == f"{100.0 * busy:.1f}"
+    assert figures["frames_per_cycle"] == f"{len(window) / syncs:.2f}"
+    assert figures["wire_ms_per_cycle"] == f"{1e3 * busy / syncs:.3f}"
+    assert len(load._frames) == len(window)  # nothing older kept
