@@ -38,6 +38,11 @@ from ssi_bridge.ros.rclpy_compat import RCLError
 
 logger = logging.getLogger(__name__)
 
+#: ``~/status``'s readers are counted (an rclpy call) once per this many seconds of cycles,
+#: not each cycle: a reader DDS has matched gets its first ``~/status`` at most this long
+#: after (plus a cycle), and a cycle after its last reader left may still build one
+STATUS_READERS_EVERY_S = 0.05
+
 
 @dataclass(slots=True)
 class PublishedCycle:
@@ -67,12 +72,25 @@ class CyclePublisher:
         #: joint_states, one message filled each cycle (a cycle is finished before the next
         #: one is decided, so nothing holds the one before when it is filled again)
         self._joint_states = JointStates()
+        #: ~/status's publisher and its reader count, counted again when ``_readers_due``
+        #: cycles have run down (:data:`STATUS_READERS_EVERY_S`)
+        self._status_pub: Any = None
+        self._status_readers = 0
+        self._readers_due = 0
+        #: the rclpy context has been shut down (its ``on_shutdown``; asked each cycle
+        #: instead of ``context.ok()``, which takes two locks)
+        self._shut_down = False
+        node.context.on_shutdown(self._on_shutdown)
+
+    def _on_shutdown(self) -> None:
+        """The node's rclpy context was shut down (its ``on_shutdown`` callback)."""
+        self._shut_down = True
 
     # -- the master's cycle (cycle thread, receive thread) ---------------------------------
     def on_cycle(self) -> None:
         """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
         node = self.node
-        if not node.context.ok():
+        if self._shut_down:
             return
         try:
             self._cycle()
@@ -150,7 +168,7 @@ class CyclePublisher:
     def on_observed(self, cycle: ObservedCycle) -> None:
         """Publish the cycle of a SYNC another master (or the log) sent."""
         node = self.node
-        if not node.context.ok():
+        if self._shut_down:
             return
         node._cycle_times.append(time.monotonic())  # the achieved rate is the observed one
         try:
@@ -217,12 +235,22 @@ class CyclePublisher:
                                             ok, text)
         # ~/status costs as much as the rest of the cycle: build it only for a listener
         status_pub = node.status_pub
-        if (capturing or status_pub.get_subscription_count() > 0
-                or node.liveview.wants(status_pub)):
+        if capturing or self._status_read(status_pub) or node.liveview.wants(status_pub):
             status = status_msg(result, js.header)
             if status.channels and node.publish_safe(status_pub, status):
                 recorder.record(status_pub.topic_name, status, stamp_ns)
         node._publish_on_change()
+
+    def _status_read(self, status_pub: Any) -> bool:
+        """Whether ``~/status`` has a DDS reader, as counted at most
+        :data:`STATUS_READERS_EVERY_S` ago (at once for a publisher made anew)."""
+        self._readers_due -= 1
+        if self._readers_due <= 0 or status_pub is not self._status_pub:
+            self._status_pub = status_pub
+            self._readers_due = max(1, round(self.node.settings.publish_rate
+                                             * STATUS_READERS_EVERY_S))
+            self._status_readers = status_pub.get_subscription_count()
+        return self._status_readers > 0
 
 
 __all__ = ["CyclePublisher", "PublishedCycle"]
