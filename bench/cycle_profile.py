@@ -227,6 +227,9 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
     if "--span" in argv:  # the node's span probe (ros/span_probe.py), read at its start
         span_log.unlink(missing_ok=True)
         os.environ["SSI_BRIDGE_SPAN_LOG"] = str(span_log)
+    for a in argv:  # --switch=S: Python's switch interval (s) for this run
+        if a.startswith("--switch="):
+            sys.setswitchinterval(float(a.split("=", 1)[1]))
     rclpy.init(args=None)
     node = SsiBridgeNode(parameter_overrides=params)
     blocks: list[tuple[int, int]] = []
