@@ -11,9 +11,11 @@ CAP_SYS_NICE, no rtprio limit) everything runs normally and the caller says so o
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import threading
+from collections.abc import Iterator
 
 #: prctl(2) option: name the calling thread (shown by top -H, ps -L, /proc/<pid>/task/*/comm)
 PR_SET_NAME = 15
@@ -90,6 +92,30 @@ def normal_this_thread() -> None:
     inherits its policy, which a slow clean-up job must not keep."""
     if os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@contextlib.contextmanager
+def fifo_meanwhile(priority: int) -> Iterator[bool]:
+    """The calling thread on SCHED_FIFO ``priority`` for the ``with`` block, then back on the
+    scheduling it had (yields whether it was raised: not for ``priority`` <= 0, a thread at
+    that FIFO priority or higher already, or without the right to it).
+
+    For a normally scheduled thread's short burst of work that a real-time thread may wait
+    for (it holds Python's lock meanwhile): a busy machine does not preempt it midway.
+    """
+    if priority <= 0:
+        yield False
+        return
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    if policy in (os.SCHED_FIFO, os.SCHED_RR) and param.sched_priority >= priority:
+        yield False
+        return
+    raised = fifo_this_thread(priority)
+    try:
+        yield raised
+    finally:
+        if raised:
+            os.sched_setscheduler(0, policy, param)
 
 
 def scheduling_of_this_thread() -> str:

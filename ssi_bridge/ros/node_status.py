@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from ssi_bridge.base.realtime import fifo_meanwhile
 from ssi_bridge.client.bus_master import CanMaster
 from ssi_bridge.client.error_frames import error_frame_keys
 from ssi_bridge.client.listener import ListenOnlyClient
@@ -50,6 +51,10 @@ BUS_WARN_COUNTS = ("undecodable_frames", "malformed_pdos", "malformed_frames", "
 BUS_ERROR_COUNT = "supervisor_errors"
 #: the bus status's figures: counter name -> value (a count, a figure, a text)
 Figures = dict[str, object]
+#: the periodic diagnostics sleep this long (s) between the parts they build, so that the
+#: receive thread, when it waits for Python's lock meanwhile, takes it then instead of after
+#: the switch interval (5 ms); long enough for a waiting thread to wake and take it
+YIELD_S = 20e-6
 
 
 class CycleRate:
@@ -234,7 +239,9 @@ class NodeDiagnostics:
             raise RuntimeError("diagnostics of a bus side never opened")
         return client
 
-    def _statuses(self) -> list[DiagnosticStatus]:
+    def _statuses(self, yielding: bool = False) -> list[DiagnosticStatus]:
+        """Every status of the message; ``yielding``: sleep :data:`YIELD_S` before each
+        joint's and the bus's (the periodic message, on the executor thread)."""
         s = self._view.settings
         client = self._client()
         fqn = self._node.get_fully_qualified_name()
@@ -247,6 +254,8 @@ class NodeDiagnostics:
                      "velocity_window": str(s.velocity_window),
                      "stale_limit_cycles": str(s.stale_cycles),
                      "frame_id": s.frame_id}
+            if yielding:
+                time.sleep(YIELD_S)
             st = channel_status(status_name(fqn, joint.name), hw, joint.counters, joint.health,
                                 joint.position, extra)
             if joint.para1_note:
@@ -257,6 +266,8 @@ class NodeDiagnostics:
             out.append(st)
         if len(self._bus.station_clients) > 1:
             return out + self._station_statuses()
+        if yielding:
+            time.sleep(YIELD_S)
         counters: Figures = dataclasses.asdict(client.counters)
         counters.update(self._recorder.counters())
         counters["late_frames"] = client.table.late_frames
@@ -358,13 +369,18 @@ class NodeDiagnostics:
             return
         master = self._bus.master
         lost = master is not None and master.interface_problem()
-        if not self._view.settings.listen_only and not lost and self._node.context.ok():
-            self._refresh_cams()
-        self.publish()
+        # at just below the cycle's priority meanwhile: the receive thread waits for Python's
+        # lock while this thread holds it, and a busy machine must not preempt it then
+        priority = self._view.settings.cycle_priority
+        with fifo_meanwhile(max(priority - 1, 1) if priority > 0 else 0):
+            if not self._view.settings.listen_only and not lost and self._node.context.ok():
+                self._refresh_cams()
+            self.publish(yielding=True)
 
-    def publish(self) -> None:
+    def publish(self, yielding: bool = False) -> None:
         """Publish one DiagnosticArray with a status per joint and one for the bus (nothing
-        once the context is shut down, or before use_sim_time's first /clock)."""
+        once the context is shut down, or before use_sim_time's first /clock); ``yielding``:
+        let a waiting thread have Python's lock between the parts (:data:`YIELD_S`)."""
         if not self._node.context.ok():
             return
         clock = self._node.get_clock()
@@ -373,7 +389,9 @@ class NodeDiagnostics:
             return  # use_sim_time before the first /clock: no time to stamp with
         msg = DiagnosticArray()
         msg.header.stamp = now.to_msg()
-        msg.status = self._statuses()
+        msg.status = self._statuses(yielding)
+        if yielding:
+            time.sleep(YIELD_S)
         if not self._publish(msg):
             return
         self._recorder.record("/diagnostics", msg, clock.now().nanoseconds)

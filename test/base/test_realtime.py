@@ -79,3 +79,57 @@ def test_fifo_permitted_leaves_every_thread_as_it_was():
     before = thread_policies(os.getpid())
     fifo_permitted(7)
     assert thread_policies(os.getpid()) == before  # the probe thread has ended, nothing raised
+
+
+def _in_a_thread(job):
+    """``job()``'s result, run in a new thread at normal scheduling (the caller's thread
+    is left as it is)."""
+    import threading
+
+    from ssi_bridge.base.realtime import normal_this_thread
+
+    out = []
+
+    def run() -> None:
+        normal_this_thread()
+        out.append(job())
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join(5.0)
+    return out[0]
+
+
+def test_fifo_meanwhile_raises_the_thread_for_the_block_and_puts_it_back():
+    from ssi_bridge.base.realtime import fifo_meanwhile, fifo_this_thread
+
+    def policy() -> tuple[int, int]:
+        return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+
+    def raised_then_back() -> tuple:
+        with fifo_meanwhile(4) as raised:
+            inside = policy()
+        return raised, inside, policy()
+
+    permitted = fifo_permitted(4)
+    raised, inside, after = _in_a_thread(raised_then_back)
+    assert raised == permitted
+    assert inside == ((os.SCHED_FIFO, 4) if permitted else (os.SCHED_OTHER, 0))
+    assert after == (os.SCHED_OTHER, 0)
+
+    def zero() -> tuple:
+        with fifo_meanwhile(0) as raised:
+            return raised, policy()
+
+    assert _in_a_thread(zero) == (False, (os.SCHED_OTHER, 0))
+    if not permitted:
+        return
+
+    def higher_already() -> tuple:
+        fifo_this_thread(6)
+        with fifo_meanwhile(4) as raised:
+            inside = policy()
+        return raised, inside, policy()
+
+    # a thread at a higher FIFO priority already is neither lowered nor changed after
+    assert _in_a_thread(higher_already) == (False, (os.SCHED_FIFO, 6), (os.SCHED_FIFO, 6))
