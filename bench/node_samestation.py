@@ -166,7 +166,7 @@ class Sniffer:
     def frames(self) -> Any:
         """(kernel ns, COB-ID) of every frame sniffed, an int64 array of shape (n, 2);
         datagrams that are no python-can frame are left out."""
-        import msgpack  # type: ignore[import-untyped]
+        import msgpack
         import numpy as np
 
         rows = []
@@ -183,7 +183,7 @@ class Sniffer:
 
 
 def one_run(tag: str, cmd: list[str], channel: str, env: dict[str, str], work: Path,
-            rate: float) -> dict:
+            rate: float) -> dict[str, Any]:
     """The node ``cmd`` published to the subscriber while the sniffer logs the bus: the
     window's samples (receive ns, stamp ns), frames and the node's CPU per s.
 
@@ -213,7 +213,7 @@ def one_run(tag: str, cmd: list[str], channel: str, env: dict[str, str], work: P
             "rate_hz": len(data) / ((w1 - w0) / 1e9), "cpu_s_per_s": (cpu1 - cpu0) / (m1 - m0)}
 
 
-def split(run: dict, n_joints: int) -> dict[str, Any]:
+def split(run: dict[str, Any], n_joints: int) -> dict[str, Any]:
     """A run's figures (us arrays): ``beyond_wire`` per sample; per sample matched to its
     SYNC (the nearest within a quarter period, its cycle complete): ``to_sync``,
     ``station``, ``after``; per complete cycle: ``station_first_tpdo``, ``station_share``."""
@@ -258,7 +258,7 @@ FIGURES = {
 }
 
 
-def report(records: list[dict], n_joints: int, pairs: list[tuple[dict, dict]]) -> None:
+def report(records: list[dict[str, Any]], n_joints: int, pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> None:
     """The case's records from its (new, old) run pairs: value new, baseline old."""
     import numpy as np
 
@@ -273,7 +273,7 @@ def report(records: list[dict], n_joints: int, pairs: list[tuple[dict, dict]]) -
         for q in (50, 99):
             a = [float(np.percentile(new[key], q)) for new, _ in figs]
             b = [float(np.percentile(old[key], q)) for _, old in figs]
-            rec: dict = {"metric": f"node_samestation_{n_joints}enc_{key}_p{q}_us",
+            rec: dict[str, Any] = {"metric": f"node_samestation_{n_joints}enc_{key}_p{q}_us",
                          "value": round(statistics.median(a), 1), "unit": "us",
                          "baseline": round(statistics.median(b), 1),
                          "runs": [[round(x, 1), round(y, 1)] for x, y in zip(a, b)],
@@ -293,7 +293,7 @@ def report(records: list[dict], n_joints: int, pairs: list[tuple[dict, dict]]) -
                        "note": f"the node process (its CPU s per s, or messages per s); {where}"})
 
 
-def run_case(records: list[dict], n_joints: int, old: Path, runs: int, work: Path) -> None:
+def run_case(records: list[dict[str, Any]], n_joints: int, old: Path, runs: int, work: Path) -> None:
     """One case: one station, the two nodes alternating, :func:`report` at the end."""
     domain = domain_id()
     env = dds_env(domain)
@@ -306,7 +306,7 @@ def run_case(records: list[dict], n_joints: int, old: Path, runs: int, work: Pat
             for v in roots}
     station_file.write_text(Path(cmds["new"][cmds["new"].index("--params-file") + 1])
                             .read_text())
-    results: dict[str, list[dict]] = {"new": [], "old": []}
+    results: dict[str, list[dict[str, Any]]] = {"new": [], "old": []}
     with station_process(REPO, station_file, channel, env, work / f"station{n_joints}.log"):
         for r in range(runs):
             for v in (("new", "old") if r % 2 == 0 else ("old", "new")):
@@ -315,7 +315,7 @@ def run_case(records: list[dict], n_joints: int, old: Path, runs: int, work: Pat
     report(records, n_joints, list(zip(results["new"], results["old"])))
 
 
-def run_all(records: list[dict], old: Path, runs: int = RUNS,
+def run_all(records: list[dict[str, Any]], old: Path, runs: int = RUNS,
             cases: tuple[int, ...] = CASES) -> None:
     """Every case against the checkout ``old``; a case that fails is an ``error`` record.
     The records also go to bench/results/node_samestation_<UTC time>.jsonl."""
@@ -338,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=int, default=RUNS, help=f"A/B pairs per case ({RUNS})")
     p.add_argument("--cases", default=",".join(map(str, CASES)), help="encoders per case")
     args = p.parse_args(argv)
-    records: list[dict] = []
+    records: list[dict[str, Any]] = []
     run_all(records, args.old, args.runs, tuple(int(c) for c in args.cases.split(",")))
     save(records)
     return 0
