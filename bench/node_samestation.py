@@ -23,12 +23,18 @@ kernel receive time and COB-ID of every frame, so each published sample splits i
   group at once, so this is the station's own receive and send time),
 * ``after``: the last TPDO in the kernel -> the subscriber's receive (the driver and DDS).
 
+``--station old`` has the other checkout's station program answer both nodes instead (its
+simulator, e.g. from before the TPDOs waited for the SSI reads; records
+``node_samestation_oldstation_*``), which shows how much of a change between the checkouts'
+figures is the simulator's.
+
 Records ``node_samestation_<N>enc_<figure>_p50_us`` / ``_p99_us``: value = new, baseline = old
 (medians of the runs), ratio = median of the pairs' ratios. Figures: ``beyond_wire`` (receive -
 stamp - computed wire time, the headline), ``station_share`` (``station`` minus the computed
 wire time: the simulator's part of ``beyond_wire``; no ratio, it lies near 0 with 8 slots),
 ``station_beyond_frames`` (``station`` minus the cycle's frames' own wire time, their real
-stuffing: the station's reaction), ``station_first_tpdo`` (SYNC -> first TPDO), ``after_station`` (``after``), ``to_sync``; and ``cpu_s_per_s`` of the node process.
+stuffing: the station's reaction), ``station_first_tpdo`` (SYNC -> first TPDO),
+``after_station`` (``after``), ``to_sync``; and ``cpu_s_per_s`` of the node process.
 Printed, appended to bench/results/latest.jsonl and written to
 bench/results/node_samestation_<UTC time>.jsonl.
 """
@@ -60,6 +66,9 @@ from real_station import real_params, station_process
 RUNS = 3
 #: how often the sniffer empties its socket (s): frames keep their kernel time in the queue
 DRAIN_S = 0.02
+#: the station's SCHED_FIFO priority, given to either checkout's program (this one's default,
+#: and the priority every checkout's node gives its station child: simulation.station_priority)
+STATION_PRIORITY = "10"
 SYNC_ID = 0x080
 #: TPDO COB-IDs (PDO1-4 and the encoder PDOs 9-12 of a node id, 000 Table 15): below the SDOs
 TPDO_IDS = (0x180, 0x580)
@@ -249,10 +258,7 @@ def split(run: dict[str, Any], n_joints: int) -> dict[str, Any]:
             "to_sync": (syncs[j] - stamp_ok) / 1e3,
             "station": (last[j] - syncs[j]) / 1e3,
             "after_station": (recv_ok - last[j]) / 1e3,
-            "station_beyond_frames": "SYNC in the kernel -> the cycle's last TPDO in the kernel, minus "
-                             "the cycle's TPDOs' own wire time (their real stuffing): the "
-                             "station's reaction (wake-up, SSI read, send) beyond its frames",
-    "station_first_tpdo": (first[cyc] - syncs[cyc]) / 1e3,
+            "station_first_tpdo": (first[cyc] - syncs[cyc]) / 1e3,
             "station_share": (last[cyc] - syncs[cyc]) / 1e3 - wire_us,
             "station_beyond_frames": (last[cyc] - syncs[cyc]) / 1e3 - frames_us[cyc],
             "matched": float(ok.mean()), "wire_us": wire_us}
@@ -263,8 +269,8 @@ FIGURES = {
                    "benchmark's total latency beyond the wire)",
     "station_share": "SYNC in the kernel -> the cycle's last TPDO in the kernel, minus the "
                      "computed wire time: the simulated station's part of beyond_wire",
-    "station_beyond_frames": "SYNC in the kernel -> the cycle's last TPDO in the kernel, minus "
-                             "the cycle's TPDOs' own wire time (their real stuffing): the "
+    "station_beyond_frames": "SYNC in the kernel -> the cycle's last TPDO in the kernel, "
+                             "minus the cycle's TPDOs' own wire time (their real stuffing): the "
                              "station's reaction (wake-up, SSI read, send) beyond its frames",
     "station_first_tpdo": "SYNC in the kernel -> the cycle's first TPDO in the kernel (the "
                           "station's reaction, its first frame's wire time included)",
@@ -274,14 +280,18 @@ FIGURES = {
 }
 
 
-def report(records: list[dict[str, Any]], n_joints: int, pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> None:
-    """The case's records from its (new, old) run pairs: value new, baseline old."""
+def report(records: list[dict[str, Any]], n_joints: int,
+           pairs: list[tuple[dict[str, Any], dict[str, Any]]], station: str = "new") -> None:
+    """The case's records from its (new, old) run pairs: value new, baseline old;
+    ``station``: whose station program ran (``old``: metrics ``node_samestation_oldstation_*``)."""
     import numpy as np
 
+    prefix = "node_samestation_" + ("oldstation_" if station == "old" else "")
     figs = [(split(new, n_joints), split(old, n_joints)) for new, old in pairs]
     where = (f"{n_joints} joint(s) at {case_rate(n_joints):g} Hz, {BITRATE} bit/s, wire "
-             f"{figs[0][0]['wire_us']:.0f} us; one station process of this checkout for all "
-             f"runs; value = this checkout's node, baseline = the other checkout's; median of "
+             f"{figs[0][0]['wire_us']:.0f} us; one station process of the {station} "
+             f"checkout for all runs; value = this checkout's node, baseline = the other "
+             f"checkout's; median of "
              f"{len(pairs)} alternating pairs in one sitting; samples matched to their SYNC: "
              f"{min(min(a['matched'], b['matched']) for a, b in figs):.3f} or more; machine "
              "shared with other benchmarks")
@@ -289,7 +299,7 @@ def report(records: list[dict[str, Any]], n_joints: int, pairs: list[tuple[dict[
         for q in (50, 99):
             a = [float(np.percentile(new[key], q)) for new, _ in figs]
             b = [float(np.percentile(old[key], q)) for _, old in figs]
-            rec: dict[str, Any] = {"metric": f"node_samestation_{n_joints}enc_{key}_p{q}_us",
+            rec: dict[str, Any] = {"metric": f"{prefix}{n_joints}enc_{key}_p{q}_us",
                          "value": round(statistics.median(a), 1), "unit": "us",
                          "baseline": round(statistics.median(b), 1),
                          "runs": [[round(x, 1), round(y, 1)] for x, y in zip(a, b)],
@@ -302,15 +312,17 @@ def report(records: list[dict[str, Any]], n_joints: int, pairs: list[tuple[dict[
             emit(records, rec)
     for key, unit in (("cpu_s_per_s", "s/s"), ("rate_hz", "Hz")):
         a, b = [n[key] for n, _ in pairs], [o[key] for _, o in pairs]
-        emit(records, {"metric": f"node_samestation_{n_joints}enc_{key}",
+        emit(records, {"metric": f"{prefix}{n_joints}enc_{key}",
                        "value": round(statistics.median(a), 3), "unit": unit,
                        "baseline": round(statistics.median(b), 3),
                        "ratio": round(statistics.median(x / y for x, y in zip(a, b)), 3),
                        "note": f"the node process (its CPU s per s, or messages per s); {where}"})
 
 
-def run_case(records: list[dict[str, Any]], n_joints: int, old: Path, runs: int, work: Path) -> None:
-    """One case: one station, the two nodes alternating, :func:`report` at the end."""
+def run_case(records: list[dict[str, Any]], n_joints: int, old: Path, runs: int, work: Path,
+             station: str = "new") -> None:
+    """One case: one station (of the ``station`` checkout, in its own environment), the two
+    nodes alternating, :func:`report` at the end."""
     domain = domain_id()
     env = dds_env(domain)
     extra = {k: v for k, v in env.items() if k.startswith(DDS_KEYS)}
@@ -320,25 +332,28 @@ def run_case(records: list[dict[str, Any]], n_joints: int, old: Path, runs: int,
     station_file = work / f"station{n_joints}.yaml"
     cmds = {v: node_command(roots[v], envs[v], n_joints, channel, work, f"{v}{n_joints}")
             for v in roots}
-    station_file.write_text(Path(cmds["new"][cmds["new"].index("--params-file") + 1])
-                            .read_text())
+    own = cmds[station]  # the station reads its node's params file (simulation switch named)
+    station_file.write_text(Path(own[own.index("--params-file") + 1]).read_text())
     results: dict[str, list[dict[str, Any]]] = {"new": [], "old": []}
-    with station_process(REPO, station_file, channel, env, work / f"station{n_joints}.log"):
+    st_env = env if station == "new" else envs["old"]
+    with station_process(roots[station], station_file, channel, st_env,
+                         work / f"station{n_joints}.log", ("--priority", STATION_PRIORITY)):
         for r in range(runs):
             for v in (("new", "old") if r % 2 == 0 else ("old", "new")):
                 results[v].append(one_run(f"{v}{n_joints}r{r}", cmds[v], channel, env, work,
                                           case_rate(n_joints)))
-    report(records, n_joints, list(zip(results["new"], results["old"])))
+    report(records, n_joints, list(zip(results["new"], results["old"])), station)
 
 
 def run_all(records: list[dict[str, Any]], old: Path, runs: int = RUNS,
-            cases: tuple[int, ...] = CASES) -> None:
-    """Every case against the checkout ``old``; a case that fails is an ``error`` record.
-    The records also go to bench/results/node_samestation_<UTC time>.jsonl."""
+            cases: tuple[int, ...] = CASES, station: str = "new") -> None:
+    """Every case against the checkout ``old``, the ``station`` checkout's station program
+    (``new``: this one's) answering; a case that fails is an ``error`` record. The records
+    also go to bench/results/node_samestation_<UTC time>.jsonl."""
     with tempfile.TemporaryDirectory(prefix="bench_samestation_") as tmp:
         for n in cases:
             try:
-                run_case(records, n, old.resolve(), runs, Path(tmp))
+                run_case(records, n, old.resolve(), runs, Path(tmp), station)
             except Exception as err:  # noqa: BLE001 - a benchmark reports, never fails
                 emit(records, {"metric": f"node_samestation_{n}enc",
                                "error": f"{type(err).__name__}: {err}"})
@@ -353,9 +368,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("old", type=Path, help="the other checkout (set up: .venv, install/)")
     p.add_argument("--runs", type=int, default=RUNS, help=f"A/B pairs per case ({RUNS})")
     p.add_argument("--cases", default=",".join(map(str, CASES)), help="encoders per case")
+    p.add_argument("--station", choices=("new", "old"), default="new",
+                   help="whose station program answers both nodes (default new: this "
+                        "checkout's; old: the other checkout's, in its environment)")
     args = p.parse_args(argv)
     records: list[dict[str, Any]] = []
-    run_all(records, args.old, args.runs, tuple(int(c) for c in args.cases.split(",")))
+    run_all(records, args.old, args.runs, tuple(int(c) for c in args.cases.split(",")),
+            args.station)
     save(records)
     return 0
 
