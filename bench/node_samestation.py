@@ -34,7 +34,8 @@ stamp - computed wire time, the headline), ``station_share`` (``station`` minus 
 wire time: the simulator's part of ``beyond_wire``; no ratio, it lies near 0 with 8 slots),
 ``station_beyond_frames`` (``station`` minus the cycle's frames' own wire time, their real
 stuffing: the station's reaction), ``station_first_tpdo`` (SYNC -> first TPDO),
-``after_station`` (``after``), ``to_sync``; and ``cpu_s_per_s`` of the node process.
+``after_station`` (``after``), ``to_sync``, ``span`` (the node's own, where it writes one);
+and ``cpu_s_per_s`` of the node process.
 Printed, appended to bench/results/latest.jsonl and written to
 bench/results/node_samestation_<UTC time>.jsonl.
 """
@@ -58,7 +59,7 @@ from typing import Any
 from benchlib import RESULTS, cpu_seconds, save
 from benchlib import emit_record as emit
 from node_cases import BITRATE, CASES, NODE_NS, REPO, after_sync_wire_s, case_rate
-from node_measure import MEASURE_S, WARMUP_S, publisher_and_subscriber
+from node_measure import MEASURE_S, SPAN_ENV, WARMUP_S, publisher_and_subscriber, span_window
 from node_procs import dds_env, domain_id
 from real_station import real_params, station_process
 
@@ -200,13 +201,17 @@ class Sniffer:
 def one_run(tag: str, cmd: list[str], channel: str, env: dict[str, str], work: Path,
             rate: float) -> dict[str, Any]:
     """The node ``cmd`` published to the subscriber while the sniffer logs the bus: the
-    window's samples (receive ns, stamp ns), frames and the node's CPU per s.
+    window's samples (receive ns, stamp ns), frames, the node's CPU per s and, where the node
+    writes them (a checkout with ``ros/span_probe.py``; :data:`SPAN_ENV` is set for every
+    node), its spans (us: the completing frame in the kernel -> ``publish()`` returned).
 
     :raises RuntimeError: as ``node_measure.publisher_and_subscriber``, the node exited in
         the window, or the window held fewer than 3 messages
     """
     import numpy as np
 
+    spans = work / f"{tag}.spans"
+    cmd = [*cmd[:2], f"{SPAN_ENV}={spans}", *cmd[2:]]  # env -i KEY=VALUE ...
     sniffer = Sniffer(channel)
     try:
         with publisher_and_subscriber(tag, cmd, f"{NODE_NS}/joint_states", env, work) as run:
@@ -225,6 +230,7 @@ def one_run(tag: str, cmd: list[str], channel: str, env: dict[str, str], work: P
     frames = sniffer.frames()
     frames = frames[(frames[:, 0] >= w0 - 10_000_000) & (frames[:, 0] < w1 + 10_000_000)]
     return {"recv": data[:, 0], "stamp": data[:, 1], "frames": frames, "rate": rate,
+            "span": span_window(spans, w0, w1) if spans.exists() else np.array([]),
             "rate_hz": len(data) / ((w1 - w0) / 1e9), "cpu_s_per_s": (cpu1 - cpu0) / (m1 - m0)}
 
 
@@ -254,7 +260,7 @@ def split(run: dict[str, Any], n_joints: int) -> dict[str, Any]:
     ok = (np.abs(syncs[j] - stamp) < 0.25e9 / run["rate"]) & complete[j]
     j, recv_ok, stamp_ok = j[ok], recv[ok], stamp[ok]
     cyc = complete & (syncs >= stamp.min()) & (syncs <= stamp.max())
-    return {"beyond_wire": (recv - stamp) / 1e3 - wire_us,
+    return {"beyond_wire": (recv - stamp) / 1e3 - wire_us, "span": run["span"],
             "to_sync": (syncs[j] - stamp_ok) / 1e3,
             "station": (last[j] - syncs[j]) / 1e3,
             "after_station": (recv_ok - last[j]) / 1e3,
@@ -277,6 +283,8 @@ FIGURES = {
     "after_station": "the cycle's last TPDO in the kernel -> the subscriber's receive: the "
                      "driver and DDS",
     "to_sync": "header.stamp -> the SYNC in the kernel: the node's SYNC send",
+    "span": "the node's own span: the completing TPDO in the kernel -> publish() returned "
+            "(ros/span_probe.py; a checkout without it has no baseline)",
 }
 
 
@@ -296,12 +304,15 @@ def report(records: list[dict[str, Any]], n_joints: int,
              f"{min(min(a['matched'], b['matched']) for a, b in figs):.3f} or more; machine "
              "shared with other benchmarks")
     for key, what in FIGURES.items():
+        if not all(len(new[key]) for new, _ in figs):
+            continue  # a node that wrote no spans
         for q in (50, 99):
             a = [float(np.percentile(new[key], q)) for new, _ in figs]
-            b = [float(np.percentile(old[key], q)) for _, old in figs]
+            b = [float(np.percentile(old[key], q)) if len(old[key]) else 0.0
+                 for _, old in figs]
             rec: dict[str, Any] = {"metric": f"{prefix}{n_joints}enc_{key}_p{q}_us",
                          "value": round(statistics.median(a), 1), "unit": "us",
-                         "baseline": round(statistics.median(b), 1),
+                         "baseline": round(statistics.median(b), 1) if all(b) else None,
                          "runs": [[round(x, 1), round(y, 1)] for x, y in zip(a, b)],
                          "note": f"{what}; {where}"}
             if all(y > 0 for y in b) and key not in ("station_share",):
