@@ -1,6 +1,7 @@
 """Total latency beyond the wire of two code versions' nodes, driven by one station process.
 
-Usage: ``python bench/node_samestation.py OLD_CHECKOUT [--runs N] [--cases 1,8]`` (from this
+Usage: ``python bench/node_samestation.py OLD_CHECKOUT [--runs N] [--cases 1,8] [--station
+new|old]`` (from this
 checkout, ``source scripts/env.sh`` first; OLD_CHECKOUT is another checkout of the repository,
 set up with its own ``make setup``: its .venv and install/). Also
 ``BENCH_NODE_ONLY=samestation BENCH_NODE_OLD=OLD_CHECKOUT make bench ONLY=node``.
