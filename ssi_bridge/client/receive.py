@@ -64,7 +64,7 @@ class FrameListener(GuardedListener):
 
     :param network: the canopen network the frames are dispatched to
     :param counters: the master's counters
-    :param load: the bus-load meter every received frame is added to (None: none)
+    :param load: the bus-load meter every received frame is queued on (None: none)
     :param priority: SCHED_FIFO priority of the receive thread (0: normal scheduling)
     """
 
@@ -78,7 +78,8 @@ class FrameListener(GuardedListener):
         self.foreign = ForeignTraffic(self.count)
         #: the error frames of the interface, per class (``client/error_frames.py``)
         self.error_frames = ErrorFrameWatch()
-        self._load = load
+        #: queues a received frame on the bus-load meter (``BusLoad.received``), or None
+        self._load = load.received if load is not None else None
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
         self.scheduling = ""
@@ -112,7 +113,7 @@ class FrameListener(GuardedListener):
         elif self.error_frames.bus_off:
             self.error_frames.heard(can_id)
         if self._load is not None:
-            self._load.add(msg)
+            self._load(msg)
         if msg.is_error_frame or msg.is_remote_frame:
             return  # no service of the master's is a remote or error frame
         data = msg.data
