@@ -10,8 +10,8 @@ to the master's listener (``FrameListener`` with a ``BusLoad``, the TPDO routes 
 * ``recv``: ``bus.recv`` returning a waiting frame (no wait: the frames are queued);
 * ``listener``: ``on_message_received`` of that frame;
 * ``load``: the bus-load meter's count of the frame, which the receive thread only queues and
-  the cycle thread's next SYNC sends through ``BusLoad.add`` (timed here at every 12th frame,
-  the SYNC of an 8-slot cycle; per frame);
+  the cycle thread counts once its cycle is over (``BusLoad.count_queued``, timed here with the
+  ``BusLoad.add`` of the next SYNC at every 12th frame, an 8-slot cycle; per frame);
 * ``send``: ``bus.send`` of a SYNC through the same stack (the cycle thread's send).
 
 Numbers go to docs/node.md, "Performance".
@@ -64,6 +64,7 @@ def _round(tx: can.BusABC, rx: can.BusABC, listener: FrameListener, table: SlotT
         if i % 12 == 0:
             table.on_sync()
             c0 = clock()
+            load.count_queued()
             load.add(sync)
             load_ns += clock() - c0
         c0 = clock()

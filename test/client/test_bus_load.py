@@ -79,9 +79,10 @@ def test_a_wall_clock_step_back_empties_the_window_instead_of_growing_it() -> No
 
 
 def test_queued_received_frames_give_the_figures_of_frames_counted_as_they_came() -> None:
-    """The receive thread only queues a frame (``BusLoad.received``); the next SYNC the master
-    sends, or the reader, counts it: the figures equal those of counting every frame as it
-    came, and a frame is counted once however the two meet."""
+    """The receive thread only queues a frame (``BusLoad.received``), a sent one is measured
+    at once and queued behind it (``add``); the cycle thread once its cycle is over
+    (``count_queued``), or the reader, counts them: the figures equal those of counting every
+    frame as it came, and a frame is counted once however they meet."""
     import can
 
     from ssi_bridge.client.load import BusLoad
@@ -99,6 +100,9 @@ def test_queued_received_frames_give_the_figures_of_frames_counted_as_they_came(
                                timestamp=t + (k + 1) * 1.3e-4)
             eager.add(tpdo)
             queued.received(tpdo)
+        if cycle % 3:
+            queued.count_queued()
+            assert not queued._queued
     queued.received(can.Message(arbitration_id=0x1, is_error_frame=True, timestamp=t0))
     now = t0 + 0.2
     figures = queued.figures(now=now)
