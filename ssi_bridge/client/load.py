@@ -29,8 +29,10 @@ SYNC_COB_ID = 0x080
 
 #: a frame of the queue: a received one, or a sent one measured already
 _Queued = can.Message | tuple[float, float, bool]
-#: queued frames beyond which a sent frame counts them (a master whose queue nobody counts)
-QUEUE_LIMIT = 4096
+#: queued frames beyond which a sent frame counts them: a master whose cycle does not count
+#: them (a loop of its own, a tool) holds a few cycles' frames, not thousands of live frame
+#: objects for the garbage collector to walk
+QUEUE_LIMIT = 64
 
 
 class BusLoad:
