@@ -4,12 +4,20 @@ Each frame handled (received, with its receive timestamp, or sent by this master
 length at the bit rate (``gateway/wire.frame_bits``: SOF to IFS with its actual stuff bits).
 Over the last ``window`` seconds of frame timestamps the figures are the load (wire time /
 window), frames and wire time per SYNC cycle: what ``ssi_bridge: bus`` shows.
+
+A received frame is only queued on the receive thread (:attr:`BusLoad.received`, one append);
+a frame the master sends is measured at once and queued behind it (:meth:`BusLoad.add`: the
+sender may reuse its payload). The queue is counted, in the order the frames were handled, by
+the cycle thread once its cycle is over (:meth:`BusLoad.count_queued`, with time to spare) and
+by :meth:`BusLoad.figures`, whichever comes first: the figures are those of counting each
+frame as it came.
 """
 
 from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 
 import can
 
@@ -19,12 +27,22 @@ from ssi_bridge.protocol.wire import frame_bits
 SYNC_COB_ID = 0x080
 
 
+#: a frame of the queue: a received one, or a sent one measured already
+_Queued = can.Message | tuple[float, float, bool]
+#: queued frames beyond which a sent frame counts them: a master whose cycle does not count
+#: them (a loop of its own, a tool) holds a few cycles' frames, not thousands of live frame
+#: objects for the garbage collector to walk
+QUEUE_LIMIT = 64
+
+
 class BusLoad:
     """Frames (timestamp, wire seconds, is SYNC) of the last ``window`` seconds.
 
-    The receive and cycle threads add, the diagnostics read: a deque's appends and pops are
-    thread-safe and only :meth:`figures` pops (the oldest, one reader at a time), so adding
-    a frame takes no lock.
+    The receive thread queues (:attr:`received`), any sending thread adds (:meth:`add`), the
+    cycle thread (:meth:`count_queued`) and the diagnostics (:meth:`figures`) count: a deque's
+    appends and pops are thread-safe, the queued frames are counted by one thread at a time
+    under the read lock (a thread that finds another counting leaves them to it), and only
+    :meth:`figures` pops the oldest counted frames.
 
     :param bitrate: the bus's bit rate (bit/s)
     :param window: seconds of frames the load is computed over
@@ -34,20 +52,55 @@ class BusLoad:
         self.bitrate = bitrate
         self.window = window
         self._frames: deque[tuple[float, float, bool]] = deque()
+        #: frames not counted yet, in the order they were handled
+        self._queued: deque[_Queued] = deque()
+        #: queue one received frame (the receive thread, every frame: one C call, no lock);
+        #: its timestamp and content are read when it is counted, so the frame must not change
+        self.received: Callable[[can.Message], None] = self._queued.append
         self._read_lock = threading.Lock()
 
     def add(self, msg: can.Message) -> None:
-        """Account one frame (its timestamp, or now when it has none).
+        """Account one frame (a frame this master sent: its timestamp, or now when it has
+        none), measured now and counted after the frames queued before it.
 
-        :param msg: the frame as python-can received or sent it
+        :param msg: the frame as python-can sent (or received) it
         """
         if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
             return
         can_id = msg.arbitration_id
         bits = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
-        # its wire time (base/timebase.frame_wire_time, inline: every frame passes here)
-        self._frames.append((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
+        # its wire time (base/timebase.frame_wire_time, inline)
+        self._queued.append((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
                              bits / self.bitrate, can_id == SYNC_COB_ID))
+        if len(self._queued) > QUEUE_LIMIT:
+            self.count_queued()
+
+    def count_queued(self) -> None:
+        """Count the queued frames now (a thread with time to spare: the cycle thread once
+        its cycle is over), unless another thread is counting them."""
+        if self._queued and self._read_lock.acquire(blocking=False):
+            try:
+                self._count_queued()
+            finally:
+                self._read_lock.release()
+
+    def _count_queued(self) -> None:
+        """Under the read lock: count every queued frame, oldest first (a received frame as
+        :meth:`add` measures one; one without a timestamp takes now's)."""
+        queued, frames = self._queued, self._frames
+        take, keep = queued.popleft, frames.append
+        rate = self.bitrate
+        while queued:
+            msg = take()
+            if isinstance(msg, tuple):
+                keep(msg)  # sent: measured already
+                continue
+            if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
+                continue
+            can_id = msg.arbitration_id
+            bits = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
+            keep((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(), bits / rate,
+                  can_id == SYNC_COB_ID))
 
     def figures(self, now: float | None = None) -> dict[str, str]:
         """load %, frames and wire time per cycle over the window ending ``now``.
@@ -59,6 +112,7 @@ class BusLoad:
         """
         now = wire_now() if now is None else now
         with self._read_lock:
+            self._count_queued()
             frames = self._frames
             while frames and not now - self.window <= frames[0][0] <= now + self.window:
                 frames.popleft()
@@ -73,4 +127,4 @@ class BusLoad:
         }
 
 
-__all__ = ["BusLoad"]
+__all__ = ["QUEUE_LIMIT", "BusLoad"]
