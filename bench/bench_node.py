@@ -33,6 +33,10 @@ then, once:
 5. the live view's cost (``node_liveview.py``, ``node_1enc_liveview_*``)
 6. without ``BENCH_NODE_ONLY``: the service-call burst (``service_burst.py``)
 
+``BENCH_NODE_ONLY=samestation BENCH_NODE_OLD=<another checkout, set up>`` runs only
+``node_samestation.py``: this checkout's node and the other's, driven in turn by one station
+process (``node_samestation_<N>enc_*``).
+
 QoS on every side is the node's: KEEP_LAST 10, RELIABLE, VOLATILE. DDS is isolated: a unique
 ROS_DOMAIN_ID and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST. Every subprocess is stopped by PID
 (``node_procs.py``).
@@ -68,6 +72,12 @@ def run(records: list[dict]) -> None:
 
     :raises RuntimeError: the installed node is missing (``make setup`` not run)
     """
+    if os.environ.get("BENCH_NODE_ONLY") == "samestation":
+        from node_samestation import run_all  # node_samestation.py: the other checkout's node
+        if not os.environ.get("BENCH_NODE_OLD"):
+            raise RuntimeError("BENCH_NODE_OLD must name the other checkout (set up)")
+        run_all(records, Path(os.environ["BENCH_NODE_OLD"]))
+        return
     if os.environ.get("BENCH_NODE_ONLY") == "stations":
         domain = domain_id()
         with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:

@@ -37,9 +37,10 @@ def real_params(tag: str) -> dict:
 
 @contextlib.contextmanager
 def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, str],
-                    log: Path) -> Iterator[subprocess.Popen]:
+                    log: Path, args: tuple[str, ...] = ()) -> Iterator[subprocess.Popen]:
     """The installed ``station`` on ``params_file``'s joints and ``channel``, ready (its
     boot-up sent) while the block runs, stopped by its PID (SIGINT, then SIGKILL) after.
+    ``args``: further options of the station program (e.g. ``--priority``).
 
     :raises RuntimeError: the station exited or did not say it is ready within
         :data:`READY_TIMEOUT_S`
@@ -47,7 +48,8 @@ def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, 
     exe = repo.joinpath(*STATION_EXE_PARTS)
     with open(log, "wb") as err:
         proc = subprocess.Popen([str(exe), "--params-file", str(params_file),
-                                 "--interface", "udp_multicast", "--channel", channel],
+                                 "--interface", "udp_multicast", "--channel", channel,
+                                 *args],
                                 stdout=subprocess.PIPE, stderr=err, env=env,
                                 start_new_session=True)
     try:

@@ -9,6 +9,9 @@ to the master's listener (``FrameListener`` with a ``BusLoad``, the TPDO routes 
 
 * ``recv``: ``bus.recv`` returning a waiting frame (no wait: the frames are queued);
 * ``listener``: ``on_message_received`` of that frame;
+* ``load``: the bus-load meter's count of the frame, which the receive thread only queues and
+  the cycle thread counts once its cycle is over (``BusLoad.count_queued``, timed here with the
+  ``BusLoad.add`` of the next SYNC at every 12th frame, an 8-slot cycle; per frame);
 * ``send``: ``bus.send`` of a SYNC through the same stack (the cycle thread's send).
 
 Numbers go to docs/node.md, "Performance".
@@ -48,17 +51,22 @@ def _frames(n: int) -> list[can.Message]:
 
 
 def _round(tx: can.BusABC, rx: can.BusABC, listener: FrameListener, table: SlotTable,
-           frames: list[can.Message]) -> tuple[float, float, float]:
+           load: BusLoad, frames: list[can.Message]) -> tuple[float, float, float, float]:
     for msg in frames:
         msg.timestamp = time.time()
         tx.send(msg)
     time.sleep(0.05)  # all in the receive queue
-    recv_ns = listen_ns = 0
+    recv_ns = listen_ns = load_ns = 0
     got = 0
     clock = time.thread_time_ns
+    sync = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
     for i in range(len(frames)):
         if i % 12 == 0:
             table.on_sync()
+            c0 = clock()
+            load.count_queued()
+            load.add(sync)
+            load_ns += clock() - c0
         c0 = clock()
         msg = rx.recv(1.0)
         c1 = clock()
@@ -69,7 +77,6 @@ def _round(tx: can.BusABC, rx: can.BusABC, listener: FrameListener, table: SlotT
         recv_ns += c1 - c0
         listen_ns += c2 - c1
         got += 1
-    sync = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
     c0 = clock()
     for _ in range(200):
         rx.send(sync)
@@ -78,7 +85,9 @@ def _round(tx: can.BusABC, rx: can.BusABC, listener: FrameListener, table: SlotT
     for bus in (tx, rx):  # the SYNCs (rx drops its own ones unseen)
         while bus.recv(0.0) is not None:
             pass
-    return recv_ns / 1e3 / max(got, 1), listen_ns / 1e3 / max(got, 1), send_ns / 1e3
+    load.figures()  # the window emptied of this round's frames
+    per = 1e3 * max(got, 1)
+    return recv_ns / per, listen_ns / per, send_ns / 1e3, load_ns / per
 
 
 def main(argv: list[str]) -> int:
@@ -90,7 +99,8 @@ def main(argv: list[str]) -> int:
     rx = ReceiveWatch(ReopeningBus(inner, lambda: open_udp_bus(channel), channel))
     network = MasterNetwork(None)
     counters = ClientCounters()
-    listener = FrameListener(network, counters, BusLoad(1_000_000))
+    load = BusLoad(1_000_000)
+    listener = FrameListener(network, counters, load)
     table = SlotTable(SLOTS)
     TpdoRoutes(NODE, SLOTS, lambda slot, cob, data, t: table.on_image(slot, data, t),
                lambda slots, cob, data, t: table.on_positions(slots, data, t)).attach(network)
@@ -98,14 +108,14 @@ def main(argv: list[str]) -> int:
     results = []
     try:
         for _ in range(rounds):
-            results.append(_round(tx, rx, listener, table, frames))
+            results.append(_round(tx, rx, listener, table, load, frames))
     finally:
         tx.shutdown()
         rx.shutdown()
-    recv, listen, send = (statistics.median(r[i] for r in results) for i in range(3))
+    recv, listen, send, counted = (statistics.median(r[i] for r in results) for i in range(4))
     print(f"{n} frames x {rounds} rounds, thread CPU per frame (us, median): recv {recv:.1f}, "
-          f"listener {listen:.1f}, recv+listener {recv + listen:.1f}; send of a SYNC {send:.1f}"
-          f" ({counters.frames} frames counted)")
+          f"listener {listen:.1f}, recv+listener {recv + listen:.1f}; load {counted:.1f} (at the"
+          f" SYNCs); send of a SYNC {send:.1f} ({counters.frames} frames counted)")
     return 0
 
 

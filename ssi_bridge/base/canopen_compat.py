@@ -19,9 +19,10 @@
   canopen's ``MessageListener`` (``Network.listeners``), its notifier's wake-up period
   (``NOTIFIER_CYCLE``), no re-raise of a handled receive error (``Network.check``, which reads
   ``notifier.exception``), and ``send_message`` returning the frame it sent;
-* :func:`dispatch`: canopen's ``Network.notify`` with each subscriber called on its own
-  (``Network.subscribers``, and the node scanner's ``on_message_received(can_id)``, whose
-  argument differs between canopen's upstream lines), for ``base/rx_guard.py``;
+* :func:`dispatcher`: canopen's ``Network.notify`` with each subscriber called on its own
+  (``Network.subscribers``, changed in place by ``subscribe``, and the node scanner's
+  ``on_message_received(can_id)``, whose argument differs between canopen's upstream lines),
+  for ``base/rx_guard.py``;
 * :func:`forget_receive_error`: clears a handled receive error from the notifier canopen's
   ``check`` reads (``Notifier.exception``), for a plain ``canopen.Network``;
 * :func:`drop_node`: takes a node out of a network's node table (``Network.nodes``) and
@@ -172,28 +173,40 @@ class CheckedRemoteNode(canopen.RemoteNode):
         return client
 
 
-#: a subscriber that raised, the frame's COB-ID and data, and what it raised (:func:`dispatch`)
+#: a subscriber that raised, the frame's COB-ID and data, and what it raised (:func:`dispatcher`)
 OnRaise = Callable[[Callable[..., object], int, bytearray, Exception], None]
 
 
-def dispatch(network: canopen.Network, can_id: int, data: bytearray, timestamp: float,
-             on_raise: OnRaise, subscribed: list[Subscriber] | tuple[()] = ()) -> None:
-    """canopen's ``Network.notify`` for one frame, each subscriber on its own: one that raises
-    goes to ``on_raise`` (with the frame and its exception) and the others still get the
-    frame; then the network's node scanner notes ``can_id``.
+#: canopen's ``Network.notify`` for one frame of a network (:func:`dispatcher`)
+Dispatch = Callable[[int, bytearray, float], None]
 
-    :param can_id: the frame's CAN identifier
-    :param data: its payload, handed to every subscriber
-    :param timestamp: the time handed to every subscriber (the master's: its wire time)
-    :param subscribed: the subscribers of ``can_id`` when the caller has just looked them up
-        (:func:`subscribers`); empty: looked up here
+
+def dispatcher(network: canopen.Network, on_raise: OnRaise) -> Dispatch:
+    """canopen's ``Network.notify`` for ``network``, each subscriber called on its own: one
+    that raises goes to ``on_raise`` (with the frame and its exception) and the others still
+    get the frame; then the network's node scanner notes the COB-ID, unless it lists the
+    frame's node already (its ``on_message_received`` would change nothing).
+
+    Prepared once, called per frame ``(can_id, data, timestamp)`` (the time handed to every
+    subscriber; the master's: its wire time): it holds the network's subscriber table, which
+    ``subscribe``/``unsubscribe`` change in place, and its scanner, whose ``nodes`` it reads
+    at every frame (``reset`` replaces the list).
     """
-    for callback in subscribed or network.subscribers.get(can_id, ()):  # as canopen's notify
-        try:
-            callback(can_id, data, timestamp)
-        except Exception as err:  # noqa: BLE001 - one subscriber must not stop the others
-            on_raise(callback, can_id, data, err)
-    network.scanner.on_message_received(can_id)
+    subscribed = network.subscribers.get
+    scanner = network.scanner
+    scan = scanner.on_message_received
+
+    def notify(can_id: int, data: bytearray, timestamp: float) -> None:
+        callbacks = subscribed(can_id)
+        if callbacks:
+            for callback in callbacks:  # as canopen's notify
+                try:
+                    callback(can_id, data, timestamp)
+                except Exception as err:  # noqa: BLE001 - one must not stop the others
+                    on_raise(callback, can_id, data, err)
+        if can_id & 0x7F not in scanner.nodes:
+            scan(can_id)
+    return notify
 
 
 def forget_receive_error(network: canopen.Network, exc: BaseException) -> None:
@@ -311,6 +324,6 @@ class OwnListenerNetwork(canopen.Network):
         return frame
 
 
-__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "OnRaise",
-           "OwnListenerNetwork", "dispatch", "drop_node", "forget_receive_error",
+__all__ = ["AnswerJudge", "CheckedRemoteNode", "CheckedSdoClient", "Dispatch", "OnRaise",
+           "OwnListenerNetwork", "dispatcher", "drop_node", "forget_receive_error",
            "forget_values", "pdo_handler", "set_eds_default", "subscribers"]

@@ -36,7 +36,9 @@ from typing import Any
 import can
 import canopen
 
-from ssi_bridge.base.canopen_compat import Subscriber, dispatch, forget_receive_error, subscribers
+from ssi_bridge.base.canopen_compat import (
+    Subscriber, dispatcher, forget_receive_error, subscribers,
+)
 from ssi_bridge.base.rate_log import RateLimitedLog
 from ssi_bridge.base.timebase import WireTimeListener, frame_wire_time
 from ssi_bridge.base.udp_bus import UndecodableFrame
@@ -92,6 +94,8 @@ class GuardedListener(WireTimeListener):
         #: True when :meth:`handling_time` is this class's (the wire time itself)
         self._plain_time = type(self).handling_time is GuardedListener.handling_time
         self._log = RateLimitedLog(logger)
+        #: canopen's notify of one frame to the network's subscribers, each on its own
+        self._dispatch = dispatcher(network, self._raised)
 
     def count(self, kind: str) -> None:
         """One fault of ``kind`` (receive thread); an owner overrides it to count it too."""
@@ -122,7 +126,7 @@ class GuardedListener(WireTimeListener):
                 route(can_id, msg.data, wire_t)
             except Exception as err:  # noqa: BLE001 - as dispatch: counted, receiving goes on
                 self._raised(route, can_id, msg.data, err)
-        dispatch(network, can_id, msg.data, wire_t, self._raised, subscribed)
+        self._dispatch(can_id, msg.data, wire_t)
 
     def _raised(self, callback: Callable[..., Any], can_id: int, data: bytearray,
                 err: Exception) -> None:

@@ -4,12 +4,20 @@ Each frame handled (received, with its receive timestamp, or sent by this master
 length at the bit rate (``gateway/wire.frame_bits``: SOF to IFS with its actual stuff bits).
 Over the last ``window`` seconds of frame timestamps the figures are the load (wire time /
 window), frames and wire time per SYNC cycle: what ``ssi_bridge: bus`` shows.
+
+A received frame is only queued on the receive thread (:attr:`BusLoad.received`, one append);
+a frame the master sends is measured at once and queued behind it (:meth:`BusLoad.add`: the
+sender may reuse its payload). The queue is counted, in the order the frames were handled, by
+the cycle thread once its cycle is over (:meth:`BusLoad.count_queued`, with time to spare) and
+by :meth:`BusLoad.figures`, whichever comes first: the figures are those of counting each
+frame as it came.
 """
 
 from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 
 import can
 
@@ -19,16 +27,26 @@ from ssi_bridge.protocol.wire import frame_bits
 SYNC_COB_ID = 0x080
 
 
+#: a frame of the queue: a received one, or a sent one measured already (wire time, bits,
+#: is SYNC)
+_Queued = can.Message | tuple[float, int, bool]
+#: queued frames beyond which a sent frame counts them: a master whose cycle does not count
+#: them (a loop of its own, a tool) holds a few cycles' frames, not thousands of live frame
+#: objects for the garbage collector to walk
+QUEUE_LIMIT = 64
+
+
 class BusLoad:
     """Frames (timestamp, and the bits and SYNCs counted before it) of the last ``window``
     seconds, and the running totals: :meth:`figures` takes a window's wire time and SYNCs as
-    the difference of two running totals, whatever the window holds.
+    the difference of two totals (no sum over a second of frames while the receive thread
+    waits for the GIL), and counting a frame drops the frames a window older than it.
 
-    The receive and cycle threads add, the diagnostics read, under one lock held for a few
-    operations (no sum over the window while other threads wait for the GIL: the figures of
-    a second of frames at 1 kHz took ~1 ms of interpreter time, on the diagnostics' timer,
-    while the receive thread waited). Adding a frame also drops the frames a window older
-    than it, so the window holds what :meth:`figures` reads and no more.
+    The receive thread queues (:attr:`received`), any sending thread adds (:meth:`add`), the
+    cycle thread (:meth:`count_queued`) and the diagnostics (:meth:`figures`) count: a deque's
+    appends and pops are thread-safe, the queued frames are counted by one thread at a time
+    under the read lock (a thread that finds another counting leaves them to it), and only
+    :meth:`figures` pops the oldest counted frames.
 
     :param bitrate: the bus's bit rate (bit/s)
     :param window: seconds of frames the load is computed over
@@ -37,32 +55,69 @@ class BusLoad:
     def __init__(self, bitrate: int, window: float = 1.0) -> None:
         self.bitrate = bitrate
         self.window = window
-        #: (wire time, bits added before this frame, SYNCs added before this frame)
+        #: (wire time, bits counted before this frame, SYNCs counted before this frame)
         self._frames: deque[tuple[float, int, int]] = deque()
-        #: bits and SYNCs of every frame added so far
+        #: bits and SYNCs of every frame counted so far
         self._bits = 0
         self._syncs = 0
-        self._lock = threading.Lock()
+        #: frames not counted yet, in the order they were handled
+        self._queued: deque[_Queued] = deque()
+        #: queue one received frame (the receive thread, every frame: one C call, no lock);
+        #: its timestamp and content are read when it is counted, so the frame must not change
+        self.received: Callable[[can.Message], None] = self._queued.append
+        self._read_lock = threading.Lock()
 
     def add(self, msg: can.Message) -> None:
-        """Account one frame (its timestamp, or now when it has none).
+        """Account one frame (a frame this master sent: its timestamp, or now when it has
+        none), measured now and counted after the frames queued before it.
 
-        :param msg: the frame as python-can received or sent it
+        :param msg: the frame as python-can sent (or received) it
         """
         if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
             return
         can_id = msg.arbitration_id
         bits = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
-        # its wire time (base/timebase.frame_wire_time, inline: every frame passes here)
-        t = getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now()
-        with self._lock:
-            frames = self._frames
-            frames.append((t, self._bits, self._syncs))
-            self._bits += bits
-            if can_id == SYNC_COB_ID:
-                self._syncs += 1
+        # its wire time (base/timebase.frame_wire_time, inline)
+        self._queued.append((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
+                             bits, can_id == SYNC_COB_ID))
+        if len(self._queued) > QUEUE_LIMIT:
+            self.count_queued()
+
+    def count_queued(self) -> None:
+        """Count the queued frames now (a thread with time to spare: the cycle thread once
+        its cycle is over), unless another thread is counting them."""
+        if self._queued and self._read_lock.acquire(blocking=False):
+            try:
+                self._count_queued()
+            finally:
+                self._read_lock.release()
+
+    def _count_queued(self) -> None:
+        """Under the read lock: count every queued frame, oldest first (a received frame as
+        :meth:`add` measures one; one without a timestamp takes now's), and drop the frames a
+        window older than the last one counted."""
+        queued, frames = self._queued, self._frames
+        take, keep = queued.popleft, frames.append
+        bits, syncs = self._bits, self._syncs
+        t = None
+        while queued:
+            msg = take()
+            if isinstance(msg, tuple):  # sent: measured already
+                t, size, sync = msg
+            else:
+                if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
+                    continue
+                can_id = msg.arbitration_id
+                size = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
+                t = getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now()
+                sync = can_id == SYNC_COB_ID
+            keep((t, bits, syncs))
+            bits += size
+            syncs += sync
+        self._bits, self._syncs = bits, syncs
+        if t is not None:
             oldest = t - self.window
-            while frames[0][0] < oldest:  # never the frame just added
+            while frames[0][0] < oldest:  # never the frame counted last
                 frames.popleft()
 
     def figures(self, now: float | None = None) -> dict[str, str]:
@@ -74,7 +129,8 @@ class BusLoad:
         (memory grows for as long as the step was).
         """
         now = wire_now() if now is None else now
-        with self._lock:
+        with self._read_lock:
+            self._count_queued()
             frames = self._frames
             while frames and not now - self.window <= frames[0][0] <= now + self.window:
                 frames.popleft()
@@ -90,4 +146,4 @@ class BusLoad:
         }
 
 
-__all__ = ["BusLoad"]
+__all__ = ["QUEUE_LIMIT", "BusLoad"]

@@ -25,11 +25,10 @@ import canopen
 from ssi_bridge.client.load import BusLoad
 from ssi_bridge.client.samples import ClientCounters
 from ssi_bridge.client.sdo import position_pdos
-from ssi_bridge.base.canopen_compat import (
-    OwnListenerNetwork, dispatch, pdo_handler, subscribers,
-)
+from ssi_bridge.base.canopen_compat import OwnListenerNetwork, pdo_handler, subscribers
 from ssi_bridge.base.rx_guard import GuardedListener
 from ssi_bridge.client.error_frames import ErrorFrameWatch
+from ssi_bridge.protocol.can_errors import BUS_OFF
 from ssi_bridge.client.foreign import ForeignTraffic
 from ssi_bridge.protocol.dictionary import tpdo_cob_base
 from ssi_bridge.base.realtime import run_this_thread_at
@@ -64,7 +63,7 @@ class FrameListener(GuardedListener):
 
     :param network: the canopen network the frames are dispatched to
     :param counters: the master's counters
-    :param load: the bus-load meter every received frame is added to (None: none)
+    :param load: the bus-load meter every received frame is queued on (None: none)
     :param priority: SCHED_FIFO priority of the receive thread (0: normal scheduling)
     """
 
@@ -78,7 +77,8 @@ class FrameListener(GuardedListener):
         self.foreign = ForeignTraffic(self.count)
         #: the error frames of the interface, per class (``client/error_frames.py``)
         self.error_frames = ErrorFrameWatch()
-        self._load = load
+        #: queues a received frame on the bus-load meter (``BusLoad.received``), or None
+        self._load = load.received if load is not None else None
         self._priority = priority
         #: the receive thread's scheduling ("SCHED_FIFO 5", "normal"; "" before a frame)
         self.scheduling = ""
@@ -103,16 +103,15 @@ class FrameListener(GuardedListener):
         comes here)."""
         if not self.scheduling:
             self._schedule_this_thread()
-        counters = self._counters
-        counters.frames += 1
+        self._counters.frames += 1
         can_id = msg.arbitration_id
         if msg.is_error_frame:
-            counters.can_errors += 1
+            self._counters.can_errors += 1
             self.error_frames.observe(can_id, msg.data)
-        elif self.error_frames.bus_off:
+        elif self.error_frames.state == BUS_OFF:  # ErrorFrameWatch.bus_off, inline
             self.error_frames.heard(can_id)
         if self._load is not None:
-            self._load.add(msg)
+            self._load(msg)
         if msg.is_error_frame or msg.is_remote_frame:
             return  # no service of the master's is a remote or error frame
         data = msg.data
@@ -129,14 +128,13 @@ class FrameListener(GuardedListener):
         if rule is not None and len(data) != rule.length:
             self.malformed(can_id, data, rule.problem(len(data)) or "")
             return
-        network = self.network
         route = self._routes.get(can_id)
         if route is not None:
             try:
                 route(can_id, data, wire_t)
             except Exception as err:  # noqa: BLE001 - as dispatch: counted, receiving goes on
                 self._raised(route, can_id, data, err)
-        dispatch(network, can_id, data, wire_t, self._raised, subscribers(network, can_id))
+        self._dispatch(can_id, data, wire_t)
 
 
 #: ``on_malformed(can_id, length, expected)``: a TPDO whose length is not its mapping's

@@ -247,8 +247,9 @@ class SlotTable:
         self._acquire()  # the lock of :attr:`cond` (its C methods: every TPDO comes here)
         try:
             st = self._slots[slot]
+            image = data if type(data) is bytes else bytes(data)  # one copy, kept by both
             if self.sink is not None:
-                self.sink.image(slot, timestamp, data, st.image_count + 1)
+                self.sink.image(slot, timestamp, image, st.image_count + 1)
             since = self._foreign_since
             if since is not None and timestamp > since:  # _foreign, inline
                 self._count_foreign()
@@ -261,10 +262,11 @@ class SlotTable:
                 st.image_seq = self.sync_seq
                 self._due -= 1
                 completed = self._due == 0
-            st.image = data if type(data) is bytes else bytes(data)
+            st.image = image
             st.image_time = timestamp
             st.image_count += 1
-            job = self._completes(completed)
+            # a frame that completes nothing leaves the gate alone (_completes, inline)
+            job = self._completes(completed) if completed or self._gate is None else None
             if job is _WAKE or self._input_waiters:
                 self.cond.notify_all()
         finally:
@@ -310,7 +312,7 @@ class SlotTable:
                     completed = completed or self._due == 0
                 st.position = value
                 st.position_time = timestamp
-            job = self._completes(completed)
+            job = self._completes(completed) if completed or self._gate is None else None
             if job is _WAKE:
                 self.cond.notify_all()
         finally:

@@ -114,6 +114,11 @@ def _step_table(width: int) -> list[int]:
 
 #: a byte of the data field or the CRC's last 8 bits; the CRC's first 7 bits
 _BYTE_STEP, _SEVEN_STEP = _step_table(8), _step_table(7)
+#: :data:`_BYTE_STEP` laid out for :func:`frame_bits`' loop over the data bytes: at
+#: ``state << 8 | byte`` the stuff bits << 15 | the state after them << 8, so that the next
+#: index is the entry ``& 0xF00 | byte`` and the stuff bits of a frame's bytes are the sum of
+#: its entries >> 15 (8 bytes' states, < 15 << 8 each, stay below 1 << 15)
+_DATA_STEP = [(step >> 4) << 15 | (step & 15) << 8 for step in _BYTE_STEP]
 #: per frame head (SOF, identifier, RTR, IDE, r0, DLC: 19 bits): its CRC-15, the stuff bits
 #: in it and the stuffing state after it (few COB-IDs, few lengths)
 _HEADS: dict[int, tuple[int, int, int]] = {}
@@ -146,15 +151,18 @@ def frame_bits(can_id: int, data: bytes | bytearray = b"", remote: bool = False,
     payload = b"" if remote else data if type(data) in (bytes, bytearray) else bytes(data)
     n = len(payload) if dlc is None else dlc
     # SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4): 19 bits
-    crc, count, state = _head((can_id << 7) | ((1 if remote else 0) << 6) | (n & 0xF))
-    table, steps = _CRC_TABLE, _BYTE_STEP
-    for byte in payload:
-        crc = ((crc << 8) & 0x7FFF) ^ table[((crc >> 7) & 0xFF) ^ byte]
-        step = steps[state << 8 | byte]
-        count += step >> 4
-        state = step & 15
-    step = _SEVEN_STEP[state << 7 | crc >> 8]
-    count += (step >> 4) + (steps[(step & 15) << 8 | (crc & 0xFF)] >> 4)
+    head = (can_id << 7) | ((1 if remote else 0) << 6) | (n & 0xF)
+    crc, count, state = _HEADS.get(head) or _head(head)
+    table, steps = _CRC_TABLE, _DATA_STEP
+    step = state << 8
+    total = 0
+    for byte in payload:  # crc < 1 << 15: crc >> 7 is a byte
+        crc = ((crc << 8) & 0x7FFF) ^ table[(crc >> 7) ^ byte]
+        step = steps[(step & 0xF00) | byte]
+        total += step
+    count += total >> 15
+    step = _SEVEN_STEP[(step & 0xF00) >> 1 | crc >> 8]
+    count += (step >> 4) + (_BYTE_STEP[(step & 15) << 8 | (crc & 0xFF)] >> 4)
     return 34 + 8 * len(payload) + count + TAIL_BITS
 
 

@@ -130,6 +130,9 @@ class CyclePublisher:
             self._pending = self._publish(*self._armed)
         else:
             self._pending, self._handed = self._handed, None
+        # the bus load's queued frames, counted here with time to spare until the next SYNC
+        # (client/load.py): not on the receive thread, not on the way to the SYNC
+        master.load.count_queued()
 
     def _finish_pending(self) -> None:
         """Finish the cycle published last (:meth:`_finish`); an error is logged, and the

@@ -1,5 +1,5 @@
 """Canaries of the canopen internals behind the one network class of the master and the
-simulated gateway (base/canopen_compat.py ``OwnListenerNetwork``, ``dispatch``,
+simulated gateway (base/canopen_compat.py ``OwnListenerNetwork``, ``dispatcher``,
 ``forget_receive_error``, ``drop_node``, ``forget_values``): a canopen release that changed
 one fails here, by name, on a real canopen ``Network`` on python-can's virtual bus."""
 
@@ -13,7 +13,7 @@ import canopen
 import pytest
 
 from ssi_bridge.base.canopen_compat import (
-    OwnListenerNetwork, dispatch, drop_node, forget_receive_error, forget_values, subscribers,
+    OwnListenerNetwork, dispatcher, drop_node, forget_receive_error, forget_values, subscribers,
 )
 from support.waiting import wait_for
 
@@ -106,17 +106,20 @@ def test_the_send_hook_is_the_one_canopen_sends_through() -> None:
     assert "send_message(" in inspect.getsource(canopen.sync.SyncProducer.transmit)
 
 
-def test_dispatch_is_canopens_notify_with_each_subscriber_on_its_own() -> None:
+def test_the_dispatcher_is_canopens_notify_with_each_subscriber_on_its_own() -> None:
     """canopen's ``notify`` calls ``subscribers[can_id]`` in order and then the node scanner's
     ``on_message_received(can_id)`` (a COB-ID: canopen's other upstream line passes a
-    different argument); ``dispatch`` does the same, and a subscriber that raises is handed
-    to ``on_raise`` while the next one still gets the frame."""
+    different argument); the ``dispatcher`` does the same, and a subscriber that raises is
+    handed to ``on_raise`` while the next one still gets the frame. It is made once per
+    network: ``subscribe`` and ``unsubscribe`` change the table it holds in place, and a
+    scanner ``reset`` (a new ``nodes`` list) is seen at the next frame."""
     source = inspect.getsource(canopen.Network.notify)
     assert "self.subscribers[can_id]" in source
     assert "callback(can_id, data, timestamp)" in source
     assert "self.scanner.on_message_received(can_id)" in source
     assert list(inspect.signature(canopen.network.NodeScanner.on_message_received)
                 .parameters) == ["self", "can_id"]
+    assert "self.nodes = []" in inspect.getsource(canopen.network.NodeScanner.reset)
     network = canopen.Network()
     got: list[tuple[int, bytes, float]] = []
     raised: list[tuple[Any, int, bytes, Exception]] = []
@@ -127,18 +130,26 @@ def test_dispatch_is_canopens_notify_with_each_subscriber_on_its_own() -> None:
     def keeps(can_id: int, data: bytearray, t: float) -> None:
         got.append((can_id, bytes(data), t))
 
+    notify = dispatcher(network, lambda cb, can_id, data, err: raised.append(
+        (cb, can_id, bytes(data), err)))
     network.subscribe(0x185, breaks)
     network.subscribe(0x185, keeps)
     assert subscribers(network, 0x185) == [breaks, keeps]
-    dispatch(network, 0x185, bytearray(b"\x01\x02"), 12.5,
-             lambda cb, can_id, data, err: raised.append((cb, can_id, bytes(data), err)))
+    notify(0x185, bytearray(b"\x01\x02"), 12.5)
     assert got == [(0x185, b"\x01\x02", 12.5)]
     assert [(cb, can_id, data) for cb, can_id, data, _ in raised] == [
         (breaks, 0x185, b"\x01\x02")]
     assert isinstance(raised[0][3], ValueError)
     assert network.scanner.nodes == [5], "a TPDO1 of node 5 is seen by the scanner"
-    dispatch(network, 0x186, bytearray(), 0.0, lambda *a: None)
+    notify(0x186, bytearray(), 0.0)
+    notify(0x286, bytearray(), 0.0)
     assert network.scanner.nodes == [5, 6]
+    network.unsubscribe(0x185, keeps)
+    notify(0x185, bytearray(b"\x03"), 13.0)
+    assert got == [(0x185, b"\x01\x02", 12.5)] and len(raised) == 2
+    network.scanner.reset()
+    notify(0x706, bytearray(b"\x05"), 14.0)
+    assert network.scanner.nodes == [6], "found again after a reset"
 
 
 def test_a_dropped_node_leaves_the_table_and_keeps_its_subscriptions() -> None:

@@ -78,6 +78,39 @@ def test_a_wall_clock_step_back_empties_the_window_instead_of_growing_it() -> No
     assert float(figures["bus_load_percent"]) < 0.1  # one SYNC frame in 1 s at 500 kbit/s
 
 
+def test_queued_received_frames_give_the_figures_of_frames_counted_as_they_came() -> None:
+    """The receive thread only queues a frame (``BusLoad.received``), a sent one is measured
+    at once and queued behind it (``add``); the cycle thread once its cycle is over
+    (``count_queued``), or the reader, counts them: the figures equal those of counting every
+    frame as it came, and a frame is counted once however they meet."""
+    import can
+
+    from ssi_bridge.client.load import BusLoad
+
+    t0 = 1.7e9
+    eager, queued = BusLoad(1_000_000), BusLoad(1_000_000)
+    for cycle in range(50):
+        t = t0 + cycle * 2e-3
+        sync = can.Message(arbitration_id=0x80, is_extended_id=False, timestamp=t)
+        eager.add(sync)
+        queued.add(sync)
+        for k in range(12):  # an 8-slot cycle's TPDOs, changing payloads (stuff bits differ)
+            data = ((cycle * 7919 + k * 104729) & 0xFFFFFFFF).to_bytes(4, "little") * 2
+            tpdo = can.Message(arbitration_id=0x181 + k, data=data, is_extended_id=False,
+                               timestamp=t + (k + 1) * 1.3e-4)
+            eager.add(tpdo)
+            queued.received(tpdo)
+        if cycle % 3:
+            queued.count_queued()
+            assert not queued._queued
+    queued.received(can.Message(arbitration_id=0x1, is_error_frame=True, timestamp=t0))
+    now = t0 + 0.2
+    figures = queued.figures(now=now)
+    assert figures == eager.figures(now=now)
+    assert figures["frames_per_cycle"] == "13.00"
+    assert queued.figures(now=now) == figures  # counted once, not again at the next read
+
+
 def test_the_figures_are_those_of_the_frames_in_the_window_however_many_came_before() -> None:
     """The window's wire time and SYNCs come from running totals (client/load.py): after
     3 s of frames, SYNC and TPDOs of varying content, the last second's figures equal the

@@ -157,6 +157,16 @@ class RosProbe:
             msg_type, topic, lambda m: received.append((time.monotonic(), m)), qos))
         return received
 
+    def subscribe_sent(self, msg_type: Any, topic: str, qos: int = 50) -> list[tuple[float, Any]]:
+        """Collect (send time, message) of ``topic``: the send time is the DDS source
+        timestamp the publisher put on it (wire time, s), so it tells when the node published
+        a message however late a busy probe receives it."""
+        received: list[tuple[float, Any]] = []
+        self._subscriptions.append(self.node.create_subscription(
+            msg_type, topic, lambda m, info: received.append((info["source_timestamp"] * 1e-9, m)),
+            qos))
+        return received
+
     def unsubscribe_since(self, count: int) -> None:
         """Destroy the subscriptions made after the first ``count`` (a test's own, on a probe
         shared by a module)."""

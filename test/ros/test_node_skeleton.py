@@ -76,8 +76,12 @@ def test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_join
         return None
 
     probe.wait_for(lambda: joint_status() is not None, 10.0, "a diagnostics status", node)
+    # OK for a healthy joint. The simulated station shares this busy machine: when it is
+    # starved, the joint's left-out share rightly makes it WARN for a while (core/health.py),
+    # so the status is awaited, not taken from one snapshot
+    probe.wait_for(lambda: joint_status().level == DiagnosticStatus.OK, 10.0,
+                   f"the joint's status OK (first seen: {joint_status().message})", node)
     st = joint_status()
-    assert st.level == DiagnosticStatus.OK, f"{st.level!r}: {st.message}"
     keys = {kv.key for kv in st.values}
     assert {"ERR_SSI", "ERR_PARA", "STS_OFLW", "STS_UFLW", "samples"} <= keys
     assert "slot 1" in st.hardware_id and "node 1" in st.hardware_id

@@ -42,7 +42,10 @@ def session(tmp_path_factory: pytest.TempPathFactory,
     env = dds_env(dom)
     params = {"bus.channel": f"split_{dom}", "record.root": str(work / "rec"),
               "record.max_duration": SPLIT_S,
-              "storage_path": str(work / "bank" / "retentive.json")}
+              "storage_path": str(work / "bank" / "retentive.json"),
+              # a deep joint_states history, recorded as the offered QoS and so replayed with
+              # it: a probe starved beside busy neighbours must not lose what it compares
+              "qos_overrides./joint_states.publisher.depth": 1000}
     pfile = work / "params.yaml"
     pfile.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     log_path = work / "node.log"

@@ -18,7 +18,7 @@ import time
 import pytest
 import yaml
 
-from support.node_changes import published, read_burst
+from support.node_changes import Change, hold_changes, published, read_burst
 from support.node_truth import RATE, Run, eight_joints, epochs, matrix, params, two_stations
 from support.truth import TruthOracle
 
@@ -91,18 +91,13 @@ def test_a_station_killed_and_started_again_on_the_same_bus(start_node, probe, t
         second = station()
         run.published_again(time.monotonic() + 0.5)
         time.sleep(1.0)
-        # the samples before the restart against the first station's epoch, after it against
-        # the new one's
-        def stamp(m) -> float:
-            return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-
-        before = [(t, m) for t, m in run.joints if stamp(m) < cut]
-        after = [(t, m) for t, m in run.joints if stamp(m) > cut]
-        run.joints[:] = before
-        run.check("station_killed", t0)
-        run.oracle = TruthOracle.from_params(params, epochs(probe, run.node, [1]))
-        run.joints[:] = after
-        run.check("station_restarted", t0)
+        # the samples stamped before the kill against the first station's epoch, after it
+        # against the new one's: split by stamp once the probe has every sample stamped so
+        # far (hold_changes), never by cutting the probe's live list, which goes on
+        # receiving the new station's samples while a check waits for them
+        restart = Change("the station killed and another started", cut, cut,
+                         TruthOracle.from_params(params, epochs(probe, run.node, [1])))
+        hold_changes(run, [restart], "station_restart", t0)
     finally:
         for proc in (first, second):
             if proc is not None and proc.poll() is None:

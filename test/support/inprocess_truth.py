@@ -4,7 +4,8 @@ at its stamp, within one count plus the stated latch bound.
 
 In process every cycle's joint_states is seen (no subscriber can fall behind), so every
 finite velocity is checked. The object has what support/node_changes.py's ``timed`` and
-``hold_changes`` use (``phase``, ``samples``, ``hold``, ``oracle``, ``bound``).
+``hold_changes`` use (``phase``, ``received_until``, ``samples``, ``hold``, ``oracle``,
+``bound``).
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ class TruthRun:
         self.bound = float(values.get("latch_bound", LATCH_BOUND)) + bridge.wire_s
         #: (wire time, name) of each disturbance started
         self.phases: list[tuple[float, str]] = []
+
+    def received_until(self, wire: float) -> None:
+        """Nothing to wait for: in process every cycle's result is kept as the cycle ends
+        (``support.node_truth.Run.received_until`` waits for a probe's subscriptions)."""
 
     def samples(self) -> list[Any]:
         """Every sample published so far."""

@@ -63,7 +63,9 @@ def hold_changes(run: Run, changes: list[Change], case: str, t0: float) -> None:
     """Every sample received so far holds the rule against the truth of its stamp's side of
     ``changes`` (in call order); a sample stamped while a call was under way holds it
     against the side before or after that call, position only (NaN is unknown, never
-    wrong). A failure names the segment."""
+    wrong). Samples are taken once the run has received all stamped until now
+    (``run.received_until``). A failure names the segment."""
+    run.received_until(time.time())
     samples = run.samples()
     oracles = [run.oracle] + [c.oracle for c in changes]
     edges = [-math.inf] + [x for c in changes for x in (c.w0, c.w1)] + [math.inf]
@@ -71,7 +73,7 @@ def hold_changes(run: Run, changes: list[Change], case: str, t0: float) -> None:
         lo, hi = edges[2 * k], edges[2 * k + 1]
         segment = [s for s in samples if lo < s.stamp < hi]
         label = "before any change" if k == 0 else f"after {changes[k - 1].name}"
-        assert segment, f"{case}: no sample stamped {label}"
+        assert segment, f"{case}: no sample stamped {label}" + _why_none(run, lo, hi)
         try:
             run.hold(segment, oracle, f"{case}: {label}" if k else case, t0)
         except AssertionError as err:
@@ -84,6 +86,26 @@ def hold_changes(run: Run, changes: list[Change], case: str, t0: float) -> None:
         assert not off, (f"{case}: {len(off)} samples stamped during {change.name} off both "
                          f"truths (residuals before/after, counts): "
                          + ", ".join(f"{s.stamp:.4f} {a:+.0f}/{b:+.0f}" for s, a, b in off[:5]))
+
+
+def _why_none(run: Run, lo: float, hi: float) -> str:
+    """What the node's ~/status said of the first joint in the cycles stamped in (lo, hi):
+    how many it left out and why, so an empty segment names its cause ("" for a run without
+    ~/status, the in-process one)."""
+    if not hasattr(run, "status"):
+        return ""
+
+    def stamp(m: Any) -> float:
+        return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+    cycles = [(stamp(m), ch) for _, m in run.status if lo < stamp(m) < hi
+              for ch in m.channels if ch.joint == run.first]
+    reasons = Counter(ch.set_aside_reason or "published" for _, ch in cycles)
+    span = f"{hi - lo:.3f} s" if math.isfinite(hi - lo) else "open"
+    newest = max((stamp(m) for _, m in run.status), default=math.nan)
+    return (f" (segment {span}; ~/status of {run.first} in it: {len(cycles)} cycles, "
+            f"{dict(reasons)}; the newest ~/status received is stamped "
+            f"{time.time() - newest:.3f} s ago)")
 
 
 def _either(s: Sample, before: TruthOracle, after: TruthOracle, bound_s: float) -> bool:

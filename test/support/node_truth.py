@@ -115,10 +115,12 @@ class Run:
         self.phases: list[tuple[float, str]] = []
 
     def check(self, case: str = "", t0: float | None = None) -> None:
-        """Every sample received so far holds the rule; it is a failure listing the worst.
+        """Every sample the node stamped until now holds the rule (received first:
+        :meth:`received_until`); it is a failure listing the worst.
 
         ``case``/``t0``: the disturbance's name and start (monotonic), for the bench's figures.
         """
+        self.received_until(time.time())
         self.hold(self.samples(), self.oracle, case, t0)
 
     def samples(self) -> list[Any]:
@@ -230,8 +232,36 @@ class Run:
         return max(levels, default=DiagnosticStatus.OK)
 
     def published_again(self, after: float) -> None:
-        self.probe.wait_for(lambda: any(t > after for t, _ in self.joints), 10.0,
-                            "joint_states again after the disturbance", self.node)
+        """The node publishes the first joint again: a joint_states stamped after ``after``
+        (monotonic) is received. By its stamp, not by when it arrived: a probe starved
+        beside burners receives seconds late, and a message it receives after ``after`` may
+        be one the node published before it."""
+        wire = time.time() - (time.monotonic() - after)
+        self.probe.wait_for(lambda: _newest(self.joints, self.first) > wire, 30.0,
+                            "joint_states stamped after the disturbance", self.node)
+
+    def received_until(self, wire: float, timeout: float = 30.0) -> None:
+        """Wait until the probe has received a joint_states with the first joint and a
+        ~/status stamped at or after ``wire`` (wire time): each topic's messages arrive in
+        the order published (one reliable writer each), so then every one stamped before
+        ``wire`` is in. A check of "every sample stamped so far" waits here first: a probe
+        on a busy machine falls seconds behind the node's 200 Hz (its executor handles every
+        message in Python), and a check right after a disturbance would miss samples the
+        node did publish."""
+        self.probe.wait_for(lambda: _newest(self.joints, self.first) >= wire
+                            and _newest(self.status, "") >= wire, timeout,
+                            f"joint_states and ~/status stamped at or after {wire:.3f}",
+                            self.node)
+
+
+def _newest(received: list[tuple[float, Any]], joint: str) -> float:
+    """The newest stamp (wire time) among ``received`` messages (with ``joint`` among their
+    names, unless empty); -inf before any. Scans from the newest received: they arrive in
+    stamp order."""
+    for _, msg in reversed(received):
+        if not joint or joint in msg.name:
+            return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    return -math.inf
 
 
 def foreign_syncs(wire: str, rate: float, seconds: float, stop: threading.Event) -> int:
