@@ -42,9 +42,10 @@ def test_register_services_over_the_handshake(running, probe):
 
 def test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_joint(running,
                                                                                   probe):
-    """One joint's ~joint_states and its /diagnostics status. (Two tests before, each on a
-    node of its own with one joint: ``wrist`` at 50 Hz, ``elbow`` with diagnostics_period
-    0.5; one node with both settings now, every check kept.)"""
+    """One joint's ~joint_states and its /diagnostics status, then ``~/status`` for a reader
+    that comes later. (Two tests before, each on a node of its own with one joint: ``wrist``
+    at 50 Hz, ``elbow`` with diagnostics_period 0.5; one node with both settings now, every
+    check kept.)"""
     node = running({"publish_rate": RATE, "joints": ["wrist"], "diagnostics_period": 0.5})
     diags = probe.subscribe(DiagnosticArray, "/diagnostics")
     msgs = probe.subscribe(JointState, node.topic("joint_states"))
@@ -85,6 +86,36 @@ def test_joint_states_rate_name_stamps_and_speed_and_diagnostics_ok_for_the_join
     keys = {kv.key for kv in st.values}
     assert {"ERR_SSI", "ERR_PARA", "STS_OFLW", "STS_UFLW", "samples"} <= keys
     assert "slot 1" in st.hardware_id and "node 1" in st.hardware_id
+    _a_status_reader_that_comes_later_gets_every_cycle_promptly(node, probe)
+
+
+def _a_status_reader_that_comes_later_gets_every_cycle_promptly(node, probe) -> None:
+    """``~/status`` is built only while it has a reader (ros/cycle_publish.py), its readers
+    counted once per ``STATUS_READERS_EVERY_S`` of cycles: a reader that comes while the node
+    runs gets ``~/status`` promptly, and every cycle's from then on. (Its own node-process
+    test before; here on the running node, within the node-process budget, docs/testing.md.)"""
+    from ssi_bridge_msgs.msg import Status
+
+    from ssi_bridge.ros.cycle_publish import STATUS_READERS_EVERY_S
+
+    received = probe.subscribe(Status, node.topic("~/status"), 200)
+    sub = probe._subscriptions[-1]
+    probe.wait_for(lambda: sub.get_publisher_count() > 0, 10.0, "~/status discovered", node)
+    matched = time.monotonic()  # the reader's side has matched the node's writer
+    probe.wait_for(lambda: len(received) > 0, 5.0, "the first ~/status", node)
+    # the node's side matches about when this side does (DDS discovery both ways, one
+    # process each on localhost); the count is read again within STATUS_READERS_EVERY_S:
+    # far less than the margin a loaded machine needs
+    assert received[0][0] - matched < STATUS_READERS_EVERY_S + 0.45, received[0][0] - matched
+    states = probe.subscribe(JointState, node.topic("joint_states"), 200)
+    time.sleep(1.0)
+    # every cycle's ~/status from then on: each joint_states (a cycle published) has the
+    # ~/status of the same stamp (a slot skipped on a loaded machine has neither)
+    both = [m.header.stamp for _, m in states[5:-5]]
+    status = {(m.header.stamp.sec, m.header.stamp.nanosec) for _, m in received}
+    assert len(both) > 0.2 * RATE, len(both)
+    missing = [s for s in both if (s.sec, s.nanosec) not in status]
+    assert not missing, f"{len(missing)} of {len(both)} cycles without ~/status"
 
 
 def test_recording_opens_with_the_mcap_reader(running, probe, tmp_path: Path):
