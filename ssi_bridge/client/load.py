@@ -15,6 +15,7 @@ frame as it came.
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import deque
 from collections.abc import Callable
@@ -23,6 +24,8 @@ import can
 
 from ssi_bridge.base.timebase import wire_now
 from ssi_bridge.protocol.wire import frame_bits
+
+logger = logging.getLogger(__name__)
 
 SYNC_COB_ID = 0x080
 
@@ -66,6 +69,8 @@ class BusLoad:
         #: its timestamp and content are read when it is counted, so the frame must not change
         self.received: Callable[[can.Message], None] = self._queued.append
         self._read_lock = threading.Lock()
+        #: received frames left out of the figures: not a classic CAN frame (logged once)
+        self.not_counted = 0
 
     def add(self, msg: can.Message) -> None:
         """Account one frame (a frame this master sent: its timestamp, or now when it has
@@ -100,25 +105,40 @@ class BusLoad:
         take, keep = queued.popleft, frames.append
         bits, syncs = self._bits, self._syncs
         t = None
-        while queued:
-            msg = take()
-            if isinstance(msg, tuple):  # sent: measured already
-                t, size, sync = msg
-            else:
-                if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
-                    continue
-                can_id = msg.arbitration_id
-                size = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
-                t = getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now()
-                sync = can_id == SYNC_COB_ID
-            keep((t, bits, syncs))
-            bits += size
-            syncs += sync
-        self._bits, self._syncs = bits, syncs
+        try:
+            while queued:
+                msg = take()
+                if isinstance(msg, tuple):  # sent: measured already
+                    t, size, sync = msg
+                else:
+                    if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
+                        continue
+                    can_id = msg.arbitration_id
+                    try:
+                        size = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
+                    except ValueError as err:  # no classic frame (an id above 0x7FF)
+                        self._not_counted(msg, err)
+                        continue
+                    t = getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now()
+                    sync = can_id == SYNC_COB_ID
+                keep((t, bits, syncs))
+                bits += size
+                syncs += sync
+        finally:  # the totals of what was kept, whatever ended the loop
+            self._bits, self._syncs = bits, syncs
         if t is not None:
             oldest = t - self.window
             while frames[0][0] < oldest:  # never the frame counted last
                 frames.popleft()
+
+    def _not_counted(self, msg: can.Message, err: ValueError) -> None:
+        """A received frame no classic CAN frame can be (an interface that passes an 11-bit
+        id above 0x7FF): counted in :attr:`not_counted`, said once."""
+        self.not_counted += 1
+        if self.not_counted == 1:
+            logger.warning("bus load: a received frame is not a classic CAN frame and is not "
+                           "counted (%s: id 0x%X); later ones are counted in not_counted only",
+                           err, msg.arbitration_id)
 
     def figures(self, now: float | None = None) -> dict[str, str]:
         """load %, frames and wire time per cycle over the window ending ``now``.

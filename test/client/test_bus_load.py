@@ -142,3 +142,38 @@ def test_the_figures_are_those_of_the_frames_in_the_window_however_many_came_bef
     assert figures["frames_per_cycle"] == f"{len(window) / syncs:.2f}"
     assert figures["wire_ms_per_cycle"] == f"{1e3 * busy / syncs:.3f}"
     assert len(load._frames) == len(window)  # nothing older kept
+
+
+def test_a_received_frame_no_classic_frame_can_be_is_left_out_and_said_once(caplog) -> None:
+    """An interface may hand over an 11-bit id above 0x7FF (python-can's ``virtual`` bus
+    passes anything): no classic CAN frame has it (ISO 11898-1: 11 identifier bits), so it
+    has no length on the wire. It is left out of the figures, counted in ``not_counted`` and
+    logged once; the frames around it are counted as if it had not come, wherever the queue
+    is counted (the cycle thread, the diagnostics' reader, a sender past the queue limit)."""
+    import logging
+
+    import can
+
+    from ssi_bridge.client.load import BusLoad
+
+    t0 = 1.7e9
+    clean, dirty = BusLoad(1_000_000), BusLoad(1_000_000)
+    caplog.set_level(logging.WARNING, logger="ssi_bridge.client.load")
+    for cycle in range(20):
+        t = t0 + cycle * 1e-3
+        frames = [can.Message(arbitration_id=0x80, is_extended_id=False, timestamp=t),
+                  can.Message(arbitration_id=0x181, data=bytes(8), is_extended_id=False,
+                              timestamp=t + 2e-4)]
+        for m in frames:
+            clean.received(m)
+            dirty.received(m)
+        dirty.received(can.Message(arbitration_id=0x800 + cycle, data=b"\1",
+                                   is_extended_id=False, timestamp=t + 4e-4))
+        if cycle == 10:
+            dirty.count_queued()  # the cycle thread's count meets a bad frame: no error
+    figures = dirty.figures(now=t0 + 0.05)
+    assert figures == clean.figures(now=t0 + 0.05)
+    assert figures["frames_per_cycle"] == "2.00"
+    assert dirty.not_counted == 20
+    said = [r for r in caplog.records if "not a classic CAN frame" in r.getMessage()]
+    assert len(said) == 1, [r.getMessage() for r in said]
