@@ -72,11 +72,12 @@ class CyclePublisher:
         #: joint_states, one message filled each cycle (a cycle is finished before the next
         #: one is decided, so nothing holds the one before when it is filled again)
         self._joint_states = JointStates()
-        #: ~/status's publisher and its reader count, counted again when ``_readers_due``
-        #: cycles have run down (:data:`STATUS_READERS_EVERY_S`)
+        #: ~/status's publisher and its reader count, counted again from ``_readers_due``
+        #: on (time.monotonic(): :data:`STATUS_READERS_EVERY_S` after the last count, at any
+        #: SYNC rate: listen-only, the cycles are another master's)
         self._status_pub: Any = None
         self._status_readers = 0
-        self._readers_due = 0
+        self._readers_due = 0.0
         #: the rclpy context has been shut down (its ``on_shutdown``; asked each cycle
         #: instead of ``context.ok()``, which takes two locks)
         self._shut_down = False
@@ -85,6 +86,14 @@ class CyclePublisher:
     def _on_shutdown(self) -> None:
         """The node's rclpy context was shut down (its ``on_shutdown`` callback)."""
         self._shut_down = True
+
+    def _context_gone(self) -> bool:
+        """Whether the context is no longer valid, noted for the next cycles: rclpy's own
+        signal handler invalidates a context without its ``on_shutdown`` callbacks, so an
+        rclpy error is where such a shutdown shows first."""
+        if not self.node.context.ok():
+            self._shut_down = True
+        return self._shut_down
 
     # -- the master's cycle (cycle thread, receive thread) ---------------------------------
     def on_cycle(self) -> None:
@@ -95,7 +104,7 @@ class CyclePublisher:
         try:
             self._cycle()
         except RCLError:
-            if node.context.ok():
+            if not self._context_gone():
                 raise
 
     def _cycle(self) -> None:
@@ -143,7 +152,7 @@ class CyclePublisher:
         try:
             self._finish(pending)
         except RCLError:
-            if self.node.context.ok():
+            if not self._context_gone():
                 logger.exception("finishing the cycle failed; continuing with the next one")
         except Exception:  # noqa: BLE001 - the next cycle's SYNC is out: it must be armed
             logger.exception("finishing the cycle failed; continuing with the next one")
@@ -164,7 +173,7 @@ class CyclePublisher:
         try:
             self._handed = self._publish(*self._armed)
         except Exception:  # noqa: BLE001 - the receive thread must outlive one bad cycle
-            if node.context.ok():
+            if not self._context_gone():
                 logger.exception("publishing the cycle failed; continuing with the next one")
 
     # -- listen-only (observer thread) -----------------------------------------------------
@@ -177,7 +186,7 @@ class CyclePublisher:
         try:
             self.publish(cycle.sync_time, cycle.seq)
         except RCLError:
-            if node.context.ok():
+            if not self._context_gone():
                 raise
 
     # -- one cycle ---------------------------------------------------------------------------
@@ -208,6 +217,7 @@ class CyclePublisher:
             js = self._joint_states.fill(result, stamp_ns, node.settings.frame_id)
             if js.name:
                 if not node.publish_safe(node.joint_pub, js):
+                    self._shut_down = True  # the context is gone (publish_safe)
                     return None
                 probe = node._span_probe
                 if probe is not None:  # bench/bench_node.py: the driver's own span
@@ -247,11 +257,10 @@ class CyclePublisher:
     def _status_read(self, status_pub: Any) -> bool:
         """Whether ``~/status`` has a DDS reader, as counted at most
         :data:`STATUS_READERS_EVERY_S` ago (at once for a publisher made anew)."""
-        self._readers_due -= 1
-        if self._readers_due <= 0 or status_pub is not self._status_pub:
+        now = time.monotonic()
+        if now >= self._readers_due or status_pub is not self._status_pub:
             self._status_pub = status_pub
-            self._readers_due = max(1, round(self.node.settings.publish_rate
-                                             * STATUS_READERS_EVERY_S))
+            self._readers_due = now + STATUS_READERS_EVERY_S
             self._status_readers = status_pub.get_subscription_count()
         return self._status_readers > 0
 

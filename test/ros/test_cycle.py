@@ -250,3 +250,27 @@ def test_the_garbage_collector_runs_on_the_cycle_thread_with_time_to_spare():
     # each of the pacing's collections was seen (the thread, ending, may also have collected
     # once after the collector came back on)
     assert 1 <= sum(loop.pacing.collections) <= len(collected_on)
+
+
+def test_status_readers_are_counted_again_by_time_not_by_cycles() -> None:
+    """``~/status`` is built only for a reader, whose count is read again
+    ``STATUS_READERS_EVERY_S`` after the last count (ros/cycle_publish.py, docs/node.md): by
+    time, so a listen-only node whose cycles are another master's slow SYNCs (10 Hz against a
+    publish_rate of 2000) sees a new reader as promptly as a master does."""
+    from types import SimpleNamespace
+
+    from ssi_bridge.ros.cycle_publish import STATUS_READERS_EVERY_S, CyclePublisher
+
+    node = SimpleNamespace(context=SimpleNamespace(on_shutdown=lambda cb: None),
+                           settings=SimpleNamespace(publish_rate=2000.0))
+    readers = [0]
+    pub = SimpleNamespace(get_subscription_count=lambda: readers[0])
+    cycles = CyclePublisher(node)
+    assert cycles._status_read(pub) is False  # a first cycle: counted, nobody reads
+    readers[0] = 1  # a reader comes
+    time.sleep(STATUS_READERS_EVERY_S + 0.01)  # one slow SYNC later
+    assert cycles._status_read(pub) is True
+    readers[0] = 0
+    assert cycles._status_read(pub) is True  # within the interval: the count kept
+    other = SimpleNamespace(get_subscription_count=lambda: readers[0])
+    assert cycles._status_read(other) is False  # a publisher made anew: counted at once
