@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import logging
 import os
 import threading
 from collections.abc import Iterator
@@ -22,6 +23,10 @@ PR_SET_NAME = 15
 #: the kernel keeps 15 bytes of a thread name
 THREAD_NAME_BYTES = 15
 _LIBC = ctypes.CDLL(None, use_errno=True)
+#: sched(7): a flag OR-ed into the policy sched_getscheduler reports
+SCHED_RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0x40000000)
+
+logger = logging.getLogger(__name__)
 
 
 def name_this_thread(name: str) -> None:
@@ -107,7 +112,9 @@ def fifo_meanwhile(priority: int) -> Iterator[bool]:
         yield False
         return
     policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-    if policy in (os.SCHED_FIFO, os.SCHED_RR) and param.sched_priority >= priority:
+    # the policy may carry SCHED_RESET_ON_FORK, which restoring it keeps
+    if (policy & ~SCHED_RESET_ON_FORK) in (os.SCHED_FIFO, os.SCHED_RR) \
+            and param.sched_priority >= priority:
         yield False
         return
     raised = fifo_this_thread(priority)
@@ -115,7 +122,13 @@ def fifo_meanwhile(priority: int) -> Iterator[bool]:
         yield raised
     finally:
         if raised:
-            os.sched_setscheduler(0, policy, param)
+            try:
+                os.sched_setscheduler(0, policy, param)
+            except OSError as err:  # a policy that cannot be set back (SCHED_DEADLINE)
+                normal_this_thread()  # never left real-time by a short burst
+                logger.warning("thread %s: its scheduling (policy %d) could not be set back "
+                               "after a real-time burst (%s); it runs normally now",
+                               threading.current_thread().name, policy, err)
 
 
 def scheduling_of_this_thread() -> str:

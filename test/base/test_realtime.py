@@ -133,3 +133,14 @@ def test_fifo_meanwhile_raises_the_thread_for_the_block_and_puts_it_back():
 
     # a thread at a higher FIFO priority already is neither lowered nor changed after
     assert _in_a_thread(higher_already) == (False, (os.SCHED_FIFO, 6), (os.SCHED_FIFO, 6))
+
+    def higher_already_reset_on_fork() -> tuple:
+        # sched(7): SCHED_RESET_ON_FORK is reported OR-ed into the policy
+        flag = os.SCHED_RESET_ON_FORK
+        os.sched_setscheduler(0, os.SCHED_FIFO | flag, os.sched_param(6))
+        with fifo_meanwhile(4) as raised:
+            inside = policy()
+        return raised, inside, policy()
+
+    flagged = os.SCHED_FIFO | os.SCHED_RESET_ON_FORK
+    assert _in_a_thread(higher_already_reset_on_fork) == (False, (flagged, 6), (flagged, 6))
