@@ -117,7 +117,10 @@ NODE_PARAMETERS: dict[str, tuple[Any, ParameterDescriptor]] = {
         "ros2_control loop has: on a busy machine the cycle does not wait behind other "
         "processes (0: normal scheduling; needs CAP_SYS_NICE or an rtprio limit, else the node "
         "says so once and schedules it normally). Below simulation.station_priority: the "
-        "simulated hardware answers first", read_only=True, int_range=(0, 99))),
+        "simulated hardware answers first. The periodic /diagnostics (its CAM reads "
+        "included) runs at cycle_priority - 1 for its few milliseconds, then at the "
+        "executor's own scheduling again: it holds Python's lock, which the real-time "
+        "threads wait for", read_only=True, int_range=(0, 99))),
     "storage_path": ("", _describe(
         "File holding the retentive registers of the simulated modules (000: REG_PARA1, "
         "limits, offset, mask); empty: keep them in memory only", read_only=True)),
