@@ -39,6 +39,20 @@ _Queued = can.Message | tuple[float, int, bool]
 QUEUE_LIMIT = 64
 
 
+def _measure(msg: can.Message) -> tuple[float, int, bool] | None:
+    """A frame's (wire time, bits on the wire, is SYNC); None for a frame the load leaves out
+    (an error, extended or FD frame). Its wire time is its stamp (base/timebase.frame_wire_time,
+    inline), or now when it has none.
+
+    :raises ValueError: no classic CAN frame has it (protocol/wire.frame_bits)
+    """
+    if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
+        return None
+    can_id = msg.arbitration_id
+    return (getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
+            frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc), can_id == SYNC_COB_ID)
+
+
 class BusLoad:
     """Frames (timestamp, and the bits and SYNCs counted before it) of the last ``window``
     seconds, and the running totals: :meth:`figures` takes a window's wire time and SYNCs as
@@ -78,15 +92,11 @@ class BusLoad:
 
         :param msg: the frame as python-can sent (or received) it
         """
-        if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
-            return
-        can_id = msg.arbitration_id
-        bits = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
-        # its wire time (base/timebase.frame_wire_time, inline)
-        self._queued.append((getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
-                             bits, can_id == SYNC_COB_ID))
-        if len(self._queued) > QUEUE_LIMIT:
-            self.count_queued()
+        measured = _measure(msg)
+        if measured is not None:
+            self._queued.append(measured)
+            if len(self._queued) > QUEUE_LIMIT:
+                self.count_queued()
 
     def count_queued(self) -> None:
         """Count the queued frames now (a thread with time to spare: the cycle thread once
@@ -111,16 +121,14 @@ class BusLoad:
                 if isinstance(msg, tuple):  # sent: measured already
                     t, size, sync = msg
                 else:
-                    if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
-                        continue
-                    can_id = msg.arbitration_id
                     try:
-                        size = frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc)
+                        measured = _measure(msg)
                     except ValueError as err:  # no classic frame (an id above 0x7FF)
                         self._not_counted(msg, err)
                         continue
-                    t = getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now()
-                    sync = can_id == SYNC_COB_ID
+                    if measured is None:
+                        continue
+                    t, size, sync = measured
                 keep((t, bits, syncs))
                 bits += size
                 syncs += sync
