@@ -178,21 +178,20 @@ class Sniffer:
     def frames(self) -> Any:
         """(kernel ns, COB-ID, bits on the wire incl. stuffing) of every frame sniffed, an
         int64 array of shape (n, 3); datagrams that are no python-can frame are left out."""
-        import msgpack
         import numpy as np
 
+        from ssi_bridge.base.udp_frames import unpack_frame
         from ssi_bridge.protocol.wire import frame_bits
 
         rows = []
         for data, ancillary in self._raw:
             stamp = next((struct.unpack("@ll", raw[:16]) for level, kind, raw in ancillary
                           if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS), None)
-            try:
-                msg = msgpack.unpackb(data, raw=False)
-                cob = int(msg["arbitration_id"])
-                bits = frame_bits(cob, bytes(msg["data"]), bool(msg["is_remote_frame"]),
-                                  int(msg["dlc"]))
-            except (ValueError, KeyError, TypeError, msgpack.ExtraData):
+            try:  # the bus's own decoder (python-can's fields)
+                msg = unpack_frame(data, 0.0)
+                cob = msg.arbitration_id
+                bits = frame_bits(cob, msg.data, msg.is_remote_frame, msg.dlc)
+            except Exception:  # noqa: BLE001 - what python-can's unpack raises: no frame
                 continue
             if stamp is not None:
                 rows.append((stamp[0] * 1_000_000_000 + stamp[1], cob, bits))
