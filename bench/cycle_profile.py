@@ -28,7 +28,8 @@ Prints median / p99 (us) of each per cycle after a 2 s warm-up, then Python's ga
 collections in the window (per generation, and the threads they ran on) and the cycle
 thread's cycles run and slots missed. ``--cprofile`` prints the
 top functions (cumulative) of the cycle's thread instead; ``--plain`` wraps nothing (for a
-sampling profiler of the whole process: ``python -X perf`` under ``perf record``). No subscriber: publish() serializes
+sampling profiler of the whole process: ``python -X perf`` under ``perf record``); ``--span``,
+``--span-frames``, ``--mt``: ``bench/cycle_span.py``. No subscriber: publish() serializes
 and hands to DDS, nothing is sent. Numbers go to docs/node.md, "Performance".
 """
 
@@ -49,7 +50,8 @@ from typing import Any
 
 sys.path.insert(0, os.path.dirname(__file__))
 from bench_node import case_rate  # noqa: E402
-from cycle_span import print_spans, watch_cycle_thread  # noqa: E402
+from cycle_span import (note_threads, print_frames, print_spans, spinner,  # noqa: E402
+                        thread_switches, watch_cycle_thread, watch_frames, watch_gc)
 
 STEPS = ("sync", "sync_cpu", "recv_cpu", "frame", "frame_cpu", "cycle", "decide", "verdict", "joint", "settle", "build",
          "publish", "finish", "levels")
@@ -182,6 +184,10 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
     busy: list[tuple[str, int, int, int]] = []
     if "--span" in argv:  # when the cycle thread blocks, and the periodic diagnostics run
         watch_cycle_thread(node, blocks, busy)
+    frames: list[tuple[int, int, int, int, int, int, int]] = []
+    if "--span-frames" in argv:  # each frame's receive and handling, beside the spans
+        watch_frames(node, frames)
+        watch_gc(busy)
     per_cycle: dict[str, list[int]] = defaultdict(list)
     acc: dict[str, int] = defaultdict(int)
     measuring = threading.Event()
@@ -206,7 +212,7 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
                 per_cycle[k].append(acc[k])
 
     if "--sample" in argv:  # nothing wrapped: where every thread of the node spends time
-        threading.Thread(target=rclpy.spin, args=(node,), daemon=True).start()
+        threading.Thread(target=spinner(argv), args=(node,), daemon=True).start()
         time.sleep(2.0)
         counts = _sample(seconds)
         node.shutdown()
@@ -228,12 +234,15 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
 
         node.diagnostics.publish = profiled_publish  # type: ignore[method-assign]
     if "--plain" in argv:  # nothing wrapped: each thread's CPU, for perf or a sampler
-        threading.Thread(target=rclpy.spin, args=(node,), daemon=True).start()
+        threading.Thread(target=spinner(argv), args=(node,), daemon=True).start()
         time.sleep(2.0)
         cpu0, c0, w0 = thread_cpu(), node.cycle.cycles, time.time_ns()
+        sw0 = thread_switches()
+        note_threads()
         print(f"measuring pid {os.getpid()} for {seconds:g} s", flush=True)
         time.sleep(seconds)
         cpu1, cycles = thread_cpu(), node.cycle.cycles - c0
+        sw1 = thread_switches()
         node.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
@@ -241,8 +250,13 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
             f"{name} {(cpu1[name] - cpu0.get(name, 0)) / 1e9 / seconds:.3f} "
             f"({(cpu1[name] - cpu0.get(name, 0)) / 1e3 / max(cycles, 1):.0f})"
             for name in sorted(cpu1, key=lambda n: cpu0.get(n, 0) - cpu1[n])[:6]))
+        print("wake-ups per s: " + ", ".join(
+            f"{name} {(sw1[name] - sw0.get(name, 0)) / seconds:.0f}"
+            for name in sorted(sw1, key=lambda n: sw0.get(n, 0) - sw1[n])[:10]))
         if "--span" in argv:
-            print_spans(span_log, blocks, w0, busy)
+            recs = print_spans(span_log, blocks, w0, busy)
+            if frames:
+                print_frames(recs, frames, blocks, busy)
         if diag_profile is not None:
             out = io.StringIO()
             pstats.Stats(diag_profile, stream=out).sort_stats("cumulative").print_stats(30)
@@ -313,7 +327,7 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
                 setattr(j, method, _timed(per_cycle, "joint", getattr(j, method), acc))
         if hasattr(j, "settle"):  # the health of the SYNC before, after publishing
             j.settle = _timed(per_cycle, "settle", j.settle, acc)  # type: ignore
-    spinner = threading.Thread(target=rclpy.spin, args=(node,), daemon=True)
+    spinner = threading.Thread(target=spinner(argv), args=(node,), daemon=True)
     spinner.start()
     import gc
 

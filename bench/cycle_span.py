@@ -3,12 +3,22 @@
 The span (ros/span_probe.py: the completing frame's receive timestamp to ``publish()``
 returned) is lined up with when the cycle thread began each SYNC and its wait (was it still
 running, holding Python's lock, when the frame came?) and with when the periodic diagnostics
-ran (``_refresh_cams``, ``publish`` on the executor thread).
+ran (``_refresh_cams``, ``publish`` on the executor thread). ``--span-frames`` takes each span
+apart by the frames around it (:func:`print_frames`: the completing frame's wake-up, whether
+the receive thread was still busy when it came, its handling, which thread published) and
+notes the garbage collections; with ``CYCLE_SPAN_DUMP=<file>`` every span's times go to that
+file as JSON (monotonic offset and thread names included), to line up with ``perf sched
+record -k mono``. ``--mt`` runs the node's callbacks as the ``ssi_bridge_node`` program does
+(:func:`spinner`); ``--plain`` prints each thread's wake-ups per second too
+(:func:`thread_switches`).
 """
 
 from __future__ import annotations
 
+import os
+import threading
 import time
+from collections import defaultdict
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -40,6 +50,149 @@ def watch_cycle_thread(node: Any, blocks: list[tuple[int, int]],
         setattr(diag, method, interval(busy, method, getattr(diag, method)))
 
 
+def watch_frames(node: Any, frames: list[tuple[int, int, int, int, int, int, int]]) -> None:
+    """Wrap the receive thread's ``recv`` and the master's listener so that each received
+    frame's (COB-ID, kernel receive ns, recv entered, recv returned, handling began, handling
+    ended, handling's thread CPU ns) goes to ``frames`` (wall ns, ``time.time_ns``)."""
+    bus = node.master.network.bus
+    recv = bus.recv
+    listener = node.master._listener
+    on_frame = listener.on_message_received
+    entered = [0, 0]
+
+    def timed_recv(timeout: float | None = None) -> Any:
+        t0 = time.time_ns()
+        msg = recv(timeout)
+        entered[0], entered[1] = t0, time.time_ns()
+        return msg
+
+    def timed_frame(msg: Any) -> None:
+        t0, c0 = time.time_ns(), time.thread_time_ns()
+        try:
+            on_frame(msg)
+        finally:
+            frames.append((msg.arbitration_id, round(msg.timestamp * 1e9), entered[0],
+                           entered[1], t0, time.time_ns(), time.thread_time_ns() - c0))
+
+    bus.recv = timed_recv  # type: ignore[method-assign]
+    listener.on_message_received = timed_frame  # type: ignore[method-assign]
+    probe = node._span_probe
+    if probe is not None:
+        published = probe.published
+
+        def noted(received_s: float, joints: int) -> None:
+            published(received_s, joints)
+            BY_CYCLE_THREAD[round(received_s * 1e9)] = \
+                threading.current_thread().name == "ssi_cycle"
+
+        probe.published = noted  # type: ignore[method-assign]
+
+
+#: native thread id -> name of the node's threads, noted when the measuring began
+THREAD_NAMES: dict[int, str] = {}
+
+
+def note_threads() -> None:
+    """Note the process's threads' names by native id (for ``CYCLE_SPAN_DUMP``)."""
+    THREAD_NAMES.update({t.native_id: t.name for t in threading.enumerate()
+                         if t.native_id is not None})
+
+
+#: receive ns of a published cycle's newest frame -> whether the cycle thread published it
+BY_CYCLE_THREAD: dict[int, bool] = {}
+
+
+def watch_gc(busy: list[tuple[str, int, int, int]]) -> None:
+    """Each garbage collection's (``gc<generation> <thread>``, start, end, 0) to ``busy``."""
+    import gc
+
+    began = [0]
+
+    def on_gc(phase: str, info: dict[str, int]) -> None:
+        if phase == "start":
+            began[0] = time.time_ns()
+        else:
+            busy.append((f"gc{info['generation']} {threading.current_thread().name}",
+                         began[0], time.time_ns(), 0))
+
+    gc.callbacks.append(on_gc)
+
+
+def print_frames(recs: list[tuple[int, int, int]],
+                 frames: list[tuple[int, int, int, int, int, int, int]],
+                 blocks: list[tuple[int, int]] = [],
+                 busy: list[tuple[str, int, int, int]] = []) -> None:
+    """Each span taken apart by the frames around it: the completing frame's wake-up (kernel
+    stamp to its ``recv`` returning), whether the receive thread was still busy with an
+    earlier frame when it arrived (behind), its handling (decide, build, publish) wall and
+    CPU, and frames other than the cycle's TPDOs (SDO answers) received in the cycle."""
+    import bisect
+
+    import numpy as np
+
+    frames.sort(key=lambda f: f[4])
+    starts = [f[4] for f in frames]
+    rows = []
+    windows: list[tuple[int, int, int]] = []
+    trail: list[tuple[int, list[tuple[int, ...]], int]] = []
+    for rx, pub, _ in recs:
+        i = bisect.bisect_right(starts, pub) - 1  # the frame whose handling published
+        while i >= 0 and frames[i][1] != rx:
+            i -= 1
+        if i < 0 or pub - frames[i][4] > 10_000_000:
+            continue
+        cob, ts, r0, r1, h0, h1, cpu = frames[i]
+        behind = r0 > ts  # recv entered only after the frame was in the kernel
+        queued = sum(1 for f in frames[max(0, i - 14):i] if f[5] > f[1] + 20_000)
+        others = sum(1 for f in frames[max(0, i - 14):i] if f[1] > rx - 1_900_000
+                     and not (0x180 <= f[0] < 0x500))
+        trail.append((pub - rx, [(f[0], (f[1] - rx) // 1000, (f[2] - rx) // 1000,
+                                  (f[3] - rx) // 1000, (f[4] - rx) // 1000,
+                                  (f[5] - rx) // 1000, f[6] // 1000)
+                                 for f in frames[max(0, i - 6):i + 1]], rx))
+        windows.append((rx, r1, pub))
+        rows.append((pub - rx, r1 - ts, h0 - r1, pub - h0, cpu, behind, queued, others,
+                     max(0, r0 - ts), BY_CYCLE_THREAD.get(rx, False)))
+    dump = os.environ.get("CYCLE_SPAN_DUMP")
+    if dump:  # every span's (receive, its recv returned, published) ns, for perf sched
+        import json
+
+        Path(dump).write_text(json.dumps({"realtime_minus_monotonic":
+                                          time.time_ns() - time.monotonic_ns(),
+                                          "spans": windows,
+                                          "threads": THREAD_NAMES}))
+    if not rows:
+        print("frames: none matched")
+        return
+    a = np.array(rows, dtype=float)
+    a[:, :5] /= 1e3
+    a[:, 8] /= 1e3
+    slow = a[:, 0] >= np.percentile(a[:, 0], 99)
+    rest = a[:, 0] < np.percentile(a[:, 0], 50)
+    for label, m in (("slowest 1 %", slow), ("fastest half", rest), ("all", np.ones(len(a), bool))):
+        b = a[m]
+        med = lambda c: f"{np.median(b[:, c]):.0f}/{np.percentile(b[:, c], 90):.0f}"
+        print(f"{label} ({len(b)}): span {med(0)}, wake (kernel->recv out) {med(1)}, "
+              f"recv out->handling {med(2)}, handling {med(3)} (CPU {med(4)}), "
+              f"rx busy at arrival {b[:, 5].mean() * 100:.0f} % (by {med(8)}), frames late "
+              f">20us before it {b[:, 6].mean():.2f}, non-TPDO frames in cycle {b[:, 7].mean():.2f}, "
+              f"published by the cycle thread {b[:, 9].mean() * 100:.0f} %")
+    if slow.any():
+        print("slowest: span wake r->h handl cpu busy queued others behind_by by_cycle")
+        for row in a[slow][np.argsort(-a[slow][:, 0])][:12]:
+            print("  " + " ".join(f"{v:6.0f}" for v in row))
+        print("the 6 slowest, frames before (cob, kernel, recv in, recv out, handling in, out, "
+              "cpu; us from the completing frame's kernel stamp):")
+        for span, fs, rx in sorted(trail, key=lambda t: -t[0])[:8]:
+            print(f"  span {span / 1e3:.0f}: " + "  ".join(
+                f"{c:03x}:{k}/{a}/{b}/{h}/{e}/{u}" for c, k, a, b, h, e, u in fs))
+            near = [f"sync {(s0 - rx) // 1000} wait {(w0 - rx) // 1000}" for s0, w0 in blocks
+                    if -3_000_000 < s0 - rx < 2_000_000]
+            near += [f"{w} {(t0 - rx) // 1000}..{(t1 - rx) // 1000}" for w, t0, t1, _ in busy
+                     if t1 > rx - 3_000_000 and t0 < rx + 2_000_000]
+            print("     " + "; ".join(near))
+
+
 def interval(into: list[tuple[str, int, int, int]], what: str,
              fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn``, each call's (what, start, end, thread CPU) in ns (``time.time_ns``,
@@ -54,7 +207,7 @@ def interval(into: list[tuple[str, int, int, int]], what: str,
 
 
 def print_spans(path: Path, blocks: list[tuple[int, int]], since_ns: int,
-                 busy: list[tuple[str, int, int, int]]) -> None:
+                 busy: list[tuple[str, int, int, int]]) -> list[tuple[int, int, int]]:
     """``--span``: the driver's span (ros/span_probe.py) after ``since_ns``, and how often the
     cycle thread had not yet blocked for the cycle (``blocks``: when it began its SYNC and
     its wait, ns)
@@ -70,7 +223,7 @@ def print_spans(path: Path, blocks: list[tuple[int, int]], since_ns: int,
     path.unlink(missing_ok=True)
     if not recs:
         print("span: no records")
-        return
+        return recs
     span = np.array([p - r for r, p, _ in recs]) / 1e3
     starts = [s for s, _ in blocks]
     late = []  # the cycle thread blocked after the frame arrived (it ran meanwhile)
@@ -93,3 +246,44 @@ def print_spans(path: Path, blocks: list[tuple[int, int]], since_ns: int,
               f"(CPU {np.median(cpu) if len(cpu) else 0:.0f} us); "
               f"overlapping {hit.mean() * 100:.2f} % of spans, {hit[slow].mean() * 100:.0f} % "
               f"of the slowest 1 %; span of those {q(span[hit])}")
+    return recs
+
+
+def spinner(argv: list[str]) -> Callable[[Any], None]:
+    """How the node's callbacks run: ``rclpy.spin`` (one thread), or with ``--mt`` as the
+    ``ssi_bridge_node`` program runs them (``MultiThreadedExecutor(4)``, ``spin_once``
+    until the context ends)."""
+    import rclpy
+
+    if "--mt" not in argv:
+        return rclpy.spin
+
+    def spin(node: Any) -> None:
+        from rclpy.executors import MultiThreadedExecutor
+
+        executor = MultiThreadedExecutor(num_threads=4)
+        executor.add_node(node)
+        try:
+            while rclpy.ok():
+                executor.spin_once(timeout_sec=0.5)
+        except Exception:  # noqa: BLE001 - the context ended under a callback
+            pass
+    return spin
+
+
+def thread_switches() -> dict[str, int]:
+    """Voluntary context switches (wake-ups) each thread of this process has had, by name (as
+    :func:`thread_cpu`)."""
+    out: dict[str, int] = defaultdict(int)
+    named = {t.native_id: t.name for t in threading.enumerate()}
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+            if name == "python":
+                name = named.get(int(task.name), name)
+            for line in (task / "status").read_text().splitlines():
+                if line.startswith("voluntary_ctxt_switches"):
+                    out[name] += int(line.split()[1])
+        except OSError:
+            continue
+    return out
