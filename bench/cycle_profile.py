@@ -50,7 +50,7 @@ from typing import Any
 
 sys.path.insert(0, os.path.dirname(__file__))
 from bench_node import case_rate  # noqa: E402
-from cycle_span import (note_threads, print_frames, print_spans, spinner,  # noqa: E402
+from cycle_span import (note_threads, print_frames, print_spans, spin_callbacks,  # noqa: E402
                         thread_switches, watch_cycle_thread, watch_frames, watch_gc)
 
 STEPS = ("sync", "sync_cpu", "recv_cpu", "frame", "frame_cpu", "cycle", "decide", "verdict", "joint", "settle", "build",
@@ -212,7 +212,7 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
                 per_cycle[k].append(acc[k])
 
     if "--sample" in argv:  # nothing wrapped: where every thread of the node spends time
-        threading.Thread(target=spinner(argv), args=(node,), daemon=True).start()
+        threading.Thread(target=spin_callbacks(argv), args=(node,), daemon=True).start()
         time.sleep(2.0)
         counts = _sample(seconds)
         node.shutdown()
@@ -234,7 +234,7 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
 
         node.diagnostics.publish = profiled_publish  # type: ignore[method-assign]
     if "--plain" in argv:  # nothing wrapped: each thread's CPU, for perf or a sampler
-        threading.Thread(target=spinner(argv), args=(node,), daemon=True).start()
+        threading.Thread(target=spin_callbacks(argv), args=(node,), daemon=True).start()
         time.sleep(2.0)
         cpu0, c0, w0 = thread_cpu(), node.cycle.cycles, time.time_ns()
         sw0 = thread_switches()
@@ -327,7 +327,7 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
                 setattr(j, method, _timed(per_cycle, "joint", getattr(j, method), acc))
         if hasattr(j, "settle"):  # the health of the SYNC before, after publishing
             j.settle = _timed(per_cycle, "settle", j.settle, acc)  # type: ignore
-    spinner = threading.Thread(target=spinner(argv), args=(node,), daemon=True)
+    spinner = threading.Thread(target=spin_callbacks(argv), args=(node,), daemon=True)
     spinner.start()
     import gc
 

@@ -9,7 +9,7 @@ the receive thread was still busy when it came, its handling, which thread publi
 notes the garbage collections; with ``CYCLE_SPAN_DUMP=<file>`` every span's times go to that
 file as JSON (monotonic offset and thread names included), to line up with ``perf sched
 record -k mono``. ``--mt`` runs the node's callbacks as the ``ssi_bridge_node`` program does
-(:func:`spinner`); ``--plain`` prints each thread's wake-ups per second too
+(:func:`spin_callbacks`); ``--plain`` prints each thread's wake-ups per second too
 (:func:`thread_switches`).
 """
 
@@ -249,7 +249,7 @@ def print_spans(path: Path, blocks: list[tuple[int, int]], since_ns: int,
     return recs
 
 
-def spinner(argv: list[str]) -> Callable[[Any], None]:
+def spin_callbacks(argv: list[str]) -> Callable[[Any], None]:
     """How the node's callbacks run: ``rclpy.spin`` (one thread), or with ``--mt`` as the
     ``ssi_bridge_node`` program runs them (``MultiThreadedExecutor(4)``, ``spin_once``
     until the context ends)."""
