@@ -175,11 +175,11 @@ def _profile(argv: list[str], joints: int, seconds: float, rate: float, params: 
     if "--span" in argv:  # the node's span probe (ros/span_probe.py), read at its start
         span_log.unlink(missing_ok=True)
         os.environ["SSI_BRIDGE_SPAN_LOG"] = str(span_log)
-    for a in argv:  # --switch=S: Python's switch interval (s) for this run
-        if a.startswith("--switch="):
-            sys.setswitchinterval(float(a.split("=", 1)[1]))
     rclpy.init(args=None)
     node = SsiBridgeNode(parameter_overrides=params)
+    for a in argv:  # --switch=S: Python's switch interval (s) for this run, set after the
+        if a.startswith("--switch="):  # node set its own at start (ros/node_start.py)
+            sys.setswitchinterval(float(a.split("=", 1)[1]))
     blocks: list[tuple[int, int]] = []
     busy: list[tuple[str, int, int, int]] = []
     if "--span" in argv:  # when the cycle thread blocks, and the periodic diagnostics run
