@@ -25,9 +25,6 @@ THREAD_NAME_BYTES = 15
 _LIBC = ctypes.CDLL(None, use_errno=True)
 #: sched(7): a flag OR-ed into the policy sched_getscheduler reports
 SCHED_RESET_ON_FORK = getattr(os, "SCHED_RESET_ON_FORK", 0x40000000)
-#: the longest GIL switch interval a cycle process keeps (s): a real-time thread that wants
-#: Python's lock from a thread running Python waits at most about this long
-SWITCH_INTERVAL_MAX_S = 100e-6
 
 logger = logging.getLogger(__name__)
 
@@ -132,21 +129,6 @@ def fifo_meanwhile(priority: int) -> Iterator[bool]:
                 logger.warning("thread %s: its scheduling (policy %d) could not be set back "
                                "after a real-time burst (%s); it runs normally now",
                                threading.current_thread().name, policy, err)
-
-
-def gil_switch_interval(rate: float, current: float) -> float:
-    """The GIL switch interval (s) for a process whose cycle runs at ``rate`` Hz: ``current``
-    (``sys.getswitchinterval()``), at most a quarter period and at most
-    :data:`SWITCH_INTERVAL_MAX_S`.
-
-    A thread that wants Python's lock (the receive thread woken by a TPDO, the cycle thread
-    for its SYNC) waits one switch interval before it asks the holder to let go, and the holder
-    (an executor thread building a wait set, a diagnostics or SDO burst, a service handler)
-    runs on meanwhile: 5 ms by default, a quarter period (0.52 ms at 480 Hz) before.
-    """
-    if not rate > 0:
-        raise ValueError(f"cycle rate {rate} Hz must be > 0")
-    return min(current, 0.25 / rate, SWITCH_INTERVAL_MAX_S)
 
 
 def scheduling_of_this_thread() -> str:

@@ -12,7 +12,7 @@ import os
 import sys
 from collections.abc import Callable, Iterable
 
-from ssi_bridge.base.realtime import gil_switch_interval, pin_process
+from ssi_bridge.base.realtime import pin_process
 from ssi_bridge.ros import logbridge
 from ssi_bridge.ros.params import NodeSettings
 
@@ -29,19 +29,17 @@ def replay_settings(settings: NodeSettings, owner: object) -> NodeSettings:
 
 def prepare_process(s: NodeSettings, info: Callable[[str], None]) -> None:
     """Before the cycle starts: pin the process to ``cpu_affinity`` (said with ``info``) and
-    shorten the GIL switch interval (``base/realtime.gil_switch_interval``: at most a quarter
-    period and 100 µs).
+    shorten the GIL switch interval to a quarter period.
 
     Python hands the GIL to a waiting thread only every switch interval (5 ms by default): a
-    service burst's CPU-bound handlers, or any normally scheduled thread of the node running
-    Python when a TPDO wakes the receive thread, would hold the cycle that long.
+    service burst's CPU-bound handlers would hold the cycle that long.
 
     :raises OSError: the CPUs cannot be set (``pin_process``)
     """
     if s.cpu_affinity:
         pin_process(s.cpu_affinity)
         info(f"process pinned to CPU(s) {list(s.cpu_affinity)}")
-    sys.setswitchinterval(gil_switch_interval(s.publish_rate, sys.getswitchinterval()))
+    sys.setswitchinterval(min(sys.getswitchinterval(), 0.25 / s.publish_rate))
 
 
 def bridging_line(s: NodeSettings, joints: Iterable[str], joint_topic: str, status_topic: str,

@@ -14,8 +14,7 @@ import sys
 
 import pytest
 
-from ssi_bridge.base.realtime import (SWITCH_INTERVAL_MAX_S, fifo_permitted, gil_switch_interval,
-                                      thread_policies)
+from ssi_bridge.base.realtime import fifo_permitted, thread_policies
 from ssi_bridge.base.udp_bus import derive_channel
 
 
@@ -145,16 +144,3 @@ def test_fifo_meanwhile_raises_the_thread_for_the_block_and_puts_it_back():
 
     flagged = os.SCHED_FIFO | os.SCHED_RESET_ON_FORK
     assert _in_a_thread(higher_already_reset_on_fork) == (False, (flagged, 6), (flagged, 6))
-
-
-def test_gil_switch_interval_is_at_most_a_quarter_period_and_100_us():
-    """Python's default switch interval (5 ms) is longer than a whole cycle: a thread that
-    wants the GIL would wait that long for a normally scheduled holder."""
-    assert SWITCH_INTERVAL_MAX_S == pytest.approx(100e-6)
-    assert gil_switch_interval(480.0, 0.005) == pytest.approx(100e-6)  # 8 joints' rate
-    assert gil_switch_interval(1000.0, 0.005) == pytest.approx(100e-6)
-    assert gil_switch_interval(20_000.0, 0.005) == pytest.approx(12.5e-6)  # a quarter period
-    assert gil_switch_interval(480.0, 50e-6) == pytest.approx(50e-6)  # shorter already: kept
-    for bad in (0.0, -1.0, float("nan")):
-        with pytest.raises(ValueError):
-            gil_switch_interval(bad, 0.005)

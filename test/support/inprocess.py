@@ -30,7 +30,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from ssi_bridge.base.realtime import gil_switch_interval
 from ssi_bridge.base.timebase import ModelClock
 from ssi_bridge.client.cycle_feed import feed_frames, sync_number
 from ssi_bridge.client.master import BridgeClient, CanMaster
@@ -110,11 +109,10 @@ class InProcessBridge:
         self.settings = self._joints_by_station(values)
         counts = [max(j.slot for j in joints) for joints in self.settings.values()]
         self.wire_s = wire.frame_seconds(wire.stations_cycle_bits(counts), self.bus.bitrate)
-        # as the node does at start (ros/node_start.prepare_process): the GIL goes to a
-        # waiting thread (the station's, the master's receive thread) within a quarter of a
-        # cycle and 100 µs
+        # as the node does at start (ros/node.py _start): the GIL goes to a waiting thread
+        # (the station's, the master's receive thread) within a quarter of a cycle
         self._switch = sys.getswitchinterval()
-        sys.setswitchinterval(gil_switch_interval(self.rate, self._switch))
+        sys.setswitchinterval(min(self._switch, 0.25 / self.rate))
         try:
             for sid, joints in self.settings.items():
                 station = Station(StationSettings(joints=joints, bus=dataclasses.replace(
