@@ -183,7 +183,7 @@ def print_frames(recs: list[tuple[int, int, int]],
             print("  " + " ".join(f"{v:6.0f}" for v in row))
         print("the 6 slowest, frames before (cob, kernel, recv in, recv out, handling in, out, "
               "cpu; us from the completing frame's kernel stamp):")
-        for span, fs, rx in sorted(trail, key=lambda t: -t[0])[:8]:
+        for span, fs, rx in sorted(trail, key=lambda t: -t[0])[:int(os.environ.get("CYCLE_SPAN_SHOW", "8"))]:
             print(f"  span {span / 1e3:.0f}: " + "  ".join(
                 f"{c:03x}:{k}/{a}/{b}/{h}/{e}/{u}" for c, k, a, b, h, e, u in fs))
             near = [f"sync {(s0 - rx) // 1000} wait {(w0 - rx) // 1000}" for s0, w0 in blocks
@@ -232,7 +232,8 @@ def print_spans(path: Path, blocks: list[tuple[int, int]], since_ns: int,
         late.append(i >= 0 and blocks[i][1] > rx)
     mask = np.array(late)
     q = lambda a: "/".join(f"{np.percentile(a, x):.0f}" for x in (50, 90, 99)) if len(a) else "-"
-    print(f"span us p50/p90/p99 {q(span)} ({len(span)} cycles); the cycle thread not yet "
+    print(f"span us p50/p90/p99 {q(span)} ({len(span)} cycles, {(span > 400).mean() * 100:.2f} "
+          f"% above 400 us); the cycle thread not yet "
           f"blocked at the frame: {mask.mean() * 100:.1f} % of cycles, span {q(span[mask])}; "
           f"else {q(span[~mask])}; of the slowest 1 %: "
           f"{mask[span >= np.percentile(span, 99)].mean() * 100:.0f} %")
