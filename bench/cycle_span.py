@@ -143,7 +143,8 @@ def print_frames(recs: list[tuple[int, int, int]],
             continue
         cob, ts, r0, r1, h0, h1, cpu = frames[i]
         behind = r0 > ts  # recv entered only after the frame was in the kernel
-        queued = sum(1 for f in frames[max(0, i - 14):i] if f[5] > f[1] + 20_000)
+        late = sum(1 for f in frames[max(0, i - 14):i]  # earlier frames of the cycle done
+                   if f[1] > rx - 1_900_000 and f[5] > f[1] + 100_000)  # > 100 us late
         others = sum(1 for f in frames[max(0, i - 14):i] if f[1] > rx - 1_900_000
                      and not (0x180 <= f[0] < 0x500))
         trail.append((pub - rx, [(f[0], (f[1] - rx) // 1000, (f[2] - rx) // 1000,
@@ -151,7 +152,7 @@ def print_frames(recs: list[tuple[int, int, int]],
                                   (f[5] - rx) // 1000, f[6] // 1000)
                                  for f in frames[max(0, i - 6):i + 1]], rx))
         windows.append((rx, r1, pub))
-        rows.append((pub - rx, r1 - ts, h0 - r1, pub - h0, cpu, behind, queued, others,
+        rows.append((pub - rx, r1 - ts, h0 - r1, pub - h0, cpu, behind, late, others,
                      max(0, r0 - ts), BY_CYCLE_THREAD.get(rx, False)))
     dump = os.environ.get("CYCLE_SPAN_DUMP")
     if dump:  # every span's (receive, its recv returned, published) ns, for perf sched
@@ -174,16 +175,19 @@ def print_frames(recs: list[tuple[int, int, int]],
         med = lambda c: f"{np.median(b[:, c]):.0f}/{np.percentile(b[:, c], 90):.0f}"
         print(f"{label} ({len(b)}): span {med(0)}, wake (kernel->recv out) {med(1)}, "
               f"recv out->handling {med(2)}, handling {med(3)} (CPU {med(4)}), "
-              f"rx busy at arrival {b[:, 5].mean() * 100:.0f} % (by {med(8)}), frames late "
-              f">20us before it {b[:, 6].mean():.2f}, non-TPDO frames in cycle {b[:, 7].mean():.2f}, "
+              f"rx busy at arrival {b[:, 5].mean() * 100:.0f} % (by {med(8)}), earlier frames "
+              f"done >100 us late {b[:, 6].mean():.2f}, "
+              f"non-TPDO frames in cycle {b[:, 7].mean():.2f}, "
               f"published by the cycle thread {b[:, 9].mean() * 100:.0f} %")
+    show = int(os.environ.get("CYCLE_SPAN_SHOW", "8"))
     if slow.any():
-        print("slowest: span wake r->h handl cpu busy queued others behind_by by_cycle")
+        print("slowest: span wake r->h handl cpu busy late others behind_by by_cycle")
         for row in a[slow][np.argsort(-a[slow][:, 0])][:12]:
             print("  " + " ".join(f"{v:6.0f}" for v in row))
-        print("the 6 slowest, frames before (cob, kernel, recv in, recv out, handling in, out, "
+        print(f"the {show} slowest, frames before (cob, kernel, recv in, recv out, "
+              "handling in, out, "
               "cpu; us from the completing frame's kernel stamp):")
-        for span, fs, rx in sorted(trail, key=lambda t: -t[0])[:int(os.environ.get("CYCLE_SPAN_SHOW", "8"))]:
+        for span, fs, rx in sorted(trail, key=lambda t: -t[0])[:show]:
             print(f"  span {span / 1e3:.0f}: " + "  ".join(
                 f"{c:03x}:{k}/{a}/{b}/{h}/{e}/{u}" for c, k, a, b, h, e, u in fs))
             near = [f"sync {(s0 - rx) // 1000} wait {(w0 - rx) // 1000}" for s0, w0 in blocks
