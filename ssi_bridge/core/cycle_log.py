@@ -184,12 +184,22 @@ class StationLog:
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
         """A process input image of ``slot`` (its 8 bytes ``data``; ``count``: images received
         for the slot so far, this one included) ended on the wire at ``t`` (s)."""
-        self._add(slot, (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count))
+        frame = (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count)
+        with self._lock:
+            self._append(slot, frame)
 
     def position(self, slot: int, t: float, value: int) -> None:
         """A position of ``slot`` (REG_SSI_POS ``value`` as received) ended on the wire at
         ``t`` (s)."""
-        self._add(slot, (t, POSITION, b"", value, 0))
+        with self._lock:
+            self._append(slot, (t, POSITION, b"", value, 0))
+
+    def positions(self, slots: Sequence[int], t: float, values: Sequence[int]) -> None:
+        """:meth:`position` of each of ``slots`` with the value of ``values`` at the same
+        index (one encoder default PDO carries several), under one lock."""
+        with self._lock:
+            for slot, value in zip(slots, values):
+                self._append(slot, (t, POSITION, b"", value, 0))
 
     def _insert(self, t: float) -> None:
         syncs = self._syncs
@@ -203,18 +213,18 @@ class StationLog:
             self._forget(syncs[gone - 1])
             del syncs[:gone]
 
-    def _add(self, slot: int, frame: Frame) -> None:
-        with self._lock:
-            frames = self._frames.get(slot)
-            lo, hi = self._span
-            if frames is None:
-                frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
-            elif len(frames) == KEEP_FRAMES and lo <= frames[0][_T] <= hi:
-                self._forget(frames[0][_T])  # about to fall out
-            t = frame[_T]
-            if lo <= t <= hi:  # as a rule a frame answers the newest SYNC: after them all
-                self._forget(t)
-            frames.append(frame)
+    def _append(self, slot: int, frame: Frame) -> None:
+        """Under the lock: keep ``frame`` of ``slot`` (the oldest falls out of a full log)."""
+        frames = self._frames.get(slot)
+        lo, hi = self._span
+        if frames is None:
+            frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
+        elif len(frames) == KEEP_FRAMES and lo <= frames[0][_T] <= hi:
+            self._forget(frames[0][_T])  # about to fall out
+        t = frame[_T]
+        if lo <= t <= hi:  # as a rule a frame answers the newest SYNC: after them all
+            self._forget(t)
+        frames.append(frame)
 
     def _forget(self, t: float) -> None:
         """Under the lock: a frame or SYNC at wire time ``t`` came or went: drop the rule-3
@@ -268,38 +278,46 @@ class StationLog:
             i = bisect_left(syncs, t_k)
             t_next = syncs[i + 1] if i + 1 < len(syncs) else math.inf
             in_step = self._station_in_step(t_k, i)
-            frames = self._frames
+            get = self._frames.get
             bound = self.latch_bound
+            append = out.append
             for slot in slots:
                 images = positions = 0
                 img: Frame | None = None
                 pos: Frame | None = None
-                for f in reversed(frames.get(slot, ())):
+                for f in reversed(get(slot, ())):  # newest first
                     t = f[_T]
                     if t < t_k:
                         break
                     if t < t_next:
                         if f[_KIND] == IMAGE:
                             images += 1
-                            img = img or f  # newest first
+                            if img is None:
+                                img = f
                         else:
                             positions += 1
-                            pos = pos or f
+                            if pos is None:
+                                pos = f
                 if img is None or pos is None:
-                    reason = NO_ANSWER if img is None and pos is None else PARTIAL
-                elif images > 1 or positions > 1:
-                    reason = SURPLUS
-                elif min(img[_T], pos[_T]) - t_k > bound:
-                    reason = LATE
-                else:
-                    reason = "" if in_step else UNSETTLED
-                image = img[_IMAGE] if img is not None else b""
-                sample = (VouchedSample(slot, pos[_POSITION], image, t_k, img[_COUNT],
-                                        min(img[_T], pos[_T]) - t_k)
-                          if vouch and not reason and img is not None and pos is not None
-                          else None)
-                out.append((sample, reason, ((img is None) + (pos is None)) / 2, image,
+                    append((None, NO_ANSWER if img is None and pos is None else PARTIAL,
+                            ((img is None) + (pos is None)) / 2,
+                            img[_IMAGE] if img is not None else b"",
                             pos[_POSITION] if pos is not None else None))
+                    continue
+                image, value = img[_IMAGE], pos[_POSITION]
+                t_img, t_pos = img[_T], pos[_T]
+                delay = (t_img if t_img < t_pos else t_pos) - t_k
+                if images > 1 or positions > 1:
+                    reason = SURPLUS
+                elif delay > bound:
+                    reason = LATE
+                elif in_step:  # vouched for
+                    append((VouchedSample(slot, value, image, t_k, img[_COUNT], delay)
+                            if vouch else None, "", 0.0, image, value))
+                    continue
+                else:
+                    reason = UNSETTLED
+                append((None, reason, 0.0, image, value))
         return t_k, out
 
     def _station_in_step(self, t_k: float, i: int) -> bool:
