@@ -285,19 +285,27 @@ class StationLog:
                 images = positions = 0
                 img: Frame | None = None
                 pos: Frame | None = None
-                for f in reversed(get(slot, ())):  # newest first
-                    t = f[_T]
-                    if t < t_k:
-                        break
-                    if t < t_next:
-                        if f[_KIND] == IMAGE:
-                            images += 1
-                            if img is None:
-                                img = f
-                        else:
-                            positions += 1
-                            if pos is None:
-                                pos = f
+                frames: Sequence[Frame] = get(slot, ())
+                if len(frames) > 2:  # as a rule the two newest frames are the window's two
+                    a, b = frames[-1], frames[-2]
+                    if (t_k <= a[_T] < t_next and t_k <= b[_T] < t_next
+                            and frames[-3][_T] < t_k and a[_KIND] != b[_KIND]):
+                        images = positions = 1
+                        img, pos = (a, b) if a[_KIND] == IMAGE else (b, a)
+                if not images:  # the window's frames, newest first, as they are
+                    for f in reversed(frames):
+                        t = f[_T]
+                        if t < t_k:
+                            break
+                        if t < t_next:
+                            if f[_KIND] == IMAGE:
+                                images += 1
+                                if img is None:
+                                    img = f
+                            else:
+                                positions += 1
+                                if pos is None:
+                                    pos = f
                 if img is None or pos is None:
                     append((None, NO_ANSWER if img is None and pos is None else PARTIAL,
                             ((img is None) + (pos is None)) / 2,
