@@ -41,8 +41,9 @@ import threading
 from bisect import bisect_left, bisect_right, insort
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Final
+
+from ssi_bridge.core.verdict import Answer, Verdict, VouchedSample
 
 #: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
 IMAGE, POSITION = 0, 1
@@ -70,43 +71,6 @@ _COUNT: Final = 4  # images received for the slot so far (IMAGE), else 0
 Frame = tuple[float, int, bytes, int, int]
 
 
-@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
-class VouchedSample:
-    """A slot's sample latched at the master's SYNC (within ``latch_bound``)."""
-
-    slot: int
-    #: REG_SSI_POS as Integer32 (object 0x6820)
-    position: int
-    #: the 8-byte process input image (000 "Process input")
-    process_input: bytes
-    #: the SYNC's wire time (s): the stamp
-    sync_time: float
-    #: process input images received for this slot
-    counter: int
-    #: the earlier of the two frames' wire times minus ``sync_time`` (s): the latch lies
-    #: between ``sync_time`` and ``sync_time + delay``
-    delay: float
-
-
-@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
-class Verdict:
-    """What the log says of one slot at one of the master's SYNCs."""
-
-    #: the sample, or None when set aside
-    sample: VouchedSample | None
-    #: "" when vouched, else one of :data:`REASONS`
-    reason: str
-    #: share of the slot's two TPDOs of the window that never came (0, 0.5, 1)
-    missing: float
-    #: the newest image of the slot in the window (b"" if none), for the status bits
-    image: bytes = b""
-    #: the newest position in the window (None if none)
-    position: int | None = None
-
-
-#: a :class:`Verdict`'s fields as a plain tuple, in its order (sample, reason, missing, image,
-#: position): what :meth:`StationLog.answers` gives the cycle, one per slot
-Answer = tuple[VouchedSample | None, str, float, bytes, int | None]
 #: the answer of every slot at a SYNC the log does not hold
 _UNKNOWN: Answer = (None, UNKNOWN_SYNC, 1.0, b"", None)
 
@@ -195,8 +159,8 @@ class StationLog:
             self._append(slot, (t, POSITION, b"", value, 0))
 
     def positions(self, slots: Sequence[int], t: float, values: Sequence[int]) -> None:
-        """:meth:`position` of each of ``slots`` with the value of ``values`` at the same
-        index (one encoder default PDO carries several), under one lock."""
+        """:meth:`position` of each of ``slots``, all ended on the wire at ``t`` (s), with the
+        value of ``values`` at the same index (one encoder default PDO carries several)."""
         with self._lock:
             for slot, value in zip(slots, values):
                 self._append(slot, (t, POSITION, b"", value, 0))
