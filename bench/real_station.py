@@ -17,10 +17,11 @@ import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from ssi_bridge.base.udp_bus import derive_channel
 # test/ is on the path: node_procs.py, which every importer of this module loads, puts it there
-from support.stations import stop_station
+from support.stations import stop_station  # type: ignore[import-not-found]
 
 STATION_EXE_PARTS = ("install", "ssi_bridge", "lib", "ssi_bridge", "station")
 #: the ``station`` program's line once it has sent its boot-up (sim/program.py READY)
@@ -28,7 +29,7 @@ READY = b"station ready"
 READY_TIMEOUT_S = 20.0
 
 
-def real_params(tag: str) -> dict:
+def real_params(tag: str) -> dict[str, Any]:
     """The node parameters of a real deployment on the group of ``tag``: no simulation,
     udp_multicast on loopback."""
     return {"simulation.enabled": False, "bus.interface": "udp_multicast",
@@ -37,7 +38,7 @@ def real_params(tag: str) -> dict:
 
 @contextlib.contextmanager
 def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, str],
-                    log: Path, args: tuple[str, ...] = ()) -> Iterator[subprocess.Popen]:
+                    log: Path, args: tuple[str, ...] = ()) -> Iterator[subprocess.Popen[bytes]]:
     """The installed ``station`` on ``params_file``'s joints and ``channel``, ready (its
     boot-up sent) while the block runs, stopped by its PID (SIGINT, then SIGKILL) after.
     ``args``: further options of the station program (e.g. ``--priority``).
@@ -52,6 +53,8 @@ def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, 
                                  *args],
                                 stdout=subprocess.PIPE, stderr=err, env=env,
                                 start_new_session=True)
+    stdout = proc.stdout
+    assert stdout is not None  # stdout=PIPE
     try:
         deadline = time.monotonic() + READY_TIMEOUT_S
         line = b""
@@ -60,12 +63,12 @@ def station_process(repo: Path, params_file: Path, channel: str, env: dict[str, 
             if left <= 0 or proc.poll() is not None:
                 raise RuntimeError(f"station not ready (exit {proc.poll()}): "
                                    f"{log.read_text(errors='replace')[-1500:]}")
-            if select.select([proc.stdout], [], [], left)[0]:
-                line = proc.stdout.readline()
+            if select.select([stdout], [], [], left)[0]:
+                line = stdout.readline()
         yield proc
     finally:
         stop_station(proc)
-        proc.stdout.close()
+        stdout.close()
 
 
 __all__ = ["real_params", "station_process"]

@@ -102,8 +102,7 @@ def main(argv: list[str]) -> int:
     load = BusLoad(1_000_000)
     listener = FrameListener(network, counters, load)
     table = SlotTable(SLOTS)
-    TpdoRoutes(NODE, SLOTS, lambda slot, cob, data, t: table.on_image(slot, data, t),
-               lambda slots, cob, data, t: table.on_positions(slots, data, t)).attach(network)
+    TpdoRoutes(NODE, SLOTS, table.on_image, table.on_positions).attach(network)
     frames = _frames(n)
     results = []
     try:

@@ -314,9 +314,17 @@ class OwnListenerNetwork(canopen.Network):
         :param remote: a remote transmission request
         :returns: the frame sent (on a simulated wire its timestamp is its end on the wire)
         """
+        return self.send_frame(self.make_frame(can_id, data, remote))
+
+    def send_frame(self, frame: can.Message) -> can.Message:
+        """Send ``frame`` as :meth:`send_message` sends the one it makes (under the same lock,
+        handed to :attr:`on_sent`) and return it: for a caller that sends the same frame
+        again (raises ``can.CanError``, RuntimeError when not connected).
+
+        :param frame: a frame as :meth:`make_frame` makes it
+        """
         if not self.bus:
             raise RuntimeError("Not connected to CAN bus")
-        frame = self.make_frame(can_id, data, remote)
         with self.send_lock:
             self.bus.send(frame)
         if self.on_sent is not None:

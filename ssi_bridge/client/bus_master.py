@@ -84,12 +84,16 @@ class CanMaster:
         self.error_frames = ErrorFrameWatch()
         #: wire time of the latest SYNC of another producer (0.0: none yet)
         self._foreign_sync_at = 0.0
+        #: the SYNC frame sent last, sent again while the bus leaves it unstamped (no new
+        #: ``can.Message`` each cycle); a simulated wire stamps its frames: a new one each time
+        self._sync_frame: can.Message | None = None
 
     def connect(self) -> None:
         """Open the bus and start canopen's network (idempotent)."""
         if self.network is not None:
             return
         source, opener = self._source, self._opener
+        self._sync_frame = None  # made anew by this connection's network
         inner = take_bus(source, "this master", opener)
         if isinstance(source, BusConfig):
             # a lost interface is reopened with back-off (client/link.py)
@@ -207,9 +211,13 @@ class CanMaster:
             self.gate.open(len(self.clients))
             for client in self.clients:
                 client.table.on_sync(t)
+        network = self.network
+        frame = self._sync_frame  # (a can.Message of no data is falsy: its len is 0)
+        if frame is None:
+            frame = network.make_frame(SYNC_COB_ID, b"", False)
         try:
             with self.send_lock:
-                frame = self.network.send_message(SYNC_COB_ID, b"")
+                network.send_frame(frame)
         except can.CanError as err:
             self.counters.can_errors += 1
             if self.link is not None and self.link.lost:
@@ -221,10 +229,13 @@ class CanMaster:
         for client in self.clients:
             if client.counters is not self.counters:
                 client.counters.syncs += 1
-        if frame is not None and frame.timestamp:
+        if frame.timestamp:  # a bus that stamps what it sent: a new frame next time
+            self._sync_frame = None
             with self.gate.cond:
                 for client in self.clients:
                     t = client.table.set_sync_time(frame.timestamp)
+        else:  # the same frame next cycle (nothing changed it: the bus load measured it)
+            self._sync_frame = frame
         return t
 
     def wait_cycle(self, timeout: float, unanswered_timeout: float = 0.0) -> bool:

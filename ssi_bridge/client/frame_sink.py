@@ -7,6 +7,7 @@ its shape.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 
@@ -34,6 +35,11 @@ class FrameSink(Protocol):
         """A position of ``slot`` at wire time ``t``.
 
         :param value: REG_SSI_POS as received
+        """
+
+    def positions(self, slots: Sequence[int], t: float, values: Sequence[int]) -> None:
+        """The positions of ``slots`` (one encoder default PDO) at wire time ``t``: what
+        :meth:`position` of each, with the value of ``values`` at the same index, does.
         """
 
 

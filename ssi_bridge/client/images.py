@@ -151,11 +151,11 @@ class ProcessImages:
         except GatewayUnavailable as err:
             logger.warning("slot %d: process output not written: %s", slot, err)
 
-    def on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
+    def on_image(self, slot: int, data: bytearray, timestamp: float) -> None:
         """A TPDO with ``slot``'s input image arrived (network thread): keep it, and send
         the next output of a running clear pulse.
 
-        :param can_id: the TPDO's COB-ID
+        :param slot: the module's slot (TPDO ``slot`` carries its image)
         :param data: the 8 bytes of the image
         :param timestamp: its wire time (s)
         """

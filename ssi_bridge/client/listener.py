@@ -92,7 +92,7 @@ class ListenOnlyClient(can.Listener):
         self.nmt_state: int | None = None
         self._bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
-        self._routes = TpdoRoutes(node_id, slots, self._on_image, self._on_positions,
+        self._routes = TpdoRoutes(node_id, slots, self.table.on_image, self.table.on_positions,
                                   self._on_malformed).routes
         self._heartbeat_id = HEARTBEAT_COB_BASE + node_id
         self._emcy_id = EMCY_COB_BASE + node_id
@@ -324,9 +324,3 @@ class ListenOnlyClient(can.Listener):
             self._cycles.append(ObservedCycle(seq, sync_time, complete))
             self._cycles_cond.notify_all()
 
-    def _on_image(self, slot: int, can_id: int, data: bytearray, timestamp: float) -> None:
-        self.table.on_image(slot, data, timestamp)
-
-    def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
-                      timestamp: float) -> None:
-        self.table.on_positions(slots, data, timestamp)

@@ -39,6 +39,10 @@ _Queued = can.Message | tuple[float, int, bool]
 QUEUE_LIMIT = 64
 
 
+#: bits of the SYNC without a counter (CiA 301), every cycle's same frame: counted once
+_SYNC_BITS = frame_bits(SYNC_COB_ID)
+
+
 def _measure(msg: can.Message) -> tuple[float, int, bool] | None:
     """A frame's (wire time, bits on the wire, is SYNC); None for a frame the load leaves out
     (an error, extended or FD frame). Its wire time is its stamp (base/timebase.frame_wire_time,
@@ -48,9 +52,11 @@ def _measure(msg: can.Message) -> tuple[float, int, bool] | None:
     """
     if msg.is_error_frame or msg.is_extended_id or msg.is_fd:
         return None
-    can_id = msg.arbitration_id
-    return (getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(),
-            frame_bits(can_id, msg.data, msg.is_remote_frame, msg.dlc), can_id == SYNC_COB_ID)
+    can_id, dlc, remote = msg.arbitration_id, msg.dlc, msg.is_remote_frame
+    sync = can_id == SYNC_COB_ID
+    bits = (_SYNC_BITS if sync and dlc == 0 and not remote
+            else frame_bits(can_id, msg.data, remote, dlc))
+    return getattr(msg, "wire_time", 0.0) or msg.timestamp or wire_now(), bits, sync
 
 
 class BusLoad:

@@ -110,7 +110,7 @@ class BridgeClient:
                                     WRITE_STEPS * handshake_timeout)
         self._slot_locks = {s: threading.Lock() for s in range(1, slots + 1)}
         self._liveness = Liveness(self)
-        self._routes = TpdoRoutes(node_id, slots, self.images.on_image, self._on_positions,
+        self._routes = TpdoRoutes(node_id, slots, self.images.on_image, self.table.on_positions,
                                   self._on_malformed)
 
     # -- life cycle -------------------------------------------------------------------------
@@ -366,10 +366,6 @@ class BridgeClient:
         self._rx_log.warning("malformed_pdo", "gateway node %d: TPDO 0x%03X with %d byte(s), "
                              "its mapping has %d: not decoded (%d so far)", self.node_id,
                              can_id, length, expected, self.counters.malformed_pdos)
-
-    def _on_positions(self, slots: list[int], can_id: int, data: bytearray,
-                      timestamp: float) -> None:
-        self.table.on_positions(slots, data, timestamp)
 
     def _on_emcy(self, error: canopen.emcy.EmcyError) -> None:
         self.counters.emergencies += 1

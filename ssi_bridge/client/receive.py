@@ -40,10 +40,12 @@ RX_THREAD_NAME = "ssi_can_rx"
 
 #: a canopen network subscriber: (COB-ID, payload, wire time)
 Subscriber = Callable[[int, bytearray, float], None]
-#: ``on_image(slot, can_id, data, timestamp)``: a process input image TPDO arrived
-ImageHandler = Callable[[int, int, bytearray, float], None]
-#: ``on_positions(slots, can_id, data, timestamp)``: an encoder default PDO arrived
-PositionHandler = Callable[[list[int], int, bytearray, float], None]
+#: ``on_image(slot, data, timestamp)``: a process input image TPDO arrived
+ImageHandler = Callable[[int, bytearray, float], object]
+#: ``on_positions(slots, data, timestamp)``: an encoder default PDO arrived
+PositionHandler = Callable[[list[int], bytearray, float], object]
+#: a route's handler of one TPDO of the right length: ``(data, timestamp)``
+Payload = Callable[[bytearray, float], object]
 
 
 class FrameListener(GuardedListener):
@@ -144,13 +146,13 @@ MalformedHandler = Callable[[int, int, int], None]
 IMAGE_BYTES, POSITION_BYTES = 8, 4
 
 
-def _checked(expected: int, handler: Subscriber, on_malformed: MalformedHandler) -> Subscriber:
-    """``handler`` for frames of ``expected`` bytes; any other length goes to
-    ``on_malformed`` and is never decoded (CiA 301: a PDO shorter than its mapping is an
-    error; a longer one is no frame this mapping produced)."""
+def _checked(expected: int, handler: Payload, on_malformed: MalformedHandler) -> Subscriber:
+    """``handler`` (given the payload and wire time) for frames of ``expected`` bytes; any
+    other length goes to ``on_malformed`` and is never decoded (CiA 301: a PDO shorter than
+    its mapping is an error; a longer one is no frame this mapping produced)."""
     def route(can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) == expected:
-            handler(can_id, data, timestamp)
+            handler(data, timestamp)
         else:
             on_malformed(can_id, len(data), expected)
     return route

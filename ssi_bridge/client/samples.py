@@ -291,8 +291,7 @@ class SlotTable:
         self._acquire()
         try:
             if self.sink is not None:
-                for slot, value in zip(slots, values):
-                    self.sink.position(slot, timestamp, value)
+                self.sink.positions(slots, timestamp, values)
             since = self._foreign_since
             if since is not None and timestamp > since:  # _foreign, inline
                 self._count_foreign()

@@ -41,8 +41,9 @@ import threading
 from bisect import bisect_left, bisect_right, insort
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Final
+
+from ssi_bridge.core.verdict import Answer, Verdict, VouchedSample
 
 #: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
 IMAGE, POSITION = 0, 1
@@ -70,43 +71,6 @@ _COUNT: Final = 4  # images received for the slot so far (IMAGE), else 0
 Frame = tuple[float, int, bytes, int, int]
 
 
-@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
-class VouchedSample:
-    """A slot's sample latched at the master's SYNC (within ``latch_bound``)."""
-
-    slot: int
-    #: REG_SSI_POS as Integer32 (object 0x6820)
-    position: int
-    #: the 8-byte process input image (000 "Process input")
-    process_input: bytes
-    #: the SYNC's wire time (s): the stamp
-    sync_time: float
-    #: process input images received for this slot
-    counter: int
-    #: the earlier of the two frames' wire times minus ``sync_time`` (s): the latch lies
-    #: between ``sync_time`` and ``sync_time + delay``
-    delay: float
-
-
-@dataclass(slots=True)  # read-only by convention: frozen would cost 2x per instance
-class Verdict:
-    """What the log says of one slot at one of the master's SYNCs."""
-
-    #: the sample, or None when set aside
-    sample: VouchedSample | None
-    #: "" when vouched, else one of :data:`REASONS`
-    reason: str
-    #: share of the slot's two TPDOs of the window that never came (0, 0.5, 1)
-    missing: float
-    #: the newest image of the slot in the window (b"" if none), for the status bits
-    image: bytes = b""
-    #: the newest position in the window (None if none)
-    position: int | None = None
-
-
-#: a :class:`Verdict`'s fields as a plain tuple, in its order (sample, reason, missing, image,
-#: position): what :meth:`StationLog.answers` gives the cycle, one per slot
-Answer = tuple[VouchedSample | None, str, float, bytes, int | None]
 #: the answer of every slot at a SYNC the log does not hold
 _UNKNOWN: Answer = (None, UNKNOWN_SYNC, 1.0, b"", None)
 
@@ -184,12 +148,22 @@ class StationLog:
     def image(self, slot: int, t: float, data: bytes | bytearray, count: int) -> None:
         """A process input image of ``slot`` (its 8 bytes ``data``; ``count``: images received
         for the slot so far, this one included) ended on the wire at ``t`` (s)."""
-        self._add(slot, (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count))
+        frame = (t, IMAGE, data if type(data) is bytes else bytes(data), 0, count)
+        with self._lock:
+            self._append(slot, frame)
 
     def position(self, slot: int, t: float, value: int) -> None:
         """A position of ``slot`` (REG_SSI_POS ``value`` as received) ended on the wire at
         ``t`` (s)."""
-        self._add(slot, (t, POSITION, b"", value, 0))
+        with self._lock:
+            self._append(slot, (t, POSITION, b"", value, 0))
+
+    def positions(self, slots: Sequence[int], t: float, values: Sequence[int]) -> None:
+        """:meth:`position` of each of ``slots``, all ended on the wire at ``t`` (s), with the
+        value of ``values`` at the same index (one encoder default PDO carries several)."""
+        with self._lock:
+            for slot, value in zip(slots, values):
+                self._append(slot, (t, POSITION, b"", value, 0))
 
     def _insert(self, t: float) -> None:
         syncs = self._syncs
@@ -203,18 +177,18 @@ class StationLog:
             self._forget(syncs[gone - 1])
             del syncs[:gone]
 
-    def _add(self, slot: int, frame: Frame) -> None:
-        with self._lock:
-            frames = self._frames.get(slot)
-            lo, hi = self._span
-            if frames is None:
-                frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
-            elif len(frames) == KEEP_FRAMES and lo <= frames[0][_T] <= hi:
-                self._forget(frames[0][_T])  # about to fall out
-            t = frame[_T]
-            if lo <= t <= hi:  # as a rule a frame answers the newest SYNC: after them all
-                self._forget(t)
-            frames.append(frame)
+    def _append(self, slot: int, frame: Frame) -> None:
+        """Under the lock: keep ``frame`` of ``slot`` (the oldest falls out of a full log)."""
+        frames = self._frames.get(slot)
+        lo, hi = self._span
+        if frames is None:
+            frames = self._frames[slot] = deque(maxlen=KEEP_FRAMES)
+        elif len(frames) == KEEP_FRAMES and lo <= frames[0][_T] <= hi:
+            self._forget(frames[0][_T])  # about to fall out
+        t = frame[_T]
+        if lo <= t <= hi:  # as a rule a frame answers the newest SYNC: after them all
+            self._forget(t)
+        frames.append(frame)
 
     def _forget(self, t: float) -> None:
         """Under the lock: a frame or SYNC at wire time ``t`` came or went: drop the rule-3
@@ -268,38 +242,54 @@ class StationLog:
             i = bisect_left(syncs, t_k)
             t_next = syncs[i + 1] if i + 1 < len(syncs) else math.inf
             in_step = self._station_in_step(t_k, i)
-            frames = self._frames
+            get = self._frames.get
             bound = self.latch_bound
+            append = out.append
             for slot in slots:
                 images = positions = 0
                 img: Frame | None = None
                 pos: Frame | None = None
-                for f in reversed(frames.get(slot, ())):
-                    t = f[_T]
-                    if t < t_k:
-                        break
-                    if t < t_next:
-                        if f[_KIND] == IMAGE:
-                            images += 1
-                            img = img or f  # newest first
-                        else:
-                            positions += 1
-                            pos = pos or f
+                frames: Sequence[Frame] = get(slot, ())
+                if len(frames) > 2:  # as a rule the two newest frames are the window's two
+                    a, b = frames[-1], frames[-2]
+                    if (t_k <= a[_T] < t_next and t_k <= b[_T] < t_next
+                            and frames[-3][_T] < t_k and a[_KIND] != b[_KIND]):
+                        images = positions = 1
+                        img, pos = (a, b) if a[_KIND] == IMAGE else (b, a)
+                if not images:  # the window's frames, newest first, as they are
+                    for f in reversed(frames):
+                        t = f[_T]
+                        if t < t_k:
+                            break
+                        if t < t_next:
+                            if f[_KIND] == IMAGE:
+                                images += 1
+                                if img is None:
+                                    img = f
+                            else:
+                                positions += 1
+                                if pos is None:
+                                    pos = f
                 if img is None or pos is None:
-                    reason = NO_ANSWER if img is None and pos is None else PARTIAL
-                elif images > 1 or positions > 1:
-                    reason = SURPLUS
-                elif min(img[_T], pos[_T]) - t_k > bound:
-                    reason = LATE
-                else:
-                    reason = "" if in_step else UNSETTLED
-                image = img[_IMAGE] if img is not None else b""
-                sample = (VouchedSample(slot, pos[_POSITION], image, t_k, img[_COUNT],
-                                        min(img[_T], pos[_T]) - t_k)
-                          if vouch and not reason and img is not None and pos is not None
-                          else None)
-                out.append((sample, reason, ((img is None) + (pos is None)) / 2, image,
+                    append((None, NO_ANSWER if img is None and pos is None else PARTIAL,
+                            ((img is None) + (pos is None)) / 2,
+                            img[_IMAGE] if img is not None else b"",
                             pos[_POSITION] if pos is not None else None))
+                    continue
+                image, value = img[_IMAGE], pos[_POSITION]
+                t_img, t_pos = img[_T], pos[_T]
+                delay = (t_img if t_img < t_pos else t_pos) - t_k
+                if images > 1 or positions > 1:
+                    reason = SURPLUS
+                elif delay > bound:
+                    reason = LATE
+                elif in_step:  # vouched for
+                    append((VouchedSample(slot, value, image, t_k, img[_COUNT], delay)
+                            if vouch else None, "", 0.0, image, value))
+                    continue
+                else:
+                    reason = UNSETTLED
+                append((None, reason, 0.0, image, value))
         return t_k, out
 
     def _station_in_step(self, t_k: float, i: int) -> bool:

@@ -15,6 +15,7 @@ CAM objects 0x6B10/0x6B20/0x6B01/0x6B02, which the node reads over SDO now and t
 from __future__ import annotations
 
 import logging
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -27,7 +28,10 @@ logger = logging.getLogger(__name__)
 
 #: process input byte 4: REG_RD_ADR (bits 0-5) and REG_RD_ABORT (bit 7) (000 "Process input")
 _ADR_MASK, _ABORT = 0x3F, 0x80
+_ADR_BITS = _ADR_MASK | _ABORT
 _FRAME_REGISTER = int(Reg.REG_SSI_FRAME)
+#: bytes 0-3 of the image (REG_RD_DATA) as the frame was read: first bit read = MSB
+_READ_FRAME = struct.Struct(">I").unpack_from
 NO_VERDICT = FrameVerdict(False, False, False, False)
 
 
@@ -103,11 +107,11 @@ class FrameWatch:
         """Check the frame in ``image``; (previous verdict, new verdict), None when no frame."""
         self.image = image
         check = self.check
-        if check is None or image[4] & (_ADR_MASK | _ABORT) != _FRAME_REGISTER:
+        if check is None or image[4] & _ADR_BITS != _FRAME_REGISTER:
             self.checked = False
             return None
         before = self.verdict
-        self.verdict = after = check.check(int.from_bytes(image[0:4], "big") & self._frame_mask)
+        self.verdict = after = check.check(_READ_FRAME(image)[0] & self._frame_mask)
         self.checked = True
         return before, after
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
 from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
-from ssi_bridge.core.joint_scale import JointScale, to_int32
+from ssi_bridge.core.joint_scale import JointScale
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
@@ -318,34 +318,36 @@ class Joint:
         :returns: the position, velocity and events to publish
         """
         counters = self.counters
-        fresh = sample_time >= t_sync
         estimator = self.velocity
-        position = to_int32(reg_ssi_pos) * self._unit_per_count  # JointScale.position
+        raw = reg_ssi_pos & 0xFFFF_FFFF  # to_int32, inline: once per joint and cycle
+        if raw & 0x8000_0000:
+            raw -= 0x1_0000_0000
+        position = raw * self._unit_per_count  # JointScale.position
         implausible = corrupt = False
         events: Sequence[tuple[bool, str]] = ()
         watch = self.frames
         # once per image received (an event-driven TPDO may arrive a cycle late, 000 Table 15)
-        seen = watch.evaluate(image) if image != watch.image else None
-        if seen is not None:
-            before, after = seen
-            if after is not before:  # most frames: CLEAN after CLEAN, nothing changed
-                events = [(True, text) for text in edges(before, after)]
-            if after is not CLEAN and after.corrupt:
-                corrupt = True
-                counters.frame_errors += 1
-                text = watch.failures.failed(t_sync, after)
-                if text:
-                    events = [*events, (False, text)]
+        if image != watch.image:
+            seen = watch.evaluate(image)
+            if seen is not None:
+                before, after = seen
+                if after is not before:  # most frames: CLEAN after CLEAN, nothing changed
+                    events = [(True, text) for text in edges(before, after)]
+                if after is not CLEAN and after.corrupt:
+                    corrupt = True
+                    counters.frame_errors += 1
+                    text = watch.failures.failed(t_sync, after)
+                    if text:
+                        events = [*events, (False, text)]
         counters.frame = watch.verdict if watch.checked else None
-        sts = image[7]
         if sample_time <= self.para1_since:
             position = velocity = math.nan  # latched while REG_PARA1 changed
         elif corrupt:
             position, velocity = self.position, estimator.velocity  # keep the last good ones
-        elif sts & NOT_MEASURING:
+        elif image[7] & NOT_MEASURING:
             estimator.reset()  # REG_SSI_POS is frozen: the speed is unknown, restarts after
             velocity = math.nan
-        elif fresh:
+        elif sample_time >= t_sync:  # fresh
             velocity = estimator.update(sample_time, reg_ssi_pos)
             implausible = estimator.last_implausible
             if implausible:

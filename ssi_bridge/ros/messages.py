@@ -89,18 +89,20 @@ class JointStates:
         """The kept message with ``result``'s cycle: only the joints with a sample latched at
         the stamp (ROS time ``stamp_ns``), in the configured order; no name when none is."""
         msg = self.msg
-        outputs = [(part.joint.name, part.output) for part in result.joints
-                   if part.output is not None]
-        names = [name for name, _ in outputs]
+        joints = result.joints
+        outputs = [out for part in joints if (out := part.output) is not None]
+        names = [part.joint.name for part in joints if part.output is not None]
         if names == self._names:  # as a rule: the arrays are filled in place
             position, velocity = msg.position, msg.velocity
-            for i, (_, out) in enumerate(outputs):
+            i = 0
+            for out in outputs:
                 position[i] = out.position
                 velocity[i] = out.velocity
+                i += 1
         else:
             msg.name = self._names = names
-            msg.position = array("d", [out.position for _, out in outputs])
-            msg.velocity = array("d", [out.velocity for _, out in outputs])
+            msg.position = array("d", [out.position for out in outputs])
+            msg.velocity = array("d", [out.velocity for out in outputs])
         header = msg.header
         stamp = header.stamp
         stamp.sec, stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
