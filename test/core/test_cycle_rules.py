@@ -129,9 +129,9 @@ def _answers(rng: random.Random, station: int, t: float, owed: int
             kinds = ["image", "position"]
             if rng.random() < 0.05:
                 kinds.reverse()
-            if rng.random() < 0.02:
+            if rng.random() < 0.04:
                 kinds.pop(rng.randrange(2))  # one frame lost
-            if rng.random() < 0.01:
+            if rng.random() < 0.03:
                 kinds.append(kinds[0])  # one sent twice
             if rng.random() < 0.01:
                 kinds = [kinds[0]] * 2  # one sent twice, the other lost
