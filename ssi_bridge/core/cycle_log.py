@@ -337,7 +337,7 @@ class StationLog:
         # the windows are the master's own: with another producer's SYNC among them, a
         # station saturated by SYNCs can stay one answer behind, each answer looking prompt
         own = self._own_times
-        ok = (len(bounds) == back + 1 and all(t in own for t in bounds)
+        ok = (len(bounds) == back + 1 and own.issuperset(bounds)
               and self._all_answered_once(bounds))
         if len(cache) >= 4:
             del cache[min(cache)]
