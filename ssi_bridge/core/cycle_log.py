@@ -38,15 +38,18 @@ from __future__ import annotations
 
 import math
 import threading
-from bisect import bisect_left, bisect_right, insort
+from bisect import bisect_left, insort
 from collections import deque
 from collections.abc import Sequence
-from typing import Final
 
+from ssi_bridge.core.frame_window import AT as _T
+from ssi_bridge.core.frame_window import COUNT as _COUNT
+from ssi_bridge.core.frame_window import IMAGE, POSITION, Frame, all_answered_once
+from ssi_bridge.core.frame_window import IMAGE_BYTES as _IMAGE
+from ssi_bridge.core.frame_window import KIND as _KIND
+from ssi_bridge.core.frame_window import VALUE as _POSITION
 from ssi_bridge.core.verdict import Answer, Verdict, VouchedSample
 
-#: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
-IMAGE, POSITION = 0, 1
 #: why a sample was set aside, as the diagnostics and ``~/status`` say it
 NO_ANSWER = "no answer"
 PARTIAL = "partial answer"
@@ -61,45 +64,8 @@ KEEP_SYNCS = 256
 KEEP_FRAMES = 256
 
 
-#: one received TPDO of one slot is a plain tuple (cheaper than an instance, on the receive
-#: thread), read through these indices (mypy takes a literal Final as a tuple index):
-_T: Final = 0  # wire time (s)
-_KIND: Final = 1  # IMAGE or POSITION
-_IMAGE: Final = 2  # the 8-byte process input image (IMAGE), else b""
-_POSITION: Final = 3  # REG_SSI_POS (POSITION), else 0
-_COUNT: Final = 4  # images received for the slot so far (IMAGE), else 0
-Frame = tuple[float, int, bytes, int, int]
-
-
 #: the answer of every slot at a SYNC the log does not hold
 _UNKNOWN: Answer = (None, UNKNOWN_SYNC, 1.0, b"", None)
-
-
-def _pairs_in_step(frames: Sequence[Frame], bounds: list[float], bound: float) -> bool:
-    """Rule 3 for one slot in the common case, without walking its frames: True when, past
-    the frames at or after the SYNC asked about (``bounds[-1]``), the slot's newest frames
-    are one image and one position per window, window by window (the newest window's two
-    last), the first of each pair within ``bound`` of its SYNC, and the frame before them
-    (if any) is older than the first window. False: not that case, the walk decides."""
-    t_k = bounds[-1]
-    j = len(frames) - 1
-    while j >= 0 and frames[j][_T] >= t_k:
-        j -= 1
-    w = len(bounds) - 2
-    if j < 2 * w + 1:
-        return False
-    end = t_k
-    while w >= 0:
-        start = bounds[w]
-        a, b = frames[j], frames[j - 1]
-        t_a, t_b = a[_T], b[_T]
-        if (not start <= t_b <= t_a < end or a[_KIND] == b[_KIND]
-                or (t_a if t_a < t_b else t_b) - start > bound):
-            return False
-        end = start
-        j -= 2
-        w -= 1
-    return j < 0 or frames[j][_T] < end
 
 
 class StationLog:
@@ -277,10 +243,13 @@ class StationLog:
                 img: Frame | None = None
                 pos: Frame | None = None
                 frames: Sequence[Frame] = get(slot, ())
-                if len(frames) > 2:  # as a rule the two newest frames are the window's two
-                    a, b = frames[-1], frames[-2]
-                    if (t_k <= a[_T] < t_next and t_k <= b[_T] < t_next
-                            and frames[-3][_T] < t_k and a[_KIND] != b[_KIND]):
+                j = len(frames) - 1
+                while j > 1 and frames[j][_T] >= t_next:
+                    j -= 1  # a later window's (the health asks about the SYNC before)
+                if j > 1:  # as a rule the two newest frames left are the window's two
+                    a, b = frames[j], frames[j - 1]
+                    if (t_k <= a[_T] and t_k <= b[_T] < t_next  # a[_T] < t_next: above
+                            and frames[j - 2][_T] < t_k and a[_KIND] != b[_KIND]):
                         images = positions = 1
                         img, pos = (a, b) if a[_KIND] == IMAGE else (b, a)
                 if not images:  # the window's frames, newest first, as they are
@@ -355,39 +324,9 @@ class StationLog:
                 self._station_in_step(t_k, bisect_left(self._syncs, t_k))
 
     def _all_answered_once(self, bounds: list[float]) -> bool:
-        """Under the lock: in each window between consecutive ``bounds`` (SYNC times, the
-        last one the SYNC asked about), every slot has exactly one image and one position,
-        the first of them within ``latch_bound`` of the window's SYNC (rule 3)."""
-        lo, t_k = bounds[0], bounds[-1]
-        back = len(bounds) - 1
-        bound = self.latch_bound
-        frames_of = self._frames
-        for slot in self.slots:
-            frames = frames_of.get(slot, ())
-            if _pairs_in_step(frames, bounds, bound):
-                continue  # as a rule: each window's two frames, newest last, as they came
-            inside: list[Frame] = []
-            for f in reversed(frames_of.get(slot, ())):
-                t = f[_T]
-                if t >= t_k:
-                    continue
-                if t < lo:
-                    break
-                inside.append(f)
-            if len(inside) != 2 * back:  # every window needs exactly its two
-                return False
-            counts = [0] * (2 * back)  # per window: images, positions
-            first = [math.inf] * back
-            for f in inside:
-                t = f[_T]
-                w = bisect_right(bounds, t) - 1
-                counts[2 * w + f[_KIND]] += 1
-                if t < first[w]:
-                    first[w] = t
-            for w in range(back):
-                if counts[2 * w] != 1 or counts[2 * w + 1] != 1 or first[w] - bounds[w] > bound:
-                    return False
-        return True
+        """Under the lock: rule 3's scan of the windows between ``bounds``
+        (:func:`~ssi_bridge.core.frame_window.all_answered_once`)."""
+        return all_answered_once(self._frames, self.slots, bounds, self.latch_bound)
 
     def settled(self, slot: int, seq: int) -> tuple[float, float] | None:
         """(wire time, share of the slot's answer not vouched) of the master's SYNC ``seq``,
