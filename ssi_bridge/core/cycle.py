@@ -115,19 +115,22 @@ class Cycle:
         (``StationLog.settled``): every joint of a cycle :meth:`run` with ``settle`` False."""
         seq = result.seq
         logs = self.logs
-        answers: dict[int, dict[int, tuple[float, float] | None]] = {}
+        # per station: its slots' health inputs, asked once for all of them (None: no log)
+        settled: dict[int, tuple[StationLog, dict[int, tuple[float, float] | None]] | None] = {}
         for part in result.joints:
             joint = part.joint
-            log = logs.get(joint.settings.station)
-            if log is None:
+            station = joint.settings.station
+            if station in settled:
+                of_station = settled[station]
+            else:
+                log = logs.get(station)
+                of_station = settled[station] = None if log is None else (
+                    log, dict(zip(log.slots, log.settled_all(log.slots, seq - 1))))
+            if of_station is None:
                 joint.settle(seq, None)
                 continue
-            by_slot = answers.get(id(log))
-            if by_slot is None:
-                slots = log.slots
-                by_slot = answers[id(log)] = dict(zip(slots, log.settled_all(slots, seq - 1)))
+            log, by_slot = of_station
             slot = joint.slot
             joint.settle(seq, by_slot[slot] if slot in by_slot else log.settled(slot, seq - 1))
-
 
 __all__ = ["Cycle", "CycleResult", "JointCycle"]

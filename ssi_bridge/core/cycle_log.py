@@ -38,15 +38,18 @@ from __future__ import annotations
 
 import math
 import threading
-from bisect import bisect_left, bisect_right, insort
+from bisect import bisect_left, insort
 from collections import deque
 from collections.abc import Sequence
-from typing import Final
 
+from ssi_bridge.core.frame_window import AT as _T
+from ssi_bridge.core.frame_window import COUNT as _COUNT
+from ssi_bridge.core.frame_window import IMAGE, POSITION, Frame, all_answered_once
+from ssi_bridge.core.frame_window import IMAGE_BYTES as _IMAGE
+from ssi_bridge.core.frame_window import KIND as _KIND
+from ssi_bridge.core.frame_window import VALUE as _POSITION
 from ssi_bridge.core.verdict import Answer, Verdict, VouchedSample
 
-#: the kinds of a slot's two TPDOs (000 Table 15: process input image, encoder default PDO)
-IMAGE, POSITION = 0, 1
 #: why a sample was set aside, as the diagnostics and ``~/status`` say it
 NO_ANSWER = "no answer"
 PARTIAL = "partial answer"
@@ -59,16 +62,6 @@ REASONS = (NO_ANSWER, PARTIAL, SURPLUS, LATE, UNSETTLED, UNKNOWN_SYNC)
 #: the densest traffic the wire carries between two cycles of the master
 KEEP_SYNCS = 256
 KEEP_FRAMES = 256
-
-
-#: one received TPDO of one slot is a plain tuple (cheaper than an instance, on the receive
-#: thread), read through these indices (mypy takes a literal Final as a tuple index):
-_T: Final = 0  # wire time (s)
-_KIND: Final = 1  # IMAGE or POSITION
-_IMAGE: Final = 2  # the 8-byte process input image (IMAGE), else b""
-_POSITION: Final = 3  # REG_SSI_POS (POSITION), else 0
-_COUNT: Final = 4  # images received for the slot so far (IMAGE), else 0
-Frame = tuple[float, int, bytes, int, int]
 
 
 #: the answer of every slot at a SYNC the log does not hold
@@ -250,10 +243,13 @@ class StationLog:
                 img: Frame | None = None
                 pos: Frame | None = None
                 frames: Sequence[Frame] = get(slot, ())
-                if len(frames) > 2:  # as a rule the two newest frames are the window's two
-                    a, b = frames[-1], frames[-2]
-                    if (t_k <= a[_T] < t_next and t_k <= b[_T] < t_next
-                            and frames[-3][_T] < t_k and a[_KIND] != b[_KIND]):
+                j = len(frames) - 1
+                while j > 1 and frames[j][_T] >= t_next:
+                    j -= 1  # a later window's (the health asks about the SYNC before)
+                if j > 1:  # as a rule the two newest frames left are the window's two
+                    a, b = frames[j], frames[j - 1]
+                    if (t_k <= a[_T] and t_k <= b[_T] < t_next  # a[_T] < t_next: above
+                            and frames[j - 2][_T] < t_k and a[_KIND] != b[_KIND]):
                         images = positions = 1
                         img, pos = (a, b) if a[_KIND] == IMAGE else (b, a)
                 if not images:  # the window's frames, newest first, as they are
@@ -310,7 +306,7 @@ class StationLog:
         # the windows are the master's own: with another producer's SYNC among them, a
         # station saturated by SYNCs can stay one answer behind, each answer looking prompt
         own = self._own_times
-        ok = (len(bounds) == back + 1 and all(t in own for t in bounds)
+        ok = (len(bounds) == back + 1 and own.issuperset(bounds)
               and self._all_answered_once(bounds))
         if len(cache) >= 4:
             del cache[min(cache)]
@@ -328,36 +324,9 @@ class StationLog:
                 self._station_in_step(t_k, bisect_left(self._syncs, t_k))
 
     def _all_answered_once(self, bounds: list[float]) -> bool:
-        """Under the lock: in each window between consecutive ``bounds`` (SYNC times, the
-        last one the SYNC asked about), every slot has exactly one image and one position,
-        the first of them within ``latch_bound`` of the window's SYNC (rule 3)."""
-        lo, t_k = bounds[0], bounds[-1]
-        back = len(bounds) - 1
-        bound = self.latch_bound
-        frames_of = self._frames
-        for slot in self.slots:
-            inside: list[Frame] = []
-            for f in reversed(frames_of.get(slot, ())):
-                t = f[_T]
-                if t >= t_k:
-                    continue
-                if t < lo:
-                    break
-                inside.append(f)
-            if len(inside) != 2 * back:  # every window needs exactly its two
-                return False
-            counts = [0] * (2 * back)  # per window: images, positions
-            first = [math.inf] * back
-            for f in inside:
-                t = f[_T]
-                w = bisect_right(bounds, t) - 1
-                counts[2 * w + f[_KIND]] += 1
-                if t < first[w]:
-                    first[w] = t
-            for w in range(back):
-                if counts[2 * w] != 1 or counts[2 * w + 1] != 1 or first[w] - bounds[w] > bound:
-                    return False
-        return True
+        """Under the lock: rule 3's scan of the windows between ``bounds``
+        (:func:`~ssi_bridge.core.frame_window.all_answered_once`)."""
+        return all_answered_once(self._frames, self.slots, bounds, self.latch_bound)
 
     def settled(self, slot: int, seq: int) -> tuple[float, float] | None:
         """(wire time, share of the slot's answer not vouched) of the master's SYNC ``seq``,

@@ -228,10 +228,16 @@ class Joint:
 
         :param settled: (wire time, share not vouched) of the SYNC before, None for the first
         """
-        if settled is not None:
+        if settled is not None:  # :meth:`observe`, one call less (every joint, every cycle)
             t_prev, lost = settled
-            self.observe(t_prev, stale=lost > 0, implausible=self._implausible, seq=seq - 1,
-                         lost=lost)
+            counters = self.counters
+            image = counters.last_image
+            limit = self.stale_cycles
+            self.health.observe(t_prev, stale=lost > 0, implausible=self._implausible,
+                                sts=image[7] if image is not None else None,
+                                consecutive_stale=counters.consecutive_stale,
+                                stale_limit=limit, seq=seq - 1, lost=lost,
+                                silent=counters.consecutive_silent >= limit)
 
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
