@@ -92,8 +92,6 @@ _WARN_BITS = (
 )
 _WARN_MASK = sum(bit for bit, _ in _WARN_BITS)
 _ERR_PARA, _ERR_SSI = int(ModuleStatus.ERR_PARA), int(ModuleStatus.ERR_SSI)
-#: the status bits that make a channel anything but OK (as a rule none is set)
-_NOT_OK = _WARN_MASK | _ERR_PARA | _ERR_SSI
 
 
 def channel_level(sts: int | None, consecutive_stale: int, stale_limit: int
@@ -245,10 +243,7 @@ class ChannelHealth:
         if not syncs:
             lost_sum = 0.0  # no float residue once the window empties
         self.lost_in_window, self.syncs_in_window, self.jumps_in_window = lost_sum, n, jumps
-        if sts is not None and consecutive_stale < stale_limit and not sts & _NOT_OK:
-            raw, message = OK, "reading"  # channel_level's last line, without the call
-        else:
-            raw, message = channel_level(sts, consecutive_stale, stale_limit)
+        raw, message = channel_level(sts, consecutive_stale, stale_limit)
         ratio = lost_sum / n if n else 0.0
         if self._first_t is None and sts is not None:
             self._first_t = now

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from ssi_bridge.core.frame_watch import FrameWatch, edges
 from ssi_bridge.core.health import OK, WARN, ChannelCounters, ChannelHealth, Level
-from ssi_bridge.core.joint_scale import JointScale
+from ssi_bridge.core.joint_scale import JointScale, to_int32
 from ssi_bridge.core.velocity import VelocityEstimator
 from ssi_bridge.exceptions import ConfigError
 from ssi_bridge.protocol.encoder_config import EncoderConfig
@@ -228,16 +228,10 @@ class Joint:
 
         :param settled: (wire time, share not vouched) of the SYNC before, None for the first
         """
-        if settled is not None:  # :meth:`observe`, one call less (every joint, every cycle)
+        if settled is not None:
             t_prev, lost = settled
-            counters = self.counters
-            image = counters.last_image
-            limit = self.stale_cycles
-            self.health.observe(t_prev, stale=lost > 0, implausible=self._implausible,
-                                sts=image[7] if image is not None else None,
-                                consecutive_stale=counters.consecutive_stale,
-                                stale_limit=limit, seq=seq - 1, lost=lost,
-                                silent=counters.consecutive_silent >= limit)
+            self.observe(t_prev, stale=lost > 0, implausible=self._implausible, seq=seq - 1,
+                         lost=lost)
 
     def set_aside(self, seq: int, settled: tuple[float, float] | None, reason: str,
                   image: bytes = b"", position: int | None = None) -> None:
@@ -325,10 +319,7 @@ class Joint:
         """
         counters = self.counters
         estimator = self.velocity
-        raw = reg_ssi_pos & 0xFFFF_FFFF  # to_int32, inline: once per joint and cycle
-        if raw & 0x8000_0000:
-            raw -= 0x1_0000_0000
-        position = raw * self._unit_per_count  # JointScale.position
+        position = to_int32(reg_ssi_pos) * self._unit_per_count  # JointScale.position
         implausible = corrupt = False
         events: Sequence[tuple[bool, str]] = ()
         watch = self.frames
