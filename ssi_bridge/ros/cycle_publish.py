@@ -98,7 +98,6 @@ class CyclePublisher:
     # -- the master's cycle (cycle thread, receive thread) ---------------------------------
     def on_cycle(self) -> None:
         """One cycle; a shutdown racing it (the context goes first) ends it quietly."""
-        node = self.node
         if self._shut_down:
             return
         try:
