@@ -10,6 +10,7 @@ Exit codes are the documented ones (ssi_bridge/tools/commission.py): 0 done, 3 a
 from __future__ import annotations
 
 import json
+import logging
 import random
 import threading
 import time
@@ -54,6 +55,18 @@ class Sender:
         self.stop.set()
         self.thread.join(2)
         self.bus.shutdown()
+
+
+@pytest.fixture(autouse=True)
+def library_log_levels() -> Iterator[None]:
+    """``main`` quiets canopen's and python-can's loggers for the process, as the executable
+    should; here the process is the test worker's, so their levels are set back after each
+    test (else a later test on the worker, e.g. test/client/test_silent_gateway_log.py, sees
+    no canopen line at all)."""
+    levels = {name: logging.getLogger(name).level for name in ("canopen", "can")}
+    yield
+    for name, level in levels.items():
+        logging.getLogger(name).setLevel(level)
 
 
 @pytest.fixture
